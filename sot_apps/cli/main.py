@@ -1,0 +1,110 @@
+"""The ``sot-apps`` command.
+
+Each subcommand lives in its own module in this package and exposes
+``register(subparsers) -> argparse.ArgumentParser`` that sets ``func`` (``args -> int | None``).
+Modules are discovered automatically; one that fails to import is reported, never hidden.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import pkgutil
+import re
+import sys
+import traceback
+from typing import Sequence as Seq
+
+from ..errors import InputError
+
+# Options whose value may start with a minus sign (e.g. --init-box -12.3,4.0,...).
+NEGATIVE_VALUE_OPTIONS = {"--init-box", "--pairs", "--origin", "--offset"}
+_NEGATIVE_VALUE = re.compile(r"^-\d|^-\.\d")
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse that reports usage errors on one line (exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"error: {self.prog}: {message} (see {self.prog} --help)\n")
+        raise SystemExit(2)
+
+
+def _subcommand_modules() -> list[str]:
+    package = importlib.import_module("sot_apps.cli")
+    names = [m.name for m in pkgutil.iter_modules(package.__path__) if m.name not in ("main", "common")]
+    return sorted(n for n in names if not n.startswith("_"))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = OneLineParser(
+        prog="sot-apps",
+        description="Model-free vehicle tracking (SOTracker) and data generation from LiDAR sequences.",
+        epilog="Example: sot-apps info ../shared/data/pandaset_002",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
+    parser.add_argument("--version", action="version", version=f"sot-apps {_version()}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
+    for name in _subcommand_modules():
+        module = importlib.import_module(f"sot_apps.cli.{name}")
+        register = getattr(module, "register", None)
+        if register is not None:
+            sub = register(subparsers)
+            sub.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help="show full tracebacks on errors")
+    return parser
+
+
+def _version() -> str:
+    from .. import __version__
+
+    return __version__
+
+
+def _join_negative_values(argv: list[str]) -> list[str]:
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        token = argv[i]
+        if token in NEGATIVE_VALUE_OPTIONS and i + 1 < len(argv) and _NEGATIVE_VALUE.match(argv[i + 1]):
+            out.append(f"{token}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(token)
+        i += 1
+    return out
+
+
+def main(argv: Seq[str] | None = None) -> int:
+    argv = _join_negative_values(list(sys.argv[1:] if argv is None else argv))
+    debug = "--debug" in argv or os.environ.get("SOT_APPS_DEBUG") == "1"
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "command", None):
+            parser.print_help()
+            return 2
+        result = args.func(args)
+        return int(result or 0)
+    except InputError as exc:
+        if debug:
+            traceback.print_exc()
+        sys.stderr.write(f"error: {exc.one_line()}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write("interrupted: finished outputs are kept; rerun to resume\n")
+        return 130
+    except BrokenPipeError:
+        return 0
+    except Exception as exc:  # noqa: BLE001 - last line of defence: one line unless --debug
+        if debug:
+            traceback.print_exc()
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        sys.stderr.write(f"error: {type(exc).__name__}: {message} (rerun with --debug for the traceback)\n")
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

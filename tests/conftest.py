@@ -1,0 +1,26 @@
+"""Shared fixtures. Real-data tests read ../shared/data/pandaset_002 (never copied into the repo)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PANDASET_002 = Path(os.environ.get("SOT_APPS_PANDASET", REPO.parent / "shared" / "data" / "pandaset_002"))
+
+
+@pytest.fixture(scope="session")
+def pandaset_root() -> Path:
+    """The real PandaSet sequence 002. Missing data is a failure, not a skip: CI has it beside the repo."""
+    if not (PANDASET_002 / "lidar" / "poses.json").is_file():
+        pytest.fail(f"real data not found at {PANDASET_002} (set SOT_APPS_PANDASET)")
+    return PANDASET_002
+
+
+@pytest.fixture(scope="session")
+def pandaset(pandaset_root):
+    from sot_apps.io import open_sequence
+
+    return open_sequence(pandaset_root)

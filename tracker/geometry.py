@@ -1,0 +1,167 @@
+"""Boxes, states and rigid transforms.
+
+Conventions (docs/conventions.md): right-handed, z up, metres, radians. A box is its centre
+(x, y, z), its heading (angle of the LENGTH axis from +x, counter-clockwise about +z), and its
+length, width, height. The object frame has x forward along the length, y to the left, z up, and
+its origin at the box centre. A transform is a 4x4 matrix named ``target_from_source``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "Box",
+    "State",
+    "wrap_angle",
+    "rotation_z",
+    "make_transform",
+    "invert_transform",
+    "transform_points",
+    "points_in_box",
+    "yaw_of_transform",
+]
+
+
+def wrap_angle(angle: float | np.ndarray) -> float | np.ndarray:
+    """Wrap an angle (radians) into [-pi, pi)."""
+    wrapped = (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+    return float(wrapped) if np.ndim(wrapped) == 0 else wrapped
+
+
+def rotation_z(theta: float) -> np.ndarray:
+    """3x3 rotation by ``theta`` radians counter-clockwise about +z."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def make_transform(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    """4x4 homogeneous transform from a 3x3 rotation and a translation."""
+    out = np.eye(4)
+    out[:3, :3] = rotation
+    out[:3, 3] = translation
+    return out
+
+
+def invert_transform(target_from_source: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform: returns ``source_from_target``."""
+    rotation = target_from_source[:3, :3]
+    translation = target_from_source[:3, 3]
+    out = np.eye(4)
+    out[:3, :3] = rotation.T
+    out[:3, 3] = -rotation.T @ translation
+    return out
+
+
+def transform_points(target_from_source: np.ndarray, points_source: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 transform to (N, 3) points; returns (N, 3) float64 points."""
+    points_source = np.asarray(points_source, dtype=np.float64).reshape(-1, 3)
+    return points_source @ target_from_source[:3, :3].T + target_from_source[:3, 3]
+
+
+def yaw_of_transform(target_from_source: np.ndarray) -> float:
+    """Rotation about +z of a transform's x axis (radians)."""
+    return float(np.arctan2(target_from_source[1, 0], target_from_source[0, 0]))
+
+
+@dataclass(frozen=True)
+class State:
+    """A vehicle's 4-DOF state in the world frame: centre (x, y, z) and heading."""
+
+    x: float
+    y: float
+    z: float
+    heading: float
+
+    def to_array(self) -> np.ndarray:
+        return np.array([self.x, self.y, self.z, self.heading], dtype=np.float64)
+
+    @classmethod
+    def from_array(cls, values: np.ndarray) -> "State":
+        x, y, z, heading = (float(v) for v in np.asarray(values, dtype=np.float64).reshape(4))
+        return cls(x, y, z, heading)
+
+
+@dataclass(frozen=True)
+class Box:
+    """An upright 3D box: centre, heading of the length axis, and size (see module docstring)."""
+
+    x: float
+    y: float
+    z: float
+    heading: float
+    length: float
+    width: float
+    height: float
+
+    @property
+    def center(self) -> np.ndarray:
+        return np.array([self.x, self.y, self.z], dtype=np.float64)
+
+    @property
+    def size(self) -> np.ndarray:
+        """(length, width, height)."""
+        return np.array([self.length, self.width, self.height], dtype=np.float64)
+
+    @property
+    def state(self) -> State:
+        return State(self.x, self.y, self.z, self.heading)
+
+    def with_state(self, state: State) -> "Box":
+        return Box(state.x, state.y, state.z, state.heading, self.length, self.width, self.height)
+
+    def scaled(self, factor: float) -> "Box":
+        """The same box with length, width and height multiplied by ``factor``."""
+        return Box(self.x, self.y, self.z, self.heading,
+                   self.length * factor, self.width * factor, self.height * factor)
+
+    def to_array(self) -> np.ndarray:
+        """[x, y, z, heading, length, width, height]."""
+        return np.array([self.x, self.y, self.z, self.heading, self.length, self.width, self.height],
+                        dtype=np.float64)
+
+    @classmethod
+    def from_array(cls, values: np.ndarray) -> "Box":
+        vals = [float(v) for v in np.asarray(values, dtype=np.float64).reshape(7)]
+        return cls(*vals)
+
+    def world_from_object(self) -> np.ndarray:
+        """4x4 transform taking object-frame points (x along the length) to the box's frame of reference."""
+        return make_transform(rotation_z(self.heading), self.center)
+
+    def object_from_world(self) -> np.ndarray:
+        return invert_transform(self.world_from_object())
+
+    def corners(self) -> np.ndarray:
+        """(8, 3) corners: bottom face first (counter-clockwise from front-left), then top face."""
+        l, w, h = self.length / 2.0, self.width / 2.0, self.height / 2.0
+        corners_object = np.array([
+            [l, w, -h], [-l, w, -h], [-l, -w, -h], [l, -w, -h],
+            [l, w, h], [-l, w, h], [-l, -w, h], [l, -w, h],
+        ])
+        return transform_points(self.world_from_object(), corners_object)
+
+    def bev_corners(self) -> np.ndarray:
+        """(4, 2) bird's-eye-view corners, counter-clockwise."""
+        return self.corners()[:4, :2]
+
+    def transformed(self, target_from_source: np.ndarray) -> "Box":
+        """This box (expressed in ``source``) expressed in ``target``; only yaw of the transform is kept for heading."""
+        center = transform_points(target_from_source, self.center[None])[0]
+        heading = wrap_angle(self.heading + yaw_of_transform(target_from_source))
+        return Box(float(center[0]), float(center[1]), float(center[2]), float(heading),
+                   self.length, self.width, self.height)
+
+
+def points_in_box(points: np.ndarray, box: Box, scale: float | tuple[float, float, float] = 1.0) -> np.ndarray:
+    """Boolean mask of the (N, 3) points inside ``box`` with its size scaled by ``scale``."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    scale_xyz = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,))
+    half = box.size * scale_xyz / 2.0
+    c, s = np.cos(box.heading), np.sin(box.heading)
+    d = points - box.center
+    local_x = c * d[:, 0] + s * d[:, 1]
+    local_y = -s * d[:, 0] + c * d[:, 1]
+    return (np.abs(local_x) <= half[0]) & (np.abs(local_y) <= half[1]) & (np.abs(d[:, 2]) <= half[2])
