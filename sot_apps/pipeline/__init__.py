@@ -1,0 +1,1 @@
+"""Data-generation pipelines: tracking -> bank -> motion export -> flow -> simulated scans."""

@@ -1,0 +1,105 @@
+"""Completion markers (for resuming) and the run manifest (what ran, config, versions, checksums).
+
+A unit of work is finished when its marker ``<dir>/.done/<name>.json`` exists, was written for the
+same configuration, and every output it lists still has the recorded checksum. Markers are written
+atomically after the outputs, so an interrupted unit has no marker and simply runs again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable
+
+from ..io.atomic import write_json
+
+__all__ = ["sha256_file", "config_digest", "DoneMarker", "versions", "write_manifest"]
+
+
+def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(chunk), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def config_digest(config: Any) -> str:
+    """A stable digest of a JSON-serialisable configuration."""
+    text = json.dumps(config, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class DoneMarker:
+    """The marker of one unit of work (``name``) under ``root``."""
+
+    root: Path
+    name: str
+
+    @property
+    def path(self) -> Path:
+        safe = self.name.replace("/", "__")
+        return Path(self.root) / ".done" / f"{safe}.json"
+
+    def is_done(self, digest: str) -> bool:
+        try:
+            record = json.loads(self.path.read_text())
+        except (OSError, json.JSONDecodeError):
+            return False
+        if record.get("config") != digest:
+            return False
+        for rel, checksum in record.get("outputs", {}).items():
+            target = Path(self.root) / rel
+            if not target.is_file() or sha256_file(target) != checksum:
+                return False
+        return True
+
+    def mark(self, digest: str, outputs: Iterable[str | Path], extra: dict | None = None) -> dict[str, str]:
+        root = Path(self.root)
+        checksums = {}
+        for out in outputs:
+            out = Path(out)
+            rel = out.relative_to(root) if out.is_absolute() else out
+            checksums[str(rel)] = sha256_file(root / rel)
+        write_json(self.path, {"name": self.name, "config": digest, "outputs": checksums,
+                               "finished_unix": time.time(), **(extra or {})})
+        return checksums
+
+    def outputs(self) -> dict[str, str]:
+        try:
+            return dict(json.loads(self.path.read_text()).get("outputs", {}))
+        except (OSError, json.JSONDecodeError):
+            return {}
+
+
+def versions() -> dict[str, str]:
+    """Versions of the toolkit and the libraries whose results it depends on."""
+    from importlib import metadata
+
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for dist in ("sot-apps", "numpy", "scipy", "opencv-python-headless", "trimesh", "embreex", "pyrender",
+                 "mcap", "foxglove-sdk", "dask", "distributed"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def write_manifest(out_dir: str | Path, config: dict, stages: list[dict], started_unix: float) -> Path:
+    """Write ``out_dir/manifest.json``: config, versions, per-stage units with status and checksums."""
+    out_dir = Path(out_dir)
+    path = out_dir / "manifest.json"
+    write_json(path, {
+        "schema": "sot-apps/manifest", "version": 1,
+        "config": config, "versions": versions(),
+        "started_unix": started_unix, "finished_unix": time.time(),
+        "stages": stages,
+    })
+    return path
