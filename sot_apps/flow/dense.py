@@ -1,0 +1,143 @@
+"""Dense flow of one pair: raycast image k against all object meshes, move the hits, project into k+1.
+
+1. Every object's mesh is placed at its state at camera k's time, in camera k's frame, and all go
+   into ONE embree scene (geometry id = object index): the first hit per pixel gives the instance,
+   its depth and inter-object occlusion. Only pixels inside the objects' projected bounding boxes
+   are cast.
+2. Pixels whose hit lies behind the frame's LiDAR occluders are dropped (the object is not the
+   nearest surface there).
+3. Each hit keeps its object-frame coordinates and moves with the object to camera k+1's time;
+   it is projected through camera k+1 (ego/camera motion and lens distortion): flow = uv1 - uv0.
+4. ``valid_noc`` additionally needs the moved point to be the nearest surface in image k+1: a ray
+   from camera k+1 towards it must first hit the same object at the same depth (objects placed at
+   k+1), no LiDAR occluder of k+1 may be in front, and it must land inside the image.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .camera import CameraModel, grid_pixels, pixel_rays, project
+from .occlusion import depth_map, lookup_depth
+from .raycast import MultiMeshScene
+from .scene import FlowObject, ObjectPairStats, PairFlow, PairSetup, image_roi, project_vertices
+
+__all__ = ["dense_flow", "RayCache"]
+
+
+class RayCache:
+    """Pixel rays of a camera, computed once per camera model (undistortion is the slow part)."""
+
+    def __init__(self) -> None:
+        self._maps: dict[tuple, np.ndarray] = {}
+
+    def rays(self, model: CameraModel, pixels: np.ndarray) -> np.ndarray:
+        if not model.has_distortion:
+            return pixel_rays(pixels, model)
+        key = (model.K.tobytes(), model.distortion.tobytes(), model.width, model.height)
+        if key not in self._maps:
+            grid = grid_pixels(0, 0, model.width, model.height)
+            self._maps[key] = pixel_rays(grid, model)[:, :2].astype(np.float64).reshape(model.height, model.width, 2)
+        xy = self._maps[key][pixels[:, 1], pixels[:, 0]]
+        return np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
+
+
+_DEFAULT_CACHE = RayCache()
+
+
+def _union_pixels(rois: list[tuple[int, int, int, int]], model: CameraModel) -> np.ndarray:
+    mask = np.zeros((model.height, model.width), dtype=bool)
+    for x0, y0, x1, y1 in rois:
+        mask[y0:y1, x0:x1] = True
+    vs, us = np.nonzero(mask)
+    return np.stack([us, vs], axis=1)
+
+
+def _in_image(uv: np.ndarray, model: CameraModel) -> np.ndarray:
+    return ((uv[:, 0] > -0.5) & (uv[:, 0] < model.width - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < model.height - 0.5))
+
+
+def visible_in_k1(setup: PairSetup, objects: list[FlowObject], obj: FlowObject, points_k1: np.ndarray,
+                  uv1: np.ndarray, scene_k1: MultiMeshScene | None, order_k1: list[int]) -> np.ndarray:
+    """Mask of points (camera k+1 frame) of ``obj`` that are the nearest surface in image k+1."""
+    model, params = setup.model, setup.params
+    z1 = points_k1[:, 2]
+    ok = (z1 > 0.05) & _in_image(np.nan_to_num(uv1, nan=-1e6), model)
+    if scene_k1 is not None and ok.any():
+        dirs = points_k1[ok] / z1[ok, None]
+        geom, t = scene_k1.first_hit(np.zeros(3), dirs)
+        target = order_k1.index(obj.index)
+        # Same object, and the hit is (within tolerance) the point itself, not a nearer part of it.
+        same = (geom == target) & (t >= z1[ok] - params.margin(z1[ok]))
+        ok[np.flatnonzero(ok)[~same]] = False
+    if setup.lidar_k1 is not None and ok.any():
+        roi = image_roi(uv1[ok], model, margin=params.dilate_px)
+        if roi is not None:
+            bottom = obj.bottom_z(obj.world_from_object_k1) + params.ground_clearance
+            dm = depth_map(setup.lidar_k1, roi, params.dilate_px, min_world_z=bottom)
+            lidar = lookup_depth(dm, roi, uv1[ok])
+            hidden = lidar < z1[ok] - params.margin(z1[ok])
+            ok[np.flatnonzero(ok)[hidden]] = False
+    return ok
+
+
+def scene_at_k1(setup: PairSetup, objects: list[FlowObject]) -> tuple[MultiMeshScene | None, list[int]]:
+    """Objects known at k+1, placed in camera k+1's frame; returns the scene and object index per geometry."""
+    placed = [o for o in objects if o.world_from_object_k1 is not None]
+    if not placed:
+        return None, []
+    cam = setup.camera_k1_from_world
+    return MultiMeshScene([o.mesh.transformed(cam @ o.world_from_object_k1) for o in placed]), [o.index for o in placed]
+
+
+def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache | None = None) -> PairFlow:
+    """Flow, validity (occ/noc) and instance mask of one pair for ``objects`` (see module doc)."""
+    model, params = setup.model, setup.params
+    cache = ray_cache or _DEFAULT_CACHE
+    out = PairFlow.empty(model.width, model.height)
+    cam_k = setup.camera_k_from_world
+    placed = [o.mesh.transformed(cam_k @ o.world_from_object_k) for o in objects]
+    rois = {}
+    for obj, mesh in zip(objects, placed):
+        roi = image_roi(project_vertices(mesh, np.eye(4), model), model)
+        if roi is not None:
+            rois[obj.index] = roi
+    if not rois:
+        return out
+    pixels = _union_pixels(list(rois.values()), model)
+    rays = cache.rays(model, pixels)
+    scene_k = MultiMeshScene(placed)
+    geom, t = scene_k.first_hit(np.zeros(3), rays)
+    scene_k1, order_k1 = scene_at_k1(setup, objects)
+    hit = geom >= 0
+    pixels, rays, geom, t = pixels[hit], rays[hit], geom[hit], t[hit]
+    for pos, obj in enumerate(objects):
+        sel = geom == pos
+        pix = pixels[sel]
+        points_k = rays[sel] * t[sel, None]
+        z = points_k[:, 2]
+        hidden = np.zeros(len(pix), dtype=bool)
+        if setup.lidar_k is not None and len(pix):
+            roi = rois[obj.index]
+            bottom = obj.bottom_z(obj.world_from_object_k) + params.ground_clearance
+            dm = depth_map(setup.lidar_k, roi, params.dilate_px, min_world_z=bottom)
+            hidden = lookup_depth(dm, roi, pix.astype(np.float64)) < z - params.margin(z)
+        pix, points_k = pix[~hidden], points_k[~hidden]
+        out.instance[pix[:, 1], pix[:, 0]] = obj.index + 1
+        stats = dict(index=obj.index, object_id=obj.object_id, pixels=len(pix), pixels_noc=0,
+                     hidden_k=int(hidden.sum()), mean_flow=0.0, mean_flow_noc=0.0, has_flow=False)
+        if obj.world_from_object_k1 is not None and len(pix):
+            motion = setup.motion(obj)
+            points_k1 = points_k @ motion[:3, :3].T + motion[:3, 3]
+            uv1, z1 = project(points_k1, model)
+            flow = uv1 - pix
+            good = np.isfinite(flow).all(axis=1)
+            noc = visible_in_k1(setup, objects, obj, points_k1, uv1, scene_k1, order_k1) & good
+            out.flow[pix[good, 1], pix[good, 0]] = flow[good]
+            out.valid_occ[pix[good, 1], pix[good, 0]] = True
+            out.valid_noc[pix[noc, 1], pix[noc, 0]] = True
+            mag = np.linalg.norm(flow[good], axis=1)
+            stats.update(pixels_noc=int(noc.sum()), has_flow=True, mean_flow=float(mag.mean()) if len(mag) else 0.0,
+                         mean_flow_noc=float(np.linalg.norm(flow[noc], axis=1).mean()) if noc.any() else 0.0)
+        out.objects.append(ObjectPairStats(**stats))
+    return out
