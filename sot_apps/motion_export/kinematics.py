@@ -1,0 +1,344 @@
+"""Per-object kinematics from per-frame box states: an RTS smoother on a CTRV model.
+
+Model (documented in docs/motion-export.md). The state of one object is
+
+    s = [x, y, theta, v, omega, z, vz]
+
+with (x, y, z) the WORLD box centre, theta the heading of the box's length axis (kept continuous,
+i.e. unwrapped), v the SIGNED speed along theta (negative when reversing), omega the yaw rate and vz
+the vertical speed. Between two frames dt apart the object moves on a circular arc
+(constant turn rate and velocity, CTRV):
+
+    x' = x + v dt (cos(theta) f1(a) - sin(theta) f2(a))      a = omega dt
+    y' = y + v dt (sin(theta) f1(a) + cos(theta) f2(a))      f1(a) = sin(a)/a, f2(a) = (1 - cos(a))/a
+    theta' = theta + omega dt,  v' = v,  omega' = omega,  z' = z + vz dt,  vz' = vz
+
+(f1, f2 use their Taylor series near a = 0, so straight-line motion needs no special case).
+Process noise is white longitudinal acceleration (sigma_accel), yaw acceleration
+(sigma_yaw_accel) and vertical acceleration (sigma_vertical_accel), integrated over dt. The
+measurements are the box centre and heading, z = [x, y, theta, z]; the heading innovation is
+wrapped to [-pi, pi), which keeps theta unwrapped across the +-pi seam.
+
+An extended Kalman filter runs forward over the frame times (irregular steps are handled exactly:
+every step uses its own dt) and a Rauch-Tung-Striebel pass runs backward. The pair is run three times,
+each pass started from the previous pass's smoothed initial state, which removes the start-up
+transient of the unknown initial speed and yaw rate.
+
+Outputs per frame: position, heading (wrapped), velocity (x, y) = v (cos theta, sin theta),
+speed = |v|, yaw rate = omega, longitudinal acceleration = dv/dt (np.gradient of the smoothed v
+over the true frame times), and 1-sigma uncertainties from the smoothed covariance.
+
+Frames whose measurement is invalid (the tracker flagged them) are not used as measurements; the
+smoother predicts through them, but their outputs are NaN and ``valid`` is False — never an
+interpolated value presented as data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracker.geometry import wrap_angle
+
+__all__ = ["SmootherConfig", "ObjectTrack", "Kinematics", "smooth_track", "ctrv_transition",
+           "central_difference_kinematics"]
+
+_NX = 7  # x, y, theta, v, omega, z, vz
+_IX, _IY, _ITH, _IV, _IW, _IZ, _IVZ = range(_NX)
+_H = np.zeros((4, _NX))
+_H[0, _IX] = _H[1, _IY] = _H[2, _ITH] = _H[3, _IZ] = 1.0
+
+
+@dataclass(frozen=True)
+class SmootherConfig:
+    """Noise model of the CTRV RTS smoother (1-sigma values, SI units)."""
+
+    sigma_position: float = 0.10        # m, measurement noise of the box centre (x, y)
+    sigma_heading: float = 0.03         # rad, measurement noise of the heading
+    sigma_z: float = 0.10               # m, measurement noise of the centre height
+    sigma_accel: float = 3.0            # m/s^2, longitudinal acceleration (process noise)
+    sigma_yaw_accel: float = 1.0        # rad/s^2, yaw acceleration (process noise)
+    sigma_vertical_accel: float = 0.5   # m/s^2, vertical acceleration (process noise)
+    initial_sigma_speed: float = 10.0   # m/s, prior on the initial speed
+    initial_sigma_yaw_rate: float = 1.0  # rad/s, prior on the initial yaw rate
+    passes: int = 3                     # EKF+RTS passes (>= 1)
+
+    def to_dict(self) -> dict[str, float]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+# Presets: tracker outputs are noisier than human annotations.
+TRACKER_SMOOTHER = SmootherConfig()
+ANNOTATION_SMOOTHER = SmootherConfig(sigma_position=0.05, sigma_heading=0.02, sigma_z=0.05)
+
+
+@dataclass
+class ObjectTrack:
+    """Per-frame box states of one object (the smoother's input).
+
+    ``states`` (N, 4) WORLD [x, y, z, heading]; ``valid`` (N,) False where the measurement must not
+    be used (``flags[i]`` says why). ``size`` is (length, width, height).
+    """
+
+    object_id: str
+    label: str
+    size: tuple[float, float, float]
+    frames: np.ndarray          # (N,) int64 sequence frame indices, strictly increasing
+    timestamps_ns: np.ndarray   # (N,) int64
+    states: np.ndarray          # (N, 4) float64
+    valid: np.ndarray           # (N,) bool
+    flags: list[list[str]] = field(default_factory=list)
+    source: str = ""
+    shape_points: np.ndarray | None = None  # (M, 3) object-frame points, optional
+    config: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.frames = np.asarray(self.frames, dtype=np.int64).reshape(-1)
+        self.timestamps_ns = np.asarray(self.timestamps_ns, dtype=np.int64).reshape(-1)
+        self.states = np.asarray(self.states, dtype=np.float64).reshape(-1, 4)
+        self.valid = np.asarray(self.valid, dtype=bool).reshape(-1)
+        n = len(self.frames)
+        if not (len(self.timestamps_ns) == len(self.states) == len(self.valid) == n):
+            raise ValueError(f"{self.object_id}: frames, timestamps, states and valid differ in length")
+        if not self.flags:
+            self.flags = [[] for _ in range(n)]
+        if len(self.flags) != n:
+            raise ValueError(f"{self.object_id}: flags has {len(self.flags)} entries for {n} frames")
+        if n > 1 and (np.any(np.diff(self.frames) <= 0) or np.any(np.diff(self.timestamps_ns) <= 0)):
+            raise ValueError(f"{self.object_id}: frames and timestamps must be strictly increasing")
+        self.valid = self.valid & np.isfinite(self.states).all(axis=1)
+
+
+@dataclass
+class Kinematics:
+    """Smoothed kinematics of one object at its frame times. Invalid samples hold NaN."""
+
+    object_id: str
+    label: str
+    size: tuple[float, float, float]
+    frames: np.ndarray          # (N,) int64
+    timestamps_ns: np.ndarray   # (N,) int64
+    valid: np.ndarray           # (N,) bool
+    flags: list[list[str]]
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    heading: np.ndarray         # wrapped to [-pi, pi)
+    velocity_x: np.ndarray      # m/s, world frame
+    velocity_y: np.ndarray
+    speed: np.ndarray           # |v|, m/s
+    acceleration: np.ndarray    # dv/dt along the heading, m/s^2
+    yaw_rate: np.ndarray        # rad/s, CCW positive
+    position_std: np.ndarray    # m, sqrt(var x + var y)
+    heading_std: np.ndarray     # rad
+    speed_std: np.ndarray       # m/s
+    yaw_rate_std: np.ndarray    # rad/s
+    source: str = ""
+    shape_points: np.ndarray | None = None
+    config: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    @property
+    def signed_speed(self) -> np.ndarray:
+        """Speed along the heading (negative when reversing)."""
+        c, s = np.cos(self.heading), np.sin(self.heading)
+        return self.velocity_x * c + self.velocity_y * s
+
+    def sample(self, i: int) -> dict:
+        """Sample i as plain Python values (None for NaN), for JSON messages."""
+        def f(value: float) -> float | None:
+            value = float(value)
+            return value if np.isfinite(value) else None
+
+        return {
+            "object_id": self.object_id, "label": self.label, "frame": int(self.frames[i]),
+            "timestamp_ns": int(self.timestamps_ns[i]), "valid": bool(self.valid[i]), "flags": list(self.flags[i]),
+            "position": {"x": f(self.x[i]), "y": f(self.y[i]), "z": f(self.z[i])},
+            "heading": f(self.heading[i]),
+            "velocity": {"x": f(self.velocity_x[i]), "y": f(self.velocity_y[i])},
+            "speed": f(self.speed[i]), "acceleration": f(self.acceleration[i]), "yaw_rate": f(self.yaw_rate[i]),
+            "std": {"position": f(self.position_std[i]), "heading": f(self.heading_std[i]),
+                    "speed": f(self.speed_std[i]), "yaw_rate": f(self.yaw_rate_std[i])},
+            "size": {"length": float(self.size[0]), "width": float(self.size[1]), "height": float(self.size[2])},
+        }
+
+
+def _f1_f2(a: float) -> tuple[float, float, float, float]:
+    """f1 = sin(a)/a, f2 = (1 - cos a)/a and their derivatives (series near 0)."""
+    if abs(a) < 1e-3:
+        a2 = a * a
+        return 1.0 - a2 / 6.0, a / 2.0 - a * a2 / 24.0, -a / 3.0 + a * a2 / 30.0, 0.5 - a2 / 8.0
+    s, c = np.sin(a), np.cos(a)
+    return s / a, (1.0 - c) / a, (a * c - s) / (a * a), (a * s - (1.0 - c)) / (a * a)
+
+
+def ctrv_transition(state: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """CTRV prediction of a 7-state over ``dt`` seconds: (next state, Jacobian d next / d state)."""
+    x, y, th, v, w, z, vz = state
+    f1, f2, d1, d2 = _f1_f2(w * dt)
+    c, s = np.cos(th), np.sin(th)
+    dx = v * dt * (c * f1 - s * f2)
+    dy = v * dt * (s * f1 + c * f2)
+    out = np.array([x + dx, y + dy, th + w * dt, v, w, z + vz * dt, vz])
+    F = np.eye(_NX)
+    F[_IX, _ITH] = -dy
+    F[_IY, _ITH] = dx
+    F[_IX, _IV] = dt * (c * f1 - s * f2)
+    F[_IY, _IV] = dt * (s * f1 + c * f2)
+    F[_IX, _IW] = v * dt * dt * (c * d1 - s * d2)
+    F[_IY, _IW] = v * dt * dt * (s * d1 + c * d2)
+    F[_ITH, _IW] = dt
+    F[_IZ, _IVZ] = dt
+    return out, F
+
+
+def _process_noise(state: np.ndarray, dt: float, cfg: SmootherConfig) -> np.ndarray:
+    c, s = np.cos(state[_ITH]), np.sin(state[_ITH])
+    G = np.zeros((_NX, 3))
+    G[_IX, 0] = 0.5 * dt * dt * c
+    G[_IY, 0] = 0.5 * dt * dt * s
+    G[_IV, 0] = dt
+    G[_ITH, 1] = 0.5 * dt * dt
+    G[_IW, 1] = dt
+    G[_IZ, 2] = 0.5 * dt * dt
+    G[_IVZ, 2] = dt
+    q = np.diag([cfg.sigma_accel ** 2, cfg.sigma_yaw_accel ** 2, cfg.sigma_vertical_accel ** 2])
+    return G @ q @ G.T
+
+
+def _initial_state(t: np.ndarray, meas: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    idx = np.flatnonzero(valid)
+    first = meas[idx[0]]
+    v0, vz0 = 0.0, 0.0
+    if len(idx) > 1:
+        second = meas[idx[1]]
+        dt = t[idx[1]] - t[idx[0]]
+        v0 = float((second[0] - first[0]) * np.cos(first[2]) + (second[1] - first[1]) * np.sin(first[2])) / dt
+        vz0 = float(second[3] - first[3]) / dt
+    return np.array([first[0], first[1], first[2], v0, 0.0, first[3], vz0])
+
+
+def _ekf_rts(t: np.ndarray, meas: np.ndarray, valid: np.ndarray, r_scale: np.ndarray,
+             s0: np.ndarray, p0: np.ndarray, cfg: SmootherConfig) -> tuple[np.ndarray, np.ndarray]:
+    n = len(t)
+    R0 = np.diag([cfg.sigma_position ** 2, cfg.sigma_position ** 2, cfg.sigma_heading ** 2, cfg.sigma_z ** 2])
+    xs_f = np.zeros((n, _NX))
+    ps_f = np.zeros((n, _NX, _NX))
+    xs_p = np.zeros((n, _NX))
+    ps_p = np.zeros((n, _NX, _NX))
+    jac = np.zeros((n, _NX, _NX))
+    x, P = s0.copy(), p0.copy()
+    for k in range(n):
+        if k > 0:
+            dt = t[k] - t[k - 1]
+            x_new, F = ctrv_transition(x, dt)
+            P = F @ P @ F.T + _process_noise(x, dt, cfg)
+            x = x_new
+            jac[k] = F
+        xs_p[k], ps_p[k] = x, P
+        if valid[k]:
+            innovation = meas[k] - _H @ x
+            innovation[2] = wrap_angle(innovation[2])
+            S = _H @ P @ _H.T + R0 * r_scale[k] ** 2
+            K = np.linalg.solve(S, _H @ P).T  # P H^T S^-1 (S, P symmetric)
+            x = x + K @ innovation
+            I_KH = np.eye(_NX) - K @ _H
+            P = I_KH @ P @ I_KH.T + K @ (R0 * r_scale[k] ** 2) @ K.T  # Joseph form
+        xs_f[k], ps_f[k] = x, P
+    xs_s, ps_s = xs_f.copy(), ps_f.copy()
+    for k in range(n - 2, -1, -1):
+        F = jac[k + 1]
+        C = np.linalg.solve(ps_p[k + 1], F @ ps_f[k]).T  # P_f F^T P_p^-1
+        xs_s[k] = xs_f[k] + C @ (xs_s[k + 1] - xs_p[k + 1])
+        ps_s[k] = ps_f[k] + C @ (ps_s[k + 1] - ps_p[k + 1]) @ C.T
+        ps_s[k] = 0.5 * (ps_s[k] + ps_s[k].T)
+    return xs_s, ps_s
+
+
+def smooth_track(track: ObjectTrack, config: SmootherConfig = TRACKER_SMOOTHER,
+                 measurement_sigma_scale: np.ndarray | None = None) -> Kinematics:
+    """Smoothed kinematics of ``track`` at its frame times (see the module docstring)."""
+    n = len(track.frames)
+    nan = np.full(n, np.nan)
+    out = {name: nan.copy() for name in ("x", "y", "z", "heading", "velocity_x", "velocity_y", "speed",
+                                          "acceleration", "yaw_rate", "position_std", "heading_std",
+                                          "speed_std", "yaw_rate_std")}
+    valid = track.valid.copy()
+    idx = np.flatnonzero(valid)
+    if len(idx) > 0:
+        lo, hi = idx[0], idx[-1] + 1
+        t = (track.timestamps_ns[lo:hi] - track.timestamps_ns[lo]).astype(np.float64) * 1e-9
+        st = track.states[lo:hi]
+        meas = np.stack([st[:, 0], st[:, 1], st[:, 3], st[:, 2]], axis=1)
+        v = valid[lo:hi]
+        meas[~v] = 0.0
+        # unwrap the measured headings over the valid frames so the initial theta is continuous
+        scale = np.ones(hi - lo) if measurement_sigma_scale is None else np.asarray(measurement_sigma_scale)[lo:hi]
+        s0 = _initial_state(t, meas, v)
+        p0 = np.diag([config.sigma_position ** 2, config.sigma_position ** 2, config.sigma_heading ** 2,
+                      config.initial_sigma_speed ** 2, config.initial_sigma_yaw_rate ** 2,
+                      config.sigma_z ** 2, 1.0])
+        for _ in range(max(1, config.passes)):
+            xs, ps = _ekf_rts(t, meas, v, scale, s0, p0, config)
+            s0 = xs[0].copy()
+            # keep the prior on speed / yaw rate loose but centred on the smoothed estimate
+        th, sv, w = xs[:, _ITH], xs[:, _IV], xs[:, _IW]
+        acc = np.gradient(sv, t) if len(t) > 1 else np.zeros(1)
+        block = {
+            "x": xs[:, _IX], "y": xs[:, _IY], "z": xs[:, _IZ], "heading": wrap_angle(th),
+            "velocity_x": sv * np.cos(th), "velocity_y": sv * np.sin(th), "speed": np.abs(sv),
+            "acceleration": acc, "yaw_rate": w,
+            "position_std": np.sqrt(ps[:, _IX, _IX] + ps[:, _IY, _IY]),
+            "heading_std": np.sqrt(ps[:, _ITH, _ITH]), "speed_std": np.sqrt(ps[:, _IV, _IV]),
+            "yaw_rate_std": np.sqrt(ps[:, _IW, _IW]),
+        }
+        for name, values in block.items():
+            arr = out[name]
+            arr[lo:hi] = np.atleast_1d(values)
+            arr[~valid] = np.nan
+    return Kinematics(object_id=track.object_id, label=track.label, size=tuple(float(s) for s in track.size),
+                      frames=track.frames.copy(), timestamps_ns=track.timestamps_ns.copy(), valid=valid,
+                      flags=[list(f) for f in track.flags], source=track.source, shape_points=track.shape_points,
+                      config={**track.config, "smoother": {"model": "CTRV EKF + RTS", **config.to_dict()}}, **out)
+
+
+def central_difference_kinematics(track: ObjectTrack) -> Kinematics:
+    """Unsmoothed reference: velocity and yaw rate by central differences of the raw states
+    (one-sided at the ends and next to invalid frames; np.gradient over the true frame times).
+
+    Used as an independent reference for ground-truth boxes. Samples whose neighbours are invalid
+    use the available one-sided difference; a sample without a valid neighbour gets NaN.
+    """
+    n = len(track.frames)
+    t = track.timestamps_ns.astype(np.float64) * 1e-9
+    st = track.states
+    valid = track.valid
+    vx, vy, w = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    heading = np.unwrap(np.where(valid, st[:, 3], 0.0)) if n else st[:, 3]
+    # work on runs of consecutive valid frames
+    runs = np.split(np.arange(n), np.flatnonzero(np.diff(valid.astype(int)) != 0) + 1) if n else []
+    for run in runs:
+        if len(run) < 2 or not valid[run[0]]:
+            continue
+        tr = t[run]
+        vx[run] = np.gradient(st[run, 0], tr)
+        vy[run] = np.gradient(st[run, 1], tr)
+        w[run] = np.gradient(np.unwrap(st[run, 3]), tr)
+    speed = np.hypot(vx, vy)
+    c, s = np.cos(heading), np.sin(heading)
+    acc = np.full(n, np.nan)
+    for run in runs:
+        if len(run) < 2 or not valid[run[0]]:
+            continue
+        acc[run] = np.gradient(vx[run] * c[run] + vy[run] * s[run], t[run])
+    nan = np.full(n, np.nan)
+    mask = lambda a: np.where(valid, a, np.nan)  # noqa: E731
+    return Kinematics(object_id=track.object_id, label=track.label, size=track.size, frames=track.frames.copy(),
+                      timestamps_ns=track.timestamps_ns.copy(), valid=valid.copy(), flags=[list(f) for f in track.flags],
+                      x=mask(st[:, 0]), y=mask(st[:, 1]), z=mask(st[:, 2]), heading=mask(wrap_angle(st[:, 3])),
+                      velocity_x=vx, velocity_y=vy, speed=speed, acceleration=acc, yaw_rate=w,
+                      position_std=nan.copy(), heading_std=nan.copy(), speed_std=nan.copy(), yaw_rate_std=nan.copy(),
+                      source=track.source, config={"smoother": {"model": "central differences"}})

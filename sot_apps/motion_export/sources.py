@@ -1,0 +1,139 @@
+"""Inputs of the motion export: tracker outputs (track directories) or ground-truth annotations.
+
+Both become :class:`~sot_apps.motion_export.kinematics.ObjectTrack` (per-frame WORLD states with a
+validity mask). A tracker frame whose ``flags`` contain any flag not listed in ``accept_flags`` is
+invalid: it is not used as a measurement and is exported with ``valid = False``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Sequence as Seq
+
+import numpy as np
+
+from tracker.geometry import Box, invert_transform, points_in_box, transform_points
+
+from ..errors import InputError
+from ..io.sequence import Sequence
+from .kinematics import ObjectTrack
+
+__all__ = ["DEFAULT_ACCEPT_FLAGS", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
+           "aggregate_shape", "voxel_downsample"]
+
+# Flags that keep a frame valid (advisory only). Everything else — "no_points", "prior_only",
+# "lost", and any flag this version does not know — invalidates the frame.
+DEFAULT_ACCEPT_FLAGS: frozenset[str] = frozenset()
+
+
+def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
+                   accept_flags: Iterable[str] = DEFAULT_ACCEPT_FLAGS) -> ObjectTrack:
+    """Read ``directory/track.json`` + ``shape.ply`` into an ObjectTrack."""
+    from ..io.tracks import read_track
+
+    directory = Path(directory)
+    track, shape = read_track(directory)
+    json_path = directory if directory.suffix == ".json" else directory / "track.json"
+    if sequence is not None:
+        if track.sequence not in (sequence.id, Path(sequence.root).name):
+            raise InputError(json_path, f"track of sequence {track.sequence!r}, not of {sequence.id!r}")
+        n = len(sequence.frames)
+        bad = [r.frame for r in track.frames if r.frame >= n]
+        if bad:
+            raise InputError(json_path, f"frame {bad[0]} is outside the sequence (frames 0..{n - 1})")
+        for r in track.frames:
+            if r.timestamp_ns != sequence.frames[r.frame].timestamp_ns:
+                raise InputError(json_path, f"frame {r.frame}: timestamp_ns {r.timestamp_ns} differs from the "
+                                            f"sequence's {sequence.frames[r.frame].timestamp_ns}")
+    records = sorted(track.frames, key=lambda r: r.frame)
+    if not records:
+        raise InputError(json_path, "frames: the track has no frames")
+    accept = set(accept_flags)
+    flags = [list(r.flags) for r in records]
+    valid = np.array([not (set(f) - accept) for f in flags], dtype=bool)
+    states = np.array([[r.state.x, r.state.y, r.state.z, r.state.heading] for r in records], dtype=np.float64)
+    try:
+        return ObjectTrack(object_id=track.object_id, label=track.label or "", size=(track.size.length,
+                           track.size.width, track.size.height), frames=[r.frame for r in records],
+                           timestamps_ns=[r.timestamp_ns for r in records], states=states, valid=valid,
+                           flags=flags, source=str(json_path), shape_points=shape,
+                           config={"tracker": track.config})
+    except ValueError as exc:
+        raise InputError(json_path, str(exc)) from exc
+
+
+def tracks_from_dirs(directories: Seq[str | Path], sequence: Sequence | None = None,
+                     accept_flags: Iterable[str] = DEFAULT_ACCEPT_FLAGS) -> list[ObjectTrack]:
+    tracks = [track_from_dir(d, sequence, accept_flags) for d in directories]
+    seen: dict[str, str] = {}
+    for t in tracks:
+        if t.object_id in seen:
+            raise InputError(t.source, f"object {t.object_id!r} is also exported from {seen[t.object_id]}")
+        seen[t.object_id] = t.source
+    return tracks
+
+
+def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = None) -> list[ObjectTrack]:
+    """Ground-truth tracks of ``sequence`` (all, or those whose ids start with ``track_ids``).
+
+    Frames inside an annotated span where the box is missing are kept as invalid frames (flag
+    "not_annotated"). The size is the per-dimension median over the annotated boxes.
+    """
+    annotated = sequence.tracks()
+    if not annotated:
+        raise InputError(sequence.root, "the sequence has no annotations (needed by --from-annotations)")
+    ids = sorted(annotated) if not track_ids else [sequence.resolve_track_id(p) for p in track_ids]
+    out: list[ObjectTrack] = []
+    for tid in dict.fromkeys(ids):
+        ann = annotated[tid]
+        first, last = ann.frames[0], ann.frames[-1]
+        frames = np.arange(first, last + 1)
+        by_frame = dict(zip(ann.frames, ann.boxes))
+        states = np.full((len(frames), 4), np.nan)
+        valid = np.zeros(len(frames), dtype=bool)
+        flags: list[list[str]] = []
+        for i, k in enumerate(frames):
+            box = by_frame.get(int(k))
+            if box is None:
+                flags.append(["not_annotated"])
+                continue
+            states[i] = [box.x, box.y, box.z, box.heading]
+            valid[i] = True
+            flags.append([])
+        sizes = np.array([[b.length, b.width, b.height] for b in ann.boxes])
+        size = tuple(float(v) for v in np.median(sizes, axis=0))
+        out.append(ObjectTrack(object_id=tid, label=ann.label, size=size, frames=frames,
+                               timestamps_ns=sequence.timestamps_ns[frames], states=states, valid=valid,
+                               flags=flags, source=f"annotations of {sequence.id}",
+                               config={"source": "annotations"}))
+    return out
+
+
+def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
+    """One point per occupied voxel (the voxel centre)."""
+    if len(points) == 0:
+        return points.reshape(0, 3)
+    keys = np.unique(np.floor(points / voxel).astype(np.int64), axis=0)
+    return (keys + 0.5) * voxel
+
+
+def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20, voxel: float = 0.05,
+                    scale: float = 1.0) -> np.ndarray:
+    """Object-frame points of ``track``: points inside its valid boxes (up to ``max_frames`` frames,
+    evenly spaced) moved into the object frame and voxel-downsampled."""
+    idx = np.flatnonzero(track.valid)
+    if len(idx) == 0:
+        return np.zeros((0, 3))
+    pick = idx[np.unique(np.linspace(0, len(idx) - 1, min(max_frames, len(idx))).round().astype(int))]
+    chunks = []
+    for i in pick:
+        x, y, z, heading = track.states[i]
+        box = Box(x, y, z, heading, *track.size)
+        world_from_ego = sequence.frames[int(track.frames[i])].world_from_ego
+        ego_from_world = invert_transform(world_from_ego)
+        # test in the ego frame: cheaper than moving the whole sweep into the world
+        box_ego = box.transformed(ego_from_world)
+        pts = sequence.sweep(int(track.frames[i])).xyz
+        inside = pts[points_in_box(pts, box_ego, scale)]
+        chunks.append(transform_points(box_ego.object_from_world(), inside))
+    return voxel_downsample(np.concatenate(chunks) if chunks else np.zeros((0, 3)), voxel)
