@@ -1,0 +1,50 @@
+"""``sot-apps synth``: write a synthetic world as a canonical sequence with exact ground truth."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..errors import InputError
+from .common import add_subcommand
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    parser = add_subcommand(
+        subparsers, "synth", help="synthesise a driving world (canonical sequence + ground truth)",
+        description="Simulate a small world (ground, walls, poles, parked cars, moving procedural vehicles that "
+                    "turn, stop and accelerate; a moving ego) with a spinning LiDAR and write it as a canonical "
+                    "sequence with ground-truth boxes, meshes, trajectories and per-point instance labels (DIR/gt/). "
+                    "The same arguments give byte-identical output.",
+        examples=["sot-apps synth --out /tmp/world --frames 20 --vehicles 3 --sensor pandar64 --seed 0",
+                  "sot-apps synth --out /tmp/world_cam --frames 10 --vehicles 4 --cameras --camera-size 640x360"])
+    parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    parser.add_argument("--frames", type=int, default=20, help="number of frames (default 20)")
+    parser.add_argument("--vehicles", type=int, default=3, help="number of moving vehicles (default 3)")
+    parser.add_argument("--sensor", default="pandar64", help="sensor preset or sensor JSON (default pandar64)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--cameras", action="store_true", help="also render a front pinhole camera (pyrender, EGL)")
+    parser.add_argument("--camera-size", default="640x360", metavar="WxH", help="camera image size (default 640x360)")
+    parser.set_defaults(func=run)
+    return parser
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InputError(None, f"--camera-size must look like 640x360, got {text!r}") from None
+    if w < 8 or h < 8:
+        raise InputError(None, "--camera-size must be at least 8x8")
+    return w, h
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..lidar_sim.synth import write_world
+
+    if args.frames < 1 or args.vehicles < 0:
+        raise InputError(None, "--frames must be >= 1 and --vehicles >= 0")
+    out = write_world(Path(args.out), frames=args.frames, vehicles=args.vehicles, sensor=args.sensor,
+                      seed=args.seed, cameras=args.cameras, camera_size=_size(args.camera_size), progress=True)
+    print(f"wrote {out / 'sequence.json'} ({args.frames} frames, {args.vehicles} moving vehicles; ground truth in {out / 'gt'})")
+    return 0

@@ -1,0 +1,222 @@
+"""Simulating one sweep of a spinning LiDAR over static and moving meshes.
+
+Rolling scan: column ``j`` of the sweep fires at its own time (``Sensor.column_time_offsets_ns``); the
+sensor pose and every moving object's pose are taken at that time, exactly (per ray), when
+``Realism.motion_distortion`` is on, else everything is frozen at the frame time.
+
+Static meshes (ground, walls, parked cars) live in one Embree scene in the world frame, one TriangleMesh
+each. Each moving object has its own Embree scene in its object frame; rays that pass near it are
+transformed into its frame at their firing time and traced there; the nearest hit wins.
+
+Output points are in the sensor frame AT THE FRAME TIME (ego motion compensated, as PandaSet stores them
+after our reader); objects that move keep their rolling-scan distortion. ``time_offset_ns`` gives each
+point's firing time relative to the frame timestamp (which marks the end of the sweep).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracker.geometry import invert_transform, transform_points
+
+from .noise import Realism, apply_range_noise, drop_mask, incidence_cosine, lambertian_intensity
+from .raycast import RaycastScene, RayHits
+from .sensors import Sensor
+
+__all__ = ["Trajectory", "SimObject", "Scan", "simulate_scan", "range_image", "build_static_scene", "state_to_matrix"]
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A 4-DOF trajectory sampled at increasing integer-ns times; states (T, 4) = x, y, z, heading (world).
+
+    A single sample is a static pose. Between samples states are interpolated linearly (heading unwrapped);
+    outside they are held.
+    """
+
+    times_ns: np.ndarray
+    states: np.ndarray
+
+    @classmethod
+    def static(cls, x: float, y: float, z: float, heading: float) -> "Trajectory":
+        return cls(np.zeros(1, dtype=np.int64), np.array([[x, y, z, heading]], dtype=np.float64))
+
+    @property
+    def is_static(self) -> bool:
+        return len(self.times_ns) == 1
+
+    def at(self, t_ns: np.ndarray | int) -> np.ndarray:
+        """(..., 4) states at the given times."""
+        t = np.asarray(t_ns, dtype=np.float64)
+        if self.is_static:
+            return np.broadcast_to(self.states[0], t.shape + (4,)).copy()
+        times = self.times_ns.astype(np.float64)
+        heading = np.unwrap(self.states[:, 3])
+        cols = [np.interp(t, times, self.states[:, i]) for i in range(3)] + [np.interp(t, times, heading)]
+        out = np.stack(cols, axis=-1)
+        out[..., 3] = (out[..., 3] + np.pi) % (2 * np.pi) - np.pi
+        return out
+
+
+def state_to_matrix(states: np.ndarray) -> np.ndarray:
+    """(..., 4) states -> (..., 4, 4) world_from_object transforms."""
+    states = np.asarray(states, dtype=np.float64)
+    c, s = np.cos(states[..., 3]), np.sin(states[..., 3])
+    out = np.zeros(states.shape[:-1] + (4, 4))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s, s, c
+    out[..., 2, 2] = 1.0
+    out[..., 3, 3] = 1.0
+    out[..., :3, 3] = states[..., :3]
+    return out
+
+
+@dataclass
+class SimObject:
+    """A mesh in its own frame and where it is over time.
+
+    ``instance`` >= 0 marks an annotated object (the value is reported per point), -1 background.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    trajectory: Trajectory
+    instance: int = -1
+    reflectivity: float = 0.5
+    name: str = ""
+
+    def radius(self) -> float:
+        return float(np.linalg.norm(self.vertices, axis=1).max())
+
+
+@dataclass
+class Scan:
+    """One simulated sweep. All arrays have one row per return."""
+
+    xyz: np.ndarray                # (N, 3) float32, sensor frame at the frame time
+    instance: np.ndarray           # (N,) int32, -1 background
+    intensity: np.ndarray          # (N,) float32 in [0, 1] (0 when intensity is off)
+    time_offset_ns: np.ndarray     # (N,) int64 relative to the frame timestamp
+    beam: np.ndarray               # (N,) int32
+    column: np.ndarray             # (N,) int32
+    distance: np.ndarray           # (N,) float32 measured range
+    object_index: np.ndarray       # (N,) int32 index into the objects list (-1 never)
+    num_beams: int = 0
+    num_columns: int = 0
+    extra: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+
+def range_image(scan: Scan) -> np.ndarray:
+    """(B, C) float32 organised range image; 0 where there is no return."""
+    image = np.zeros((scan.num_beams, scan.num_columns), dtype=np.float32)
+    image[scan.beam, scan.column] = scan.distance
+    return image
+
+
+def _near_sphere(origins: np.ndarray, dirs: np.ndarray, centres: np.ndarray, radius: float,
+                 max_range: float) -> np.ndarray:
+    d = centres - origins
+    t = np.einsum("ij,ij->i", d, dirs)
+    perp2 = np.einsum("ij,ij->i", d, d) - t * t
+    return (perp2 <= radius * radius) & (t >= -radius) & (t <= max_range + radius)
+
+
+def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: Trajectory | np.ndarray,
+                  frame_time_ns: int = 0, realism: Realism | None = None,
+                  static_scene: RaycastScene | None = None) -> Scan:
+    """Simulate one sweep ending at ``frame_time_ns``.
+
+    ``world_from_sensor`` is a 4x4 (fixed sensor) or a Trajectory of the sensor (x, y, z, heading).
+    ``static_scene`` may pass a prebuilt scene of the static objects (same order as they appear in
+    ``objects``) to save rebuilding it every frame.
+    """
+    realism = realism or Realism()
+    rng = np.random.default_rng(realism.seed)
+    dirs_s, beam, column = sensor.ray_grid()
+    col_t = sensor.column_time_offsets_ns()
+    times = col_t if realism.motion_distortion else np.zeros_like(col_t)
+    abs_times = frame_time_ns + times  # per column
+
+    if isinstance(world_from_sensor, Trajectory):
+        sensor_T_col = state_to_matrix(world_from_sensor.at(abs_times))          # (C, 4, 4)
+        world_from_sensor_frame = state_to_matrix(world_from_sensor.at(frame_time_ns))
+    else:
+        sensor_T_col = np.broadcast_to(np.asarray(world_from_sensor, dtype=np.float64), (sensor.columns, 4, 4))
+        world_from_sensor_frame = np.asarray(world_from_sensor, dtype=np.float64)
+    rot = sensor_T_col[column, :3, :3]
+    origins = sensor_T_col[column, :3, 3]
+    dirs = np.einsum("nij,nj->ni", rot, dirs_s)
+
+    static_idx = [i for i, o in enumerate(objects) if o.trajectory.is_static]
+    moving_idx = [i for i, o in enumerate(objects) if not o.trajectory.is_static]
+    if static_scene is None:
+        static_scene = build_static_scene(objects)
+    hits = static_scene.cast(origins, dirs)
+    obj_of_geom = np.array(static_idx + [-1], dtype=np.int32)
+    object_index = np.where(hits.hit, obj_of_geom[np.where(hits.hit, hits.geom_id, -1)], -1).astype(np.int32)
+    dist = hits.distance.copy()
+    normal = hits.normal.copy()
+
+    for i in moving_idx:
+        o = objects[i]
+        states_col = o.trajectory.at(abs_times)                 # (C, 4)
+        centres = states_col[column, :3]
+        cand = np.flatnonzero(_near_sphere(origins, dirs, centres, o.radius(), sensor.max_range))
+        if cand.size == 0:
+            continue
+        object_from_world = invert_transform_batch(state_to_matrix(states_col))[column[cand]]
+        o_obj = np.einsum("nij,nj->ni", object_from_world[:, :3, :3], origins[cand]) + object_from_world[:, :3, 3]
+        d_obj = np.einsum("nij,nj->ni", object_from_world[:, :3, :3], dirs[cand])
+        scene = RaycastScene()
+        scene.add_mesh(o.vertices, o.faces)
+        h: RayHits = scene.cast(o_obj, d_obj)
+        closer = h.hit & (h.distance < dist[cand])
+        sel = cand[closer]
+        dist[sel] = h.distance[closer]
+        world_from_object_rot = np.transpose(object_from_world[closer, :3, :3], (0, 2, 1))
+        normal[sel] = np.einsum("nij,nj->ni", world_from_object_rot, h.normal[closer])
+        object_index[sel] = i
+
+    valid = np.isfinite(dist) & (dist >= sensor.min_range) & (dist <= sensor.max_range)
+    cos_inc = incidence_cosine(dirs, normal)
+    measured = dist.copy()
+    if realism.range_noise and sensor.range_noise_sigma > 0:
+        measured = apply_range_noise(measured, sensor.range_noise_sigma, rng)
+    if realism.drop_random > 0 or realism.drop_grazing:
+        valid &= ~drop_mask(cos_inc, realism, rng)
+    reflect = np.array([o.reflectivity for o in objects] + [0.0], dtype=np.float64)
+    if realism.intensity:
+        intensity = lambertian_intensity(cos_inc, reflect[object_index], measured, realism.attenuation_per_m)
+    else:
+        intensity = np.zeros_like(measured)
+    keep = np.flatnonzero(valid)
+    pts_world = origins[keep] + dirs[keep] * measured[keep, None]
+    xyz = transform_points(invert_transform(world_from_sensor_frame), pts_world).astype(np.float32)
+    inst_of_obj = np.array([o.instance for o in objects] + [-1], dtype=np.int32)
+    return Scan(xyz=xyz, instance=inst_of_obj[object_index[keep]], intensity=intensity[keep].astype(np.float32),
+                time_offset_ns=col_t[column[keep]].astype(np.int64), beam=beam[keep], column=column[keep],
+                distance=measured[keep].astype(np.float32), object_index=object_index[keep],
+                num_beams=sensor.beams, num_columns=sensor.columns)
+
+
+def build_static_scene(objects: list[SimObject]) -> RaycastScene:
+    """One Embree scene (world frame) of the static objects, in list order: geometry id g is the g-th static one."""
+    scene = RaycastScene()
+    for o in objects:
+        if o.trajectory.is_static:
+            scene.add_mesh(transform_points(state_to_matrix(o.trajectory.states[0]), o.vertices), o.faces)
+    return scene
+
+
+def invert_transform_batch(target_from_source: np.ndarray) -> np.ndarray:
+    """Inverse of (..., 4, 4) rigid transforms."""
+    rot = np.swapaxes(target_from_source[..., :3, :3], -1, -2)
+    out = np.zeros_like(target_from_source)
+    out[..., :3, :3] = rot
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", rot, target_from_source[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
