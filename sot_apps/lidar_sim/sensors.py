@@ -141,10 +141,9 @@ _HDL32E = (
 
 _VLP16 = (-15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0, -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0)
 
-_WAYMO_TOP = tuple(round(2.4 - 20.0 * i / 63.0, 6) for i in range(64))
+_WAYMO_TOP = tuple(float(v) for v in np.linspace(2.4, -17.6, 64))
 
-_HDL64E = tuple(round(2.0 - (10.33 / 31.0) * i, 6) for i in range(32)) + tuple(
-    round(-8.83 - 0.5 * i, 6) for i in range(32))
+_HDL64E = tuple(float(v) for v in np.linspace(2.0, -8.33, 32)) + tuple(float(v) for v in np.linspace(-8.83, -24.33, 32))
 
 PRESETS: dict[str, Sensor] = {
     "waymo_top": Sensor("waymo_top", _WAYMO_TOP, columns=2650, min_range=0.5, max_range=75.0,

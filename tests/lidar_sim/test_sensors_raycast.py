@@ -1,0 +1,102 @@
+"""Sensors (beam tables), Embree ray casting (analytic distances), flat-ground ring radii."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from sot_apps.errors import InputError
+from sot_apps.lidar_sim.noise import Realism
+from sot_apps.lidar_sim.raycast import RaycastScene, cast_rays
+from sot_apps.lidar_sim.scan import SimObject, Trajectory, range_image, simulate_scan
+from sot_apps.lidar_sim.sensors import PRESETS, load_sensor
+
+# Datasheet tables, written out independently of sensors.py (degrees, laser-id order).
+DATASHEET = {
+    "vlp16": [-15, 1, -13, 3, -11, 5, -9, 7, -7, 9, -5, 11, -3, 13, -1, 15],
+    "hdl32e": [-30.67, -9.33, -29.33, -8.00, -28.00, -6.67, -26.67, -5.33, -25.33, -4.00, -24.00, -2.67, -22.67,
+               -1.33, -21.33, 0.00, -20.00, 1.33, -18.67, 2.67, -17.33, 4.00, -16.00, 5.33, -14.67, 6.67, -13.33,
+               8.00, -12.00, 9.33, -10.67, 10.67],
+    "waymo_top": list(np.linspace(2.4, -17.6, 64)),
+    "hdl64e": list(np.linspace(2.0, -8.33, 32)) + list(np.linspace(-8.83, -24.33, 32)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_preset_ray_elevations_equal_table(name):
+    sensor = PRESETS[name]
+    dirs, beam, column = sensor.ray_grid()
+    assert dirs.shape == (sensor.beams * sensor.columns, 3)
+    elev = np.degrees(np.arctan2(dirs[:, 2], np.hypot(dirs[:, 0], dirs[:, 1])))
+    table = np.asarray(DATASHEET.get(name, sensor.elevations_deg), dtype=float)
+    np.testing.assert_allclose(elev, table[beam], atol=1e-9)
+    if name == "pandar64":  # non-uniform: 0.167-deg spacing near the horizon, sparse at the edges
+        gaps = -np.diff(np.sort(table)[::-1])
+        assert np.isclose(table.max(), 14.882) and np.isclose(table.min(), -24.897)
+        assert np.median(gaps) < 0.2 and gaps.max() > 5.0
+    # columns are evenly spaced over a full turn
+    az = np.unwrap(sensor.column_azimuths())
+    np.testing.assert_allclose(np.abs(np.diff(az)), 2 * np.pi / sensor.columns, atol=1e-9)
+
+
+def test_waymo_top_spec():
+    s = PRESETS["waymo_top"]
+    assert (s.beams, s.columns, s.num_rays, s.max_range) == (64, 2650, 169_600, 75.0)
+
+
+def test_sensor_json_round_trip(tmp_path):
+    import json
+
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(PRESETS["hdl32e"].to_dict()))
+    assert load_sensor(str(path)) == PRESETS["hdl32e"]
+    path.write_text(json.dumps({"name": "x", "elevations_deg": [], "columns": 10}))
+    with pytest.raises(InputError, match="elevations_deg"):
+        load_sensor(str(path))
+
+
+def test_ray_at_box_returns_analytic_distance():
+    scene = RaycastScene()
+    box = trimesh.creation.box(extents=[2.0, 3.0, 1.5])
+    gid0 = scene.add_mesh(box.vertices + [10.0, 0.0, 0.0], box.faces)
+    gid1 = scene.add_mesh(box.vertices + [0.0, 20.0, 0.0], box.faces)
+    rng = np.random.default_rng(0)
+    # rays from the origin at random points on the near face (x = 9) of box 0, and at box 1's face y = 18.5
+    targets0 = np.column_stack([np.full(50, 9.0), rng.uniform(-1.4, 1.4, 50), rng.uniform(-0.7, 0.7, 50)])
+    targets1 = np.column_stack([rng.uniform(-0.9, 0.9, 50), np.full(50, 18.5), rng.uniform(-0.7, 0.7, 50)])
+    targets = np.vstack([targets0, targets1])
+    dirs = targets / np.linalg.norm(targets, axis=1, keepdims=True)
+    hits = scene.cast(np.zeros(3), dirs)
+    np.testing.assert_allclose(hits.distance, np.linalg.norm(targets, axis=1), atol=1e-5)
+    assert (hits.geom_id[:50] == gid0).all() and (hits.geom_id[50:] == gid1).all()
+    np.testing.assert_allclose(hits.normal[:50], np.tile([-1.0, 0, 0], (50, 1)), atol=1e-6)
+    np.testing.assert_allclose(hits.normal[50:], np.tile([0, -1.0, 0], (50, 1)), atol=1e-6)
+    assert (hits.prim_id >= 0).all() and (hits.prim_id < len(box.faces)).all()
+    miss = scene.cast(np.zeros(3), np.array([[0.0, -1.0, 0.0]]))
+    assert np.isinf(miss.distance[0]) and miss.geom_id[0] == -1
+    # the process-parallel path returns the same hits
+    par = cast_rays(scene, np.zeros(3), np.repeat(dirs, 50, axis=0), processes=2, min_rays_per_process=1000)
+    np.testing.assert_array_equal(par.distance, np.repeat(hits.distance, 50))
+
+
+@pytest.mark.parametrize("name", ["vlp16", "hdl64e"])
+def test_flat_ground_rings_have_analytic_radii(name):
+    sensor = PRESETS[name]
+    height = 1.73
+    ground = SimObject(np.array([[-500, -500, 0], [500, -500, 0], [500, 500, 0], [-500, 500, 0]], float),
+                       np.array([[0, 1, 2], [0, 2, 3]]), Trajectory.static(0, 0, 0, 0))
+    world_from_sensor = np.eye(4)
+    world_from_sensor[2, 3] = height
+    scan = simulate_scan(sensor, [ground], world_from_sensor, realism=Realism.ideal())
+    radius = np.hypot(scan.xyz[:, 0], scan.xyz[:, 1])
+    elev = np.radians(np.asarray(sensor.elevations_deg))
+    expected = height / np.tan(-elev[scan.beam])
+    assert (elev[scan.beam] < 0).all()
+    np.testing.assert_allclose(radius, expected, rtol=2e-6, atol=1e-4)
+    np.testing.assert_allclose(scan.xyz[:, 2], -height, atol=1e-4)
+    in_range = (elev < 0) & (height / np.sin(-np.minimum(elev, -1e-9)) <= sensor.max_range)
+    assert len(scan) == int(in_range.sum()) * sensor.columns  # every down-looking beam in range returns
+    image = range_image(scan)
+    assert image.shape == (sensor.beams, sensor.columns)
+    assert np.count_nonzero(image) == len(scan)
