@@ -2,20 +2,25 @@
 
 Model (documented in docs/motion-export.md). The state of one object is
 
-    s = [x, y, theta, v, omega, z, vz]
+    s = [x, y, theta, v, omega, z, vz, beta]
 
 with (x, y, z) the WORLD box centre, theta the heading of the box's length axis (kept continuous,
-i.e. unwrapped), v the SIGNED speed along theta (negative when reversing), omega the yaw rate and vz
-the vertical speed. Between two frames dt apart the object moves on a circular arc
-(constant turn rate and velocity, CTRV):
+i.e. unwrapped), v the SIGNED speed of the centre (negative when reversing), omega the yaw rate, vz
+the vertical speed and beta the side-slip angle between the heading and the centre's direction of
+travel phi = theta + beta. (The centre of a turning car does not move along its length axis: it
+slips by about atan(l_rear * omega / v), over 10 degrees for a slow car turning a corner. A plain
+CTRV model that forces the velocity along the heading biases positions and speeds there.)
+Between two frames dt apart the centre moves on a circular arc (constant turn rate and velocity,
+CTRV, with a slowly varying slip):
 
-    x' = x + v dt (cos(theta) f1(a) - sin(theta) f2(a))      a = omega dt
-    y' = y + v dt (sin(theta) f1(a) + cos(theta) f2(a))      f1(a) = sin(a)/a, f2(a) = (1 - cos(a))/a
-    theta' = theta + omega dt,  v' = v,  omega' = omega,  z' = z + vz dt,  vz' = vz
+    x' = x + v dt (cos(phi) f1(a) - sin(phi) f2(a))      a = omega dt, phi = theta + beta
+    y' = y + v dt (sin(phi) f1(a) + cos(phi) f2(a))      f1(a) = sin(a)/a, f2(a) = (1 - cos(a))/a
+    theta' = theta + omega dt,  v' = v,  omega' = omega,  z' = z + vz dt,  vz' = vz,  beta' = beta
 
 (f1, f2 use their Taylor series near a = 0, so straight-line motion needs no special case).
 Process noise is white longitudinal acceleration (sigma_accel), yaw acceleration
-(sigma_yaw_accel) and vertical acceleration (sigma_vertical_accel), integrated over dt. The
+(sigma_yaw_accel), vertical acceleration (sigma_vertical_accel) and slip rate (sigma_slip_rate),
+integrated over dt; the slip starts at 0 with prior sigma initial_sigma_slip. The
 measurements are the box centre and heading, z = [x, y, theta, z]; the heading innovation is
 wrapped to [-pi, pi), which keeps theta unwrapped across the +-pi seam.
 
@@ -24,7 +29,7 @@ every step uses its own dt) and a Rauch-Tung-Striebel pass runs backward. The pa
 each pass started from the previous pass's smoothed initial state, which removes the start-up
 transient of the unknown initial speed and yaw rate.
 
-Outputs per frame: position, heading (wrapped), velocity (x, y) = v (cos theta, sin theta),
+Outputs per frame: position, heading (wrapped), velocity (x, y) = v (cos phi, sin phi),
 speed = |v|, yaw rate = omega, longitudinal acceleration = dv/dt (np.gradient of the smoothed v
 over the true frame times), and 1-sigma uncertainties from the smoothed covariance.
 
@@ -44,8 +49,8 @@ from tracker.geometry import wrap_angle
 __all__ = ["SmootherConfig", "ObjectTrack", "Kinematics", "smooth_track", "ctrv_transition",
            "central_difference_kinematics"]
 
-_NX = 7  # x, y, theta, v, omega, z, vz
-_IX, _IY, _ITH, _IV, _IW, _IZ, _IVZ = range(_NX)
+_NX = 8  # x, y, theta, v, omega, z, vz, beta
+_IX, _IY, _ITH, _IV, _IW, _IZ, _IVZ, _IB = range(_NX)
 _H = np.zeros((4, _NX))
 _H[0, _IX] = _H[1, _IY] = _H[2, _ITH] = _H[3, _IZ] = 1.0
 
@@ -60,6 +65,8 @@ class SmootherConfig:
     sigma_accel: float = 3.0            # m/s^2, longitudinal acceleration (process noise)
     sigma_yaw_accel: float = 1.0        # rad/s^2, yaw acceleration (process noise)
     sigma_vertical_accel: float = 0.5   # m/s^2, vertical acceleration (process noise)
+    sigma_slip_rate: float = 0.3        # rad/s, rate of change of the side-slip angle (process noise)
+    initial_sigma_slip: float = 0.2     # rad, prior on the side-slip angle (mean 0)
     initial_sigma_speed: float = 10.0   # m/s, prior on the initial speed
     initial_sigma_yaw_rate: float = 1.0  # rad/s, prior on the initial yaw rate
     passes: int = 3                     # EKF+RTS passes (>= 1)
@@ -143,7 +150,7 @@ class Kinematics:
 
     @property
     def signed_speed(self) -> np.ndarray:
-        """Speed along the heading (negative when reversing)."""
+        """Velocity component along the heading (negative when reversing)."""
         c, s = np.cos(self.heading), np.sin(self.heading)
         return self.velocity_x * c + self.velocity_y * s
 
@@ -176,16 +183,16 @@ def _f1_f2(a: float) -> tuple[float, float, float, float]:
 
 
 def ctrv_transition(state: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """CTRV prediction of a 7-state over ``dt`` seconds: (next state, Jacobian d next / d state)."""
-    x, y, th, v, w, z, vz = state
+    """CTRV prediction of a state over ``dt`` seconds: (next state, Jacobian d next / d state)."""
+    x, y, th, v, w, z, vz, beta = state
     f1, f2, d1, d2 = _f1_f2(w * dt)
-    c, s = np.cos(th), np.sin(th)
+    c, s = np.cos(th + beta), np.sin(th + beta)
     dx = v * dt * (c * f1 - s * f2)
     dy = v * dt * (s * f1 + c * f2)
-    out = np.array([x + dx, y + dy, th + w * dt, v, w, z + vz * dt, vz])
+    out = np.array([x + dx, y + dy, th + w * dt, v, w, z + vz * dt, vz, beta])
     F = np.eye(_NX)
-    F[_IX, _ITH] = -dy
-    F[_IY, _ITH] = dx
+    F[_IX, _ITH] = F[_IX, _IB] = -dy
+    F[_IY, _ITH] = F[_IY, _IB] = dx
     F[_IX, _IV] = dt * (c * f1 - s * f2)
     F[_IY, _IV] = dt * (s * f1 + c * f2)
     F[_IX, _IW] = v * dt * dt * (c * d1 - s * d2)
@@ -196,8 +203,8 @@ def ctrv_transition(state: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
 
 
 def _process_noise(state: np.ndarray, dt: float, cfg: SmootherConfig) -> np.ndarray:
-    c, s = np.cos(state[_ITH]), np.sin(state[_ITH])
-    G = np.zeros((_NX, 3))
+    c, s = np.cos(state[_ITH] + state[_IB]), np.sin(state[_ITH] + state[_IB])
+    G = np.zeros((_NX, 4))
     G[_IX, 0] = 0.5 * dt * dt * c
     G[_IY, 0] = 0.5 * dt * dt * s
     G[_IV, 0] = dt
@@ -205,7 +212,9 @@ def _process_noise(state: np.ndarray, dt: float, cfg: SmootherConfig) -> np.ndar
     G[_IW, 1] = dt
     G[_IZ, 2] = 0.5 * dt * dt
     G[_IVZ, 2] = dt
-    q = np.diag([cfg.sigma_accel ** 2, cfg.sigma_yaw_accel ** 2, cfg.sigma_vertical_accel ** 2])
+    G[_IB, 3] = dt
+    q = np.diag([cfg.sigma_accel ** 2, cfg.sigma_yaw_accel ** 2, cfg.sigma_vertical_accel ** 2,
+                 cfg.sigma_slip_rate ** 2])
     return G @ q @ G.T
 
 
@@ -218,7 +227,7 @@ def _initial_state(t: np.ndarray, meas: np.ndarray, valid: np.ndarray) -> np.nda
         dt = t[idx[1]] - t[idx[0]]
         v0 = float((second[0] - first[0]) * np.cos(first[2]) + (second[1] - first[1]) * np.sin(first[2])) / dt
         vz0 = float(second[3] - first[3]) / dt
-    return np.array([first[0], first[1], first[2], v0, 0.0, first[3], vz0])
+    return np.array([first[0], first[1], first[2], v0, 0.0, first[3], vz0, 0.0])
 
 
 def _ekf_rts(t: np.ndarray, meas: np.ndarray, valid: np.ndarray, r_scale: np.ndarray,
@@ -280,16 +289,17 @@ def smooth_track(track: ObjectTrack, config: SmootherConfig = TRACKER_SMOOTHER,
         s0 = _initial_state(t, meas, v)
         p0 = np.diag([config.sigma_position ** 2, config.sigma_position ** 2, config.sigma_heading ** 2,
                       config.initial_sigma_speed ** 2, config.initial_sigma_yaw_rate ** 2,
-                      config.sigma_z ** 2, 1.0])
+                      config.sigma_z ** 2, 1.0, config.initial_sigma_slip ** 2])
         for _ in range(max(1, config.passes)):
             xs, ps = _ekf_rts(t, meas, v, scale, s0, p0, config)
             s0 = xs[0].copy()
             # keep the prior on speed / yaw rate loose but centred on the smoothed estimate
         th, sv, w = xs[:, _ITH], xs[:, _IV], xs[:, _IW]
+        course = th + xs[:, _IB]
         acc = np.gradient(sv, t) if len(t) > 1 else np.zeros(1)
         block = {
             "x": xs[:, _IX], "y": xs[:, _IY], "z": xs[:, _IZ], "heading": wrap_angle(th),
-            "velocity_x": sv * np.cos(th), "velocity_y": sv * np.sin(th), "speed": np.abs(sv),
+            "velocity_x": sv * np.cos(course), "velocity_y": sv * np.sin(course), "speed": np.abs(sv),
             "acceleration": acc, "yaw_rate": w,
             "position_std": np.sqrt(ps[:, _IX, _IX] + ps[:, _IY, _IY]),
             "heading_std": np.sqrt(ps[:, _ITH, _ITH]), "speed_std": np.sqrt(ps[:, _IV, _IV]),

@@ -148,7 +148,9 @@ class _Writer:
             transforms.append(m.FrameTransform(timestamp=ts, parent_frame_id=WORLD_FRAME,
                                                child_frame_id=object_frame(oid), translation=position,
                                                rotation=orientation))
-            signed = float(k.signed_speed[i])
+            c, s = np.cos(k.heading[i]), np.sin(k.heading[i])
+            body_vx = float(c * k.velocity_x[i] + s * k.velocity_y[i])   # velocity in the object frame
+            body_vy = float(-s * k.velocity_x[i] + c * k.velocity_y[i])
             pos_var = float(k.position_std[i]) ** 2 / 2.0
             pose_cov = [0.0] * 36
             pose_cov[0] = pose_cov[7] = pos_var
@@ -157,7 +159,7 @@ class _Writer:
             vel_cov[0] = float(k.speed_std[i]) ** 2
             vel_cov[35] = float(k.yaw_rate_std[i]) ** 2
             odom = m.Odometry(timestamp=ts, frame_id=WORLD_FRAME, body_frame_id=object_frame(oid), pose=pose,
-                              linear_velocity=m.Vector3(x=signed, y=0.0, z=0.0),
+                              linear_velocity=m.Vector3(x=body_vx, y=body_vy, z=0.0),
                               angular_velocity=m.Vector3(x=0.0, y=0.0, z=float(k.yaw_rate[i])),
                               pose_covariance=pose_cov, velocity_covariance=vel_cov)
             self._log(self.pose[oid], f"/objects/{oid}/pose", odom, t_ns)
