@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from .camera import CameraModel, grid_pixels, pixel_rays, project
@@ -45,10 +46,17 @@ class RayCache:
 _DEFAULT_CACHE = RayCache()
 
 
-def _union_pixels(rois: list[tuple[int, int, int, int]], model: CameraModel) -> np.ndarray:
-    mask = np.zeros((model.height, model.width), dtype=bool)
-    for x0, y0, x1, y1 in rois:
-        mask[y0:y1, x0:x1] = True
+def _ray_pixels(footprints: list[tuple[tuple[int, int, int, int], np.ndarray | None]], model: CameraModel) -> np.ndarray:
+    """Pixels to cast: each object's projected silhouette (convex hull of its projected vertices,
+    grown by 2 px) or, with lens distortion or vertices behind the camera, its bounding box."""
+    mask = np.zeros((model.height, model.width), dtype=np.uint8)
+    for (x0, y0, x1, y1), uv in footprints:
+        if uv is None or model.has_distortion or np.isnan(uv).any():
+            mask[y0:y1, x0:x1] = 1
+            continue
+        hull = cv2.convexHull(np.round(uv * 16).astype(np.int32))
+        cv2.fillConvexPoly(mask, hull, 1, lineType=cv2.LINE_8, shift=4)
+    mask = cv2.dilate(mask, np.ones((5, 5), np.uint8))
     vs, us = np.nonzero(mask)
     return np.stack([us, vs], axis=1)
 
@@ -97,14 +105,16 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
     out = PairFlow.empty(model.width, model.height)
     cam_k = setup.camera_k_from_world
     placed = [o.mesh.transformed(cam_k @ o.world_from_object_k) for o in objects]
-    rois = {}
+    rois, footprints = {}, []
     for obj, mesh in zip(objects, placed):
-        roi = image_roi(project_vertices(mesh, np.eye(4), model), model)
+        uv = project_vertices(mesh, np.eye(4), model)
+        roi = image_roi(uv, model)
         if roi is not None:
             rois[obj.index] = roi
+            footprints.append((roi, uv))
     if not rois:
         return out
-    pixels = _union_pixels(list(rois.values()), model)
+    pixels = _ray_pixels(footprints, model)
     rays = cache.rays(model, pixels)
     scene_k = MultiMeshScene(placed)
     geom, t = scene_k.first_hit(np.zeros(3), rays)

@@ -1,0 +1,236 @@
+"""Orchestration: for each image pair k -> k+1 of one camera, place the objects, compute and write flow.
+
+Output layout (docs/flow.md), under ``OUT/<camera>/``, files named by k as six digits:
+``flow_occ/``, ``flow_noc/`` (KITTI PNG), ``flo/`` (Middlebury, flow_occ), ``instances/`` (16-bit
+PNG, 0 = none, object index + 1; mapping in ``instances.json``), ``vis/`` (``*_flow.png`` colour
+wheel, ``*_overlay.jpg``), ``pairs/`` (per-pair stats, written last: a pair with its json is
+finished and skipped on a rerun) and ``stats.json`` (all pairs, data_schema/flow_stats.schema.json).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from tracker.geometry import invert_transform, transform_points
+
+from ..errors import InputError
+from ..io.atomic import write_bytes, write_json
+from ..io.sequence import Camera, Sequence
+from .camera import CameraModel
+from .dense import RayCache, dense_flow
+from .flo_io import write_flo
+from .kitti_io import write_kitti_flow
+from .objects import TrackedObject
+from .occlusion import ProjectedPoints, project_lidar
+from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup
+from .sparse import sparse_flow
+from .states import interpolate_pose
+from .visualize import flow_to_color, overlay
+
+__all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "STATS_VERSION"]
+
+STATS_VERSION = 1
+SUBDIRS = ("flow_occ", "flow_noc", "flo", "instances", "vis", "pairs")
+
+
+@dataclass(frozen=True)
+class FlowOptions:
+    mode: str = "dense"
+    occlusion: OcclusionParams = field(default_factory=OcclusionParams)
+    use_lidar: bool = True
+    write_vis: bool = True
+    exclusion_margin: float = 0.4
+
+
+def camera_pose_at(seq: Sequence, camera: Camera, k: int) -> np.ndarray:
+    """world_from_camera at camera frame k's own timestamp.
+
+    A per-frame pose is used as given, except when it is just the LiDAR frame's ego pose times a
+    rigid ``ego_from_camera`` (no pose of its own at the camera time): then the ego pose is
+    interpolated to the camera timestamp.
+    """
+    frame = camera.frames[k]
+    if camera.ego_from_camera is not None and len(seq.frames) > 1:
+        derived = seq.frames[k].world_from_ego @ camera.ego_from_camera
+        if np.allclose(derived, frame.world_from_camera, atol=1e-9):
+            poses = np.stack([f.world_from_ego for f in seq.frames])
+            return interpolate_pose(seq.timestamps_ns, poses, frame.timestamp_ns) @ camera.ego_from_camera
+    return np.asarray(frame.world_from_camera, dtype=np.float64)
+
+
+def _lidar_occluders(seq: Sequence, k: int, objects: list[TrackedObject], camera_from_world: np.ndarray,
+                     model: CameraModel, margin: float) -> ProjectedPoints:
+    """Frame k's points minus those in (or near) any tracked object during the sweep, projected."""
+    if not 0 <= k < len(seq.frames):
+        return ProjectedPoints.empty()
+    points = seq.points_world(k)
+    # Only points the camera sees can occlude: cut to the view first (cheap), then remove object points.
+    cam = transform_points(camera_from_world, points)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = cam[:, :2] / cam[:, 2:3] * np.diag(model.K)[:2] + model.K[:2, 2]
+    slack = 0.25 * max(model.width, model.height)  # generous: distortion may move points inwards
+    view = ((cam[:, 2] > 0.5) & (uv[:, 0] > -slack) & (uv[:, 0] < model.width + slack)
+            & (uv[:, 1] > -slack) & (uv[:, 1] < model.height + slack))
+    points = points[view]
+    keep = np.ones(len(points), dtype=bool)
+    t_end = seq.frames[k].timestamp_ns
+    for obj in objects:
+        half = obj.extent() + margin
+        for dt in (-100_000_000, -50_000_000, 0):
+            pose = obj.trajectory.world_from_object_at(t_end + dt)
+            if pose is None:
+                continue
+            # Cheap bounding-sphere test before the exact one.
+            near = np.flatnonzero(keep & (np.sum((points - pose[:3, 3]) ** 2, axis=1) <= float(half @ half)))
+            if len(near) == 0:
+                continue
+            local = transform_points(invert_transform(pose), points[near])
+            keep[near[(np.abs(local) <= half).all(axis=1)]] = False
+    return project_lidar(points[keep], camera_from_world, model)
+
+
+def build_pair(seq: Sequence, camera: Camera, k: int, objects: list[TrackedObject], options: FlowOptions,
+               lidar_cache: dict | None = None) -> tuple[PairSetup, list[FlowObject]]:
+    """The pair's cameras, occluders and the objects present at camera k's time."""
+    model = CameraModel.from_camera(camera)
+    t0, t1 = camera.frames[k].timestamp_ns, camera.frames[k + 1].timestamp_ns
+    pose_k, pose_k1 = camera_pose_at(seq, camera, k), camera_pose_at(seq, camera, k + 1)
+    flow_objects = []
+    for index, obj in enumerate(objects):
+        wk = obj.trajectory.world_from_object_at(t0)
+        if wk is None:
+            continue
+        flow_objects.append(FlowObject(index, obj.object_id, obj.mesh, wk, obj.trajectory.world_from_object_at(t1),
+                                       obj.points, obj.label))
+    lidar_k = lidar_k1 = None
+    if options.use_lidar and flow_objects:
+        cache = lidar_cache if lidar_cache is not None else {}
+
+        def occluders(j: int, pose: np.ndarray) -> ProjectedPoints:
+            if j not in cache:
+                cache[j] = _lidar_occluders(seq, j, objects, invert_transform(pose), model, options.exclusion_margin)
+                for old in [key for key in cache if key < j - 1]:
+                    del cache[old]
+            return cache[j]
+
+        lidar_k, lidar_k1 = occluders(k, pose_k), occluders(k + 1, pose_k1)
+    return PairSetup(model, pose_k, pose_k1, lidar_k, lidar_k1, options.occlusion), flow_objects
+
+
+def compute_pair(setup: PairSetup, flow_objects: list[FlowObject], mode: str, ray_cache: RayCache | None = None) -> PairFlow:
+    if mode == "dense":
+        return dense_flow(setup, flow_objects, ray_cache)
+    if mode == "sparse":
+        return sparse_flow(setup, flow_objects)
+    raise ValueError(f"unknown mode {mode!r}")
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    ok, data = cv2.imencode(path.suffix, image)
+    if not ok:
+        raise RuntimeError(f"cannot encode {path}")
+    write_bytes(path, data.tobytes())
+
+
+def _write_outputs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> None:
+    name = f"{k:06d}"
+    write_kitti_flow(root / "flow_occ" / f"{name}.png", result.flow, result.valid_occ)
+    write_kitti_flow(root / "flow_noc" / f"{name}.png", result.flow, result.valid_noc)
+    write_flo(root / "flo" / f"{name}.flo", result.flow, result.valid_occ)
+    _write_png(root / "instances" / f"{name}.png", result.instance)
+    if write_vis:
+        colour = cv2.cvtColor(flow_to_color(result.flow, result.valid_occ), cv2.COLOR_RGB2BGR)
+        _write_png(root / "vis" / f"{name}_flow.png", colour)
+        image = cv2.imread(str(image_path), cv2.IMREAD_COLOR)
+        if image is not None and image.shape[:2] == result.instance.shape:
+            _write_png(root / "vis" / f"{name}_overlay.jpg", overlay(image, result.flow, result.valid_occ, result.instance))
+
+
+def _pair_record(k: int, camera: Camera, result: PairFlow, elapsed_ms: float) -> dict:
+    objects = [s.to_dict() for s in result.objects]
+    mag = np.linalg.norm(result.flow[result.valid_occ], axis=1)
+    pixels = int(result.valid_occ.sum())
+    noc = int(result.valid_noc.sum())
+    return {"frame": k, "frame_next": k + 1, "timestamp_ns": int(camera.frames[k].timestamp_ns),
+            "timestamp_next_ns": int(camera.frames[k + 1].timestamp_ns), "pixels": pixels, "pixels_noc": noc,
+            "mean_flow_px": round(float(mag.mean()), 4) if pixels else 0.0,
+            "occluded_share": round(1.0 - noc / pixels, 6) if pixels else 0.0,
+            "time_ms": round(elapsed_ms, 1), "objects": [o for o in objects if o["pixels"] > 0]}
+
+
+def _check_instances(root: Path, mapping: list[dict]) -> None:
+    path = root / "instances.json"
+    doc = {"schema_version": STATS_VERSION, "instances": mapping}
+    if path.is_file():
+        try:
+            existing = json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError:
+            existing = None
+        if existing is not None and existing.get("instances") != mapping and any((root / "pairs").glob("*.json")):
+            raise InputError(path, "this output directory holds pairs annotated with different objects; use a new --out")
+    write_json(path, doc)
+
+
+def annotate_camera(seq: Sequence, camera_name: str, objects: list[TrackedObject], out: str | Path,
+                    pairs: tuple[int, int] | None = None, options: FlowOptions | None = None,
+                    progress: bool = True, source: str = "") -> dict:
+    """Annotate pairs k -> k+1 for A <= k < B of one camera; returns the stats document."""
+    options = options or FlowOptions()
+    if camera_name not in seq.cameras:
+        raise InputError(seq.root, f"no camera {camera_name!r}; cameras: {', '.join(seq.cameras) or 'none'}")
+    camera = seq.cameras[camera_name]
+    last = len(camera.frames) - 1
+    a, b = pairs if pairs is not None else (0, last)
+    if not (0 <= a < b <= last):
+        raise InputError(seq.root, f"--pairs {a}:{b} is out of range: camera {camera_name} has pairs 0..{last}"
+                                   f" (A:B with 0 <= A < B <= {last})")
+    root = Path(out) / camera_name
+    mapping = [{"value": i + 1, "object_id": o.object_id, "label": o.label, "source": o.source}
+               for i, o in enumerate(objects)]
+    _check_instances(root, mapping)
+    ray_cache, lidar_cache = RayCache(), {}
+    for k in tqdm(range(a, b), desc=f"flow {camera_name}", unit="pair", disable=not progress):
+        record_path = root / "pairs" / f"{k:06d}.json"
+        if record_path.is_file():
+            continue
+        start = time.perf_counter()
+        setup, flow_objects = build_pair(seq, camera, k, objects, options, lidar_cache)
+        result = compute_pair(setup, flow_objects, options.mode, ray_cache)
+        elapsed = (time.perf_counter() - start) * 1e3
+        _write_outputs(root, k, result, camera.frames[k].image_path, options.write_vis)
+        write_json(record_path, _pair_record(k, camera, result, elapsed))
+    return write_stats(root, seq.id, camera_name, options.mode, source, mapping)
+
+
+def write_stats(root: Path, sequence_id: str, camera_name: str, mode: str, source: str, mapping: list[dict]) -> dict:
+    """Gather every finished pair's record into ``stats.json`` (validated against its schema)."""
+    records = [json.loads(p.read_text(encoding="utf-8")) for p in sorted((root / "pairs").glob("*.json"))]
+    totals: dict[str, dict] = {}
+    for rec in records:
+        for o in rec["objects"]:
+            t = totals.setdefault(o["object_id"], {"object_id": o["object_id"], "index": o["index"], "pairs": 0,
+                                                    "pixels": 0, "pixels_noc": 0, "_flow_sum": 0.0})
+            t["pairs"] += 1
+            t["pixels"] += o["pixels"]
+            t["pixels_noc"] += o["pixels_noc"]
+            t["_flow_sum"] += o["mean_flow_px"] * o["pixels"]
+    objects = []
+    for t in sorted(totals.values(), key=lambda d: d["index"]):
+        flow_sum = t.pop("_flow_sum")
+        t["mean_flow_px"] = round(flow_sum / t["pixels"], 4) if t["pixels"] else 0.0
+        t["occluded_share"] = round(1.0 - t["pixels_noc"] / t["pixels"], 6) if t["pixels"] else 0.0
+        objects.append(t)
+    doc = {"schema_version": STATS_VERSION, "sequence": sequence_id, "camera": camera_name, "mode": mode, "source": source,
+           "instances": mapping, "pairs": records, "objects": objects}
+    from ..schemas import validate
+
+    validate("flow_stats", doc, root / "stats.json")
+    write_json(root / "stats.json", doc)
+    return doc

@@ -1,0 +1,128 @@
+"""The objects to annotate: trajectories (states at known times) and shapes, from tracks or GT boxes.
+
+- ``objects_from_tracks``: the tracker's ``track.json`` + ``shape.ply`` (states at each frame's
+  ``timestamp_ns``, shape points in the object frame).
+- ``objects_from_annotations``: ground-truth boxes. Each box is stamped with the median capture
+  time of the LiDAR points inside it (sweeps are not motion-compensated, so a box describes the
+  object when the beam passed it, not at the frame timestamp); the shape is the ground-removed
+  points inside the boxes, aggregated in the object frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+from tqdm import tqdm
+
+from tracker.geometry import Box, transform_points
+
+from ..errors import InputError
+from ..io.sequence import Sequence
+from .meshing import Mesh, box_mesh, mesh_from_points, voxel_downsample
+from .states import ObjectTrajectory
+
+__all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for"]
+
+
+@dataclass(frozen=True)
+class TrackedObject:
+    """One object: id, label, trajectory (world), shape points and mesh (object frame), box size."""
+
+    object_id: str
+    label: str
+    trajectory: ObjectTrajectory
+    points: np.ndarray
+    mesh: Mesh
+    size: np.ndarray
+    source: str
+
+    def extent(self) -> np.ndarray:
+        """Half extents of the object (box size and mesh bounds, whichever is larger), object frame."""
+        mesh_half = np.abs(self.mesh.vertices).max(axis=0) if len(self.mesh.vertices) else np.zeros(3)
+        return np.maximum(self.size / 2.0, mesh_half)
+
+
+def mesh_for(points: np.ndarray, size: np.ndarray, method: str = "hull", extend_to_ground: bool = True) -> Mesh:
+    """Mesh of an object's shape points; the box itself when the points cannot span a volume.
+
+    ``extend_to_ground``: copies of the lower-body points are dropped to the box bottom, so the
+    hull reaches the road like wheels do (ground removal cuts the lowest ~0.2 m away).
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if extend_to_ground and len(points):
+        bottom = -float(size[2]) / 2.0
+        low = points[points[:, 2] < bottom + 0.6]
+        if len(low):
+            dropped = low.copy()
+            dropped[:, 2] = bottom
+            points = np.concatenate([points, dropped])
+    mesh = mesh_from_points(points, method) if len(points) >= 4 else None
+    return mesh if mesh is not None else box_mesh(*(float(v) for v in size))
+
+
+def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hull") -> list[TrackedObject]:
+    from ..io.tracks import read_track
+
+    out = []
+    for directory in track_dirs:
+        track, shape = read_track(directory)
+        if not track.frames:
+            raise InputError(directory, "track has no frames")
+        times = [r.timestamp_ns for r in track.frames]
+        states = [r.state.to_array() for r in track.frames]
+        size = track.size.to_array()
+        out.append(TrackedObject(track.object_id, track.label or "", ObjectTrajectory.from_samples(times, states),
+                                 shape, mesh_for(shape, size, mesh_method), size, f"track:{Path(directory)}"))
+    return out
+
+
+def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, frames: Iterable[int] | None = None,
+                             moving_only: bool = False, mesh_method: str = "hull", ground_clearance: float = 0.2,
+                             voxel: float = 0.05, progress: bool = True) -> list[TrackedObject]:
+    """Objects from the ground-truth boxes (see module doc). ``frames``: sweeps used for shapes and timing."""
+    tracks = seq.tracks()
+    if not tracks:
+        raise InputError(seq.root, "the sequence has no annotations (needed by --from-annotations)")
+    ids = [seq.resolve_track_id(t) for t in track_ids] if track_ids else sorted(tracks)
+    frame_list = sorted(set(range(len(seq.frames)) if frames is None else frames))
+    by_frame: dict[int, list[str]] = {}
+    for tid in ids:
+        for k in tracks[tid].frames:
+            if k in frame_list:
+                by_frame.setdefault(k, []).append(tid)
+    points: dict[str, list[np.ndarray]] = {tid: [] for tid in ids}
+    times: dict[str, dict[int, int]] = {tid: {} for tid in ids}
+    for k in tqdm(sorted(by_frame), desc="shapes from boxes", unit="frame", disable=not progress, leave=False):
+        sweep = seq.sweep(k)
+        world = transform_points(seq.frames[k].world_from_ego, sweep.xyz)
+        for tid in by_frame[k]:
+            box = tracks[tid].box_at(k)
+            local = transform_points(box.object_from_world(), world)
+            half = box.size / 2.0
+            inside = (np.abs(local) <= half + np.array([0.1, 0.1, 0.0])).all(axis=1)
+            stamp = seq.frames[k].timestamp_ns
+            if sweep.time_offset_ns is not None and inside.sum() >= 3:
+                stamp += int(np.median(sweep.time_offset_ns[inside]))
+            times[tid][k] = stamp
+            above = inside & (local[:, 2] > -half[2] + ground_clearance)
+            points[tid].append(local[above])
+    out = []
+    for tid in ids:
+        track = tracks[tid]
+        ks = [k for k in track.frames if k in frame_list]
+        if not ks:
+            continue
+        if moving_only and all(
+                np.linalg.norm(track.box_at(k).center - track.box_at(ks[0]).center) < 0.5 for k in ks):
+            continue
+        stamps = [times[tid].get(k, seq.frames[k].timestamp_ns) for k in ks]
+        boxes: list[Box] = [track.box_at(k) for k in ks]
+        size = np.median(np.array([b.size for b in boxes]), axis=0)
+        shape = voxel_downsample(np.concatenate(points[tid]) if points[tid] else np.zeros((0, 3)), voxel)
+        trajectory = ObjectTrajectory.from_samples(stamps, [b.state.to_array() for b in boxes])
+        out.append(TrackedObject(tid, track.label, trajectory, shape, mesh_for(shape, size, mesh_method), size,
+                                 "annotations"))
+    return out
