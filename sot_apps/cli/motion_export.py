@@ -14,8 +14,9 @@ def register(subparsers) -> argparse.ArgumentParser:
         help="export smoothed object motion (MCAP for Foxglove, AV2 parquet, Waymo-style npz, CSV)",
         description="Smooth per-frame object states (RTS smoother on a constant-turn-rate-and-velocity model), "
                     "derive velocity, speed, acceleration and yaw rate with uncertainties, and write an MCAP file "
-                    "that Foxglove opens directly plus optional forecasting tables. Frames the tracker flagged are "
-                    "exported as invalid, never interpolated. See docs/motion-export.md.",
+                    "that Foxglove opens directly plus optional forecasting tables. Frames the tracker flagged as not "
+                    "measured (no_points, prior_only) are exported as invalid, never interpolated. "
+                    "See docs/motion-export.md.",
         examples=[
             "sot-apps motion-export ../shared/data/pandaset_002 --tracks out/tracks/8ac00bad out/tracks/20d13d1d --out motion.mcap --parquet motion.parquet",
             "sot-apps motion-export ../shared/data/pandaset_002 --from-annotations --track-id 8ac00bad --out gt.mcap --npz gt.npz --csv gt.csv",
@@ -35,8 +36,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--parquet", metavar="FILE", help="Argoverse-2-style parquet (all objects in one file)")
     parser.add_argument("--npz", metavar="FILE", help="dense Waymo-motion-style npz (objects x timesteps)")
     parser.add_argument("--csv", metavar="FILE", help="CSV for quick looks (one row per object and frame)")
-    parser.add_argument("--accept-flags", nargs="*", default=[], metavar="FLAG",
-                        help="tracker flags that do NOT invalidate a frame (default: none; any flag invalidates)")
+    parser.add_argument("--invalid-flags", nargs="+", default=None, metavar="FLAG",
+                        help="tracker flags that make a frame invalid (default: no_points prior_only lost); "
+                             "the start frame is always valid")
     parser.add_argument("--focal-track", metavar="ID", default=None,
                         help="AV2 focal track (id or prefix; default: the first exported object)")
     parser.add_argument("--observed-steps", type=int, default=None, metavar="N",
@@ -49,7 +51,8 @@ def register(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..motion_export.export import export_motion
-    from ..motion_export.sources import aggregate_shape, tracks_from_annotations, tracks_from_dirs
+    from ..motion_export.sources import (DEFAULT_INVALID_FLAGS, aggregate_shape, tracks_from_annotations,
+                                         tracks_from_dirs)
 
     if args.track_id and not args.from_annotations:
         raise InputError(None, "--track-id selects annotated tracks and needs --from-annotations")
@@ -63,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
             for t in tracks:
                 t.shape_points = aggregate_shape(sequence, t)
     else:
-        tracks = tracks_from_dirs(args.tracks, sequence, accept_flags=args.accept_flags)
+        invalid_flags = DEFAULT_INVALID_FLAGS if args.invalid_flags is None else args.invalid_flags
+        tracks = tracks_from_dirs(args.tracks, sequence, invalid_flags=invalid_flags)
         source = "tracks"
     focal = None
     if args.focal_track:

@@ -1,8 +1,11 @@
 """Inputs of the motion export: tracker outputs (track directories) or ground-truth annotations.
 
 Both become :class:`~sot_apps.motion_export.kinematics.ObjectTrack` (per-frame WORLD states with a
-validity mask). A tracker frame whose ``flags`` contain any flag not listed in ``accept_flags`` is
-invalid: it is not used as a measurement and is exported with ``valid = False``.
+validity mask). A tracker frame whose ``flags`` contain one of ``invalid_flags`` (default
+"no_points", "prior_only", "lost": the state was predicted, not measured) is invalid: it is not used
+as a measurement and is exported with ``valid = False``. Advisory flags ("init", "low_points",
+"no_shape_inliers", "nan_points") keep the frame valid; the start frame ("init") is the given box and
+always valid.
 """
 
 from __future__ import annotations
@@ -18,16 +21,20 @@ from ..errors import InputError
 from ..io.sequence import Sequence
 from .kinematics import ObjectTrack
 
-__all__ = ["DEFAULT_ACCEPT_FLAGS", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
+__all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
            "aggregate_shape", "voxel_downsample"]
 
-# Flags that keep a frame valid (advisory only). Everything else — "no_points", "prior_only",
-# "lost", and any flag this version does not know — invalidates the frame.
-DEFAULT_ACCEPT_FLAGS: frozenset[str] = frozenset()
+# Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points and prior_only).
+DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost"})
+
+
+def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> bool:
+    flags = set(flags)
+    return "init" in flags or not (flags & set(invalid_flags))
 
 
 def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
-                   accept_flags: Iterable[str] = DEFAULT_ACCEPT_FLAGS) -> ObjectTrack:
+                   invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> ObjectTrack:
     """Read ``directory/track.json`` + ``shape.ply`` into an ObjectTrack."""
     from ..io.tracks import read_track
 
@@ -48,9 +55,8 @@ def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
     records = sorted(track.frames, key=lambda r: r.frame)
     if not records:
         raise InputError(json_path, "frames: the track has no frames")
-    accept = set(accept_flags)
     flags = [list(r.flags) for r in records]
-    valid = np.array([not (set(f) - accept) for f in flags], dtype=bool)
+    valid = np.array([frame_is_valid(f, invalid_flags) for f in flags], dtype=bool)
     states = np.array([[r.state.x, r.state.y, r.state.z, r.state.heading] for r in records], dtype=np.float64)
     try:
         return ObjectTrack(object_id=track.object_id, label=track.label or "", size=(track.size.length,
@@ -63,8 +69,8 @@ def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
 
 
 def tracks_from_dirs(directories: Seq[str | Path], sequence: Sequence | None = None,
-                     accept_flags: Iterable[str] = DEFAULT_ACCEPT_FLAGS) -> list[ObjectTrack]:
-    tracks = [track_from_dir(d, sequence, accept_flags) for d in directories]
+                     invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> list[ObjectTrack]:
+    tracks = [track_from_dir(d, sequence, invalid_flags) for d in directories]
     seen: dict[str, str] = {}
     for t in tracks:
         if t.object_id in seen:

@@ -49,3 +49,38 @@ def test_motion_export_usage_errors(tmp_path, pandaset_root, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "missing" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "a.mcap").exists()
+
+
+def _write_flagged_track(directory, pandaset, prefix: str, last: int, flags: dict[int, list[str]]):
+    from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
+    from tracker.geometry import State
+
+    tid = pandaset.resolve_track_id(prefix)
+    gt = pandaset.tracks()[tid]
+    boxes = gt.boxes[: last + 1]
+    records = [FrameRecord(frame=k, timestamp_ns=int(pandaset.frames[k].timestamp_ns),
+                           state=State(b.x, b.y, b.z, b.heading), num_points=100, quality=0.9,
+                           flags=flags.get(k, [])) for k, b in enumerate(boxes)]
+    track = TrackFile(sequence=pandaset.id, object_id=tid, size=Size(boxes[0].length, boxes[0].width, boxes[0].height),
+                      start_frame=0, end_frame=last, init_box=boxes[0], config={"preset": "test"}, frames=records,
+                      label=gt.label)
+    write_track(directory, track, np.zeros((5, 3)))
+    return tid
+
+
+def test_motion_export_from_track_files_marks_flagged_frames(tmp_path, pandaset_root, pandaset):
+    flags = {0: ["init"], 5: ["no_points", "prior_only"], 6: ["prior_only"], 8: ["low_points"]}
+    tid = _write_flagged_track(tmp_path / "t1", pandaset, "8ac00bad", 20, flags)
+    code = main(["motion-export", str(pandaset_root), "--tracks", str(tmp_path / "t1"), "--out",
+                 str(tmp_path / "m.mcap"), "--parquet", str(tmp_path / "m.parquet"), "--quiet"])
+    assert code == 0
+    rows = pq.read_table(tmp_path / "m.parquet").to_pylist()
+    assert [r["frame"] for r in rows] == list(range(21)) and {r["track_id"] for r in rows} == {tid}
+    assert [r["frame"] for r in rows if not r["valid"]] == [5, 6]
+    assert all(np.isnan(r["position_x"]) for r in rows if not r["valid"])
+    assert rows[8]["flags"] == "low_points" and rows[8]["valid"]
+    with open(tmp_path / "m.mcap", "rb") as handle:
+        summary = make_reader(handle).get_summary()
+    counts = {c.topic: summary.statistics.channel_message_counts[cid] for cid, c in summary.channels.items()}
+    assert counts[f"/objects/{tid}/pose"] == 19 and counts[f"/objects/{tid}/kinematics"] == 21
+    assert counts["/objects/" + tid + "/shape"] == 1
