@@ -1,0 +1,83 @@
+"""PandaSet reader on the real sequence 002 and on a native-layout (pandas pickle) copy of two frames."""
+
+from __future__ import annotations
+
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+from sot_apps.io import detect_format, open_sequence
+from sot_apps.io.pandaset import read_pandaset
+from tracker.geometry import points_in_box, wrap_angle
+
+
+def test_open_reads_no_sweep(pandaset_root):
+    calls = []
+    seq = open_sequence(pandaset_root)
+    original = seq.load_sweep
+    seq.load_sweep = lambda k: calls.append(k) or original(k)
+    tracks = seq.tracks()
+    assert len(tracks) > 50 and len(seq) == 56
+    seq.resolve_track_id("8ac00bad")
+    assert calls == []
+
+
+def test_pandaset_conventions_on_track_8ac00bad(pandaset):
+    tid = pandaset.resolve_track_id("8ac00bad")
+    track = pandaset.tracks()[tid]
+    box = track.box_at(10)
+    before, after = track.box_at(8), track.box_at(12)
+    motion = math.atan2(after.y - before.y, after.x - before.x)
+    assert math.hypot(after.y - before.y, after.x - before.x) > 0.5  # it really moves
+    assert abs(math.degrees(wrap_angle(box.heading - motion))) < 15.0
+    assert box.length > box.width
+    assert points_in_box(pandaset.points_world(10), box).sum() >= 900
+
+
+def test_sensor_1_duplicates_dropped_and_times(pandaset):
+    # one box per object per frame
+    for annotations in pandaset.annotations:
+        ids = [a.track_id for a in annotations]
+        assert len(ids) == len(set(ids))
+    sweep = pandaset.sweep(0)
+    # PandaSet's lidar timestamp marks the END of the sweep: offsets span ~0.1 s before it
+    assert -0.12e9 < sweep.time_offset_ns.min() < -0.08e9 and sweep.time_offset_ns.max() < 0.01e9
+    assert sweep.time_offset_ns.dtype == np.int64 and sweep.xyz.dtype == np.float32
+    # cameras fire before the lidar timestamp: front ~50 ms, back ~100 ms
+    for name, expected_ms in (("front_camera", -50), ("back_camera", -100)):
+        offsets = [(cf.timestamp_ns - f.timestamp_ns) / 1e6 for cf, f in zip(pandaset.cameras[name].frames, pandaset.frames)]
+        assert abs(np.mean(offsets) - expected_ms) < 5
+
+
+def _native_copy(root, out, frames=(0, 1)):
+    """Build the devkit's native layout (pandas pickles) from the npz/csv copy."""
+    import pandas as pd
+    (out / "lidar").mkdir(parents=True)
+    (out / "annotations" / "cuboids").mkdir(parents=True)
+    for name in ("poses.json", "timestamps.json"):
+        shutil.copy(root / "lidar" / name, out / "lidar" / name)
+    for k in frames:
+        with np.load(root / "lidar" / f"{k:02d}.npz") as data:
+            pd.DataFrame({c: data[c] for c in ("x", "y", "z", "i", "t", "d")}).to_pickle(out / "lidar" / f"{k:02d}.pkl.gz")
+        pd.read_csv(root / "annotations" / "cuboids" / f"{k:02d}.csv").to_pickle(
+            out / "annotations" / "cuboids" / f"{k:02d}.pkl.gz")
+    return out
+
+
+def test_native_pickles_read_identically(pandaset_root, tmp_path):
+    native = _native_copy(pandaset_root, tmp_path / "native")
+    assert detect_format(native) == "pandaset"
+    ours = read_pandaset(native)
+    reference = open_sequence(pandaset_root)
+    assert len(ours) == 2
+    for k in range(2):
+        assert ours.frames[k].timestamp_ns == reference.frames[k].timestamp_ns
+        np.testing.assert_array_equal(ours.frames[k].world_from_ego, reference.frames[k].world_from_ego)
+        a, b = ours.sweep(k), reference.sweep(k)
+        np.testing.assert_array_equal(a.xyz, b.xyz)
+        np.testing.assert_array_equal(a.intensity, b.intensity)
+        np.testing.assert_array_equal(a.time_offset_ns, b.time_offset_ns)
+        assert len(ours.annotations[k]) > 50
+        assert ours.annotations[k] == reference.annotations[k]
