@@ -37,6 +37,11 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="use ground-truth boxes; shapes from the ground-removed points inside them")
     parser.add_argument("--track-id", nargs="+", metavar="ID", help="with --from-annotations: only these track ids (prefixes)")
     parser.add_argument("--moving-only", action="store_true", help="with --from-annotations: skip objects that never move 0.5 m")
+    parser.add_argument("--box-time", choices=("points", "frame"), default="points",
+                        help="with --from-annotations: time of a box = median capture time of its points (default; "
+                             "PandaSet) or the frame timestamp (boxes given at frame time, e.g. sot-apps synth)")
+    parser.add_argument("--shape-frames", type=_pairs, metavar="A:B",
+                        help="with --from-annotations: sweeps A <= k < B build the shapes (default: pairs +- 10 frames)")
     parser.add_argument("--camera", required=True, metavar="NAME", help="camera name, e.g. front_camera")
     parser.add_argument("--pairs", type=_pairs, metavar="A:B", help="pairs k -> k+1 for A <= k < B (default: all)")
     parser.add_argument("--mode", choices=("dense", "sparse"), default="dense",
@@ -63,8 +68,13 @@ def run(args: argparse.Namespace) -> int:
     if args.camera not in seq.cameras:
         raise InputError(seq.root, f"no camera {args.camera!r}; cameras: {', '.join(seq.cameras) or 'none'}")
     if args.from_annotations:
-        objects = objects_from_annotations(seq, args.track_id, moving_only=args.moving_only, mesh_method=args.mesh,
-                                           progress=not args.quiet)
+        if args.shape_frames:
+            shape_frames = range(*args.shape_frames)
+        else:
+            a, b = args.pairs or (0, len(seq.frames) - 1)
+            shape_frames = range(max(a - 10, 0), min(b + 11, len(seq.frames)))
+        objects = objects_from_annotations(seq, args.track_id, frames=shape_frames, moving_only=args.moving_only,
+                                           mesh_method=args.mesh, box_time=args.box_time, progress=not args.quiet)
         source = "annotations"
     else:
         objects = objects_from_tracks(args.tracks, mesh_method=args.mesh)

@@ -81,8 +81,15 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
 
 def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, frames: Iterable[int] | None = None,
                              moving_only: bool = False, mesh_method: str = "hull", ground_clearance: float = 0.2,
-                             voxel: float = 0.05, progress: bool = True) -> list[TrackedObject]:
-    """Objects from the ground-truth boxes (see module doc). ``frames``: sweeps used for shapes and timing."""
+                             voxel: float = 0.05, box_time: str = "points", progress: bool = True) -> list[TrackedObject]:
+    """Objects from the ground-truth boxes (see module doc). ``frames``: sweeps used for shapes and timing.
+
+    ``box_time``: "points" stamps each box with the median capture time of its points (PandaSet: boxes
+    are fitted to the unmotion-compensated points); "frame" uses the frame timestamp (datasets whose
+    boxes are the object state at the frame time, e.g. ``sot-apps synth``).
+    """
+    if box_time not in ("points", "frame"):
+        raise ValueError(f"box_time must be 'points' or 'frame', not {box_time!r}")
     tracks = seq.tracks()
     if not tracks:
         raise InputError(seq.root, "the sequence has no annotations (needed by --from-annotations)")
@@ -104,7 +111,7 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
             half = box.size / 2.0
             inside = (np.abs(local) <= half + np.array([0.1, 0.1, 0.0])).all(axis=1)
             stamp = seq.frames[k].timestamp_ns
-            if sweep.time_offset_ns is not None and inside.sum() >= 3:
+            if box_time == "points" and sweep.time_offset_ns is not None and inside.sum() >= 3:
                 stamp += int(np.median(sweep.time_offset_ns[inside]))
             times[tid][k] = stamp
             above = inside & (local[:, 2] > -half[2] + ground_clearance)
