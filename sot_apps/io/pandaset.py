@@ -230,7 +230,8 @@ def _image_size(path: Path) -> tuple[int, int]:
 
 def _jpeg_size(path: Path) -> tuple[int, int] | None:
     """Width and height from a JPEG's SOF marker (no decoding)."""
-    data = path.read_bytes()[:65536]
+    with open(path, "rb") as handle:
+        data = handle.read(65536)
     if data[:2] != b"\xff\xd8":
         return None
     i = 2
