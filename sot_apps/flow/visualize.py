@@ -52,7 +52,9 @@ def overlay(image_bgr: np.ndarray, flow: np.ndarray, valid: np.ndarray, instance
     colour = cv2.cvtColor(flow_to_color(flow, valid, max_flow), cv2.COLOR_RGB2BGR)
     out[valid] = (alpha * colour[valid] + (1 - alpha) * out[valid]).astype(np.uint8)
     if instance is not None and instance.any():
-        edges = cv2.morphologyEx((instance > 0).astype(np.uint8) * 255, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
+        # Outline of the (closed) object region: also readable for sparse masks.
+        region = cv2.morphologyEx((instance > 0).astype(np.uint8) * 255, cv2.MORPH_CLOSE, np.ones((9, 9), np.uint8))
+        edges = cv2.morphologyEx(region, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
         out[edges > 0] = (255, 255, 255)
     vs, us = np.nonzero(valid[::arrow_step, ::arrow_step])
     for u, v in zip(us * arrow_step, vs * arrow_step):  # a few hundred arrows at most
