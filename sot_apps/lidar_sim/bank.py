@@ -1,0 +1,287 @@
+"""The vehicle bank: meshes of real (or any) vehicles to insert into simulated scans.
+
+Layout::
+
+    BANK/index.json                 {"version": 1, "entries": [...]} (schema ``bank``)
+    BANK/entries/<id>/mesh.ply      triangle mesh, OBJECT frame (origin = box centre, x forward)
+    BANK/entries/<id>/points.ply    the object-frame points it was meshed from
+
+Entry sources:
+
+- a tracker output directory (``track.json`` + ``shape.ply``; the shape is already in the object frame);
+- an annotated track of a sequence: the points inside its ground-truth box in every frame (optionally all
+  frames but some), transformed into the object frame and aggregated. Ground removal: points lower than
+  ``ground_clearance`` (0.15 m) above the box bottom are dropped (annotated boxes sit on the road);
+- any mesh file trimesh reads (``.ply``, ``.obj``, ``.stl``, ``.glb``, ...): re-centred on its bounding box.
+
+Point entries are meshed with surfel disks (:mod:`.meshing`), optionally mirror-completed. ``quality`` is
+the tracker's mean frame quality for tracker outputs, ``min(1, points / 1000)`` for annotation entries,
+and 1 for mesh files.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from tracker.geometry import Box, points_in_box, transform_points
+
+from ..errors import InputError
+from ..io.atomic import write_json
+from ..io.ply import read_ply_mesh, read_ply_points, write_ply_mesh, write_ply_points
+from ..io.sequence import Sequence
+from ..schemas import load_json_validated, validate
+from .meshing import SurfelParams, surfel_mesh
+
+__all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
+           "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points"]
+
+GROUND_CLEARANCE = 0.15
+
+
+@dataclass
+class BankEntry:
+    id: str
+    mesh: str                      # path relative to the bank root
+    points: str | None
+    source: dict
+    size: dict                     # length, width, height (object-frame bounds of the mesh)
+    point_count: int
+    quality: float
+    label: str | None = None
+    mirrored: bool = False
+    build_seconds: float | None = None
+
+    def to_json(self) -> dict:
+        out = asdict(self)
+        return {k: v for k, v in out.items() if v is not None}
+
+    @classmethod
+    def from_json(cls, data: dict) -> "BankEntry":
+        return cls(**{k: data.get(k) for k in ("id", "mesh", "points", "source", "size", "point_count", "quality",
+                                               "label", "mirrored", "build_seconds")})
+
+    def box_size(self) -> tuple[float, float, float]:
+        return float(self.size["length"]), float(self.size["width"]), float(self.size["height"])
+
+
+@dataclass
+class Bank:
+    root: Path
+    entries: list[BankEntry] = field(default_factory=list)
+
+    def get(self, entry_id: str) -> BankEntry:
+        for e in self.entries:
+            if e.id == entry_id:
+                return e
+        raise InputError(self.root / "index.json", f"no bank entry {entry_id!r}; entries: "
+                                                   f"{', '.join(e.id for e in self.entries[:8]) or '(none)'}")
+
+    def mesh(self, entry_id: str) -> tuple[np.ndarray, np.ndarray]:
+        return read_ply_mesh(self.root / self.get(entry_id).mesh)
+
+    def upsert(self, entry: BankEntry) -> None:
+        self.entries = [e for e in self.entries if e.id != entry.id] + [entry]
+
+
+def _safe_id(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_")[:80] or "entry"
+
+
+def read_bank(root: str | Path, must_exist: bool = True) -> Bank:
+    root = Path(root)
+    path = root / "index.json"
+    if not path.is_file():
+        if must_exist:
+            raise InputError(path, "not a vehicle bank (index.json is missing); build one with `sot-apps bank build`")
+        return Bank(root, [])
+    doc = load_json_validated(path, "bank")
+    bank = Bank(root, [BankEntry.from_json(e) for e in doc["entries"]])
+    for e in bank.entries:
+        if not (root / e.mesh).is_file():
+            raise InputError(path, f"entry {e.id!r}: mesh file {e.mesh!r} does not exist")
+    return bank
+
+
+def write_bank_index(bank: Bank) -> Path:
+    doc = {"version": 1, "entries": [e.to_json() for e in sorted(bank.entries, key=lambda e: e.id)]}
+    path = bank.root / "index.json"
+    validate("bank", doc, path)
+    write_json(path, doc)
+    return path
+
+
+def entry_from_points(bank_root: Path, entry_id: str, points_object: np.ndarray, source: dict, quality: float,
+                      label: str | None = None, mirror: bool = False, params: SurfelParams = SurfelParams(),
+                      size: tuple[float, float, float] | None = None) -> BankEntry:
+    """Mesh object-frame points with surfels and store them as an entry (files written, index not)."""
+    start = time.perf_counter()
+    entry_id = _safe_id(entry_id)
+    vertices, faces, used = surfel_mesh(points_object, params, mirror=mirror)
+    directory = bank_root / "entries" / entry_id
+    write_ply_mesh(directory / "mesh.ply", vertices, faces)
+    write_ply_points(directory / "points.ply", np.asarray(points_object, dtype=np.float64))
+    if size is None:
+        extent = used.max(axis=0) - used.min(axis=0)
+        size = (float(extent[0]), float(extent[1]), float(extent[2]))
+    return BankEntry(entry_id, f"entries/{entry_id}/mesh.ply", f"entries/{entry_id}/points.ply", source,
+                     {"length": float(size[0]), "width": float(size[1]), "height": float(size[2])},
+                     int(len(points_object)), float(np.clip(quality, 0.0, 1.0)), label, mirror,
+                     round(time.perf_counter() - start, 4))
+
+
+def entry_from_track_dir(bank_root: Path, track_dir: str | Path, mirror: bool = False,
+                         params: SurfelParams = SurfelParams()) -> BankEntry:
+    from ..io.tracks import read_track
+
+    track, shape = read_track(track_dir)
+    if len(shape) < 3:
+        raise InputError(track_dir, f"shape has only {len(shape)} points; cannot build a bank entry")
+    quality = float(np.mean([f.quality for f in track.frames])) if track.frames else 0.0
+    source = {"kind": "track", "sequence": track.sequence, "track": track.object_id, "path": str(track_dir)}
+    return entry_from_points(bank_root, f"{track.sequence}_{track.object_id}", shape, source, quality,
+                             track.label, mirror, params,
+                             size=(track.size.length, track.size.width, track.size.height))
+
+
+def _states_at(track_times_ns: np.ndarray, boxes: list[Box], t_ns: np.ndarray) -> np.ndarray:
+    """(N, 4) box states linearly interpolated (heading unwrapped) at the given times."""
+    states = np.array([[b.x, b.y, b.z, b.heading] for b in boxes], dtype=np.float64)
+    if len(states) == 1:
+        return np.repeat(states, len(t_ns), axis=0)
+    states[:, 3] = np.unwrap(states[:, 3])
+    t = np.asarray(t_ns, dtype=np.float64)
+    times = np.asarray(track_times_ns, dtype=np.float64)
+    return np.stack([np.interp(t, times, states[:, i]) for i in range(4)], axis=1)
+
+
+def aggregate_tracks_points(seq: Sequence, track_ids: list[str], exclude_frames: Iterable[int] = (),
+                            ground_clearance: float = GROUND_CLEARANCE, progress: bool = False
+                            ) -> dict[str, tuple[np.ndarray, list[int]]]:
+    """Object-frame points of annotated tracks, aggregated over their frames (each sweep read once).
+
+    Each point is put into the object frame of the box AT ITS CAPTURE TIME (boxes interpolated between
+    annotated frames with the sweep's per-point time offsets), which undoes the rolling-scan smear of
+    moving vehicles. Points below ``ground_clearance`` above the box bottom are dropped.
+    """
+    from tqdm import tqdm
+
+    tracks = seq.tracks()
+    missing = [t for t in track_ids if t not in tracks]
+    if missing:
+        raise InputError(seq.root, f"no annotated track {missing[0]!r}")
+    excluded = set(int(k) for k in exclude_frames)
+    stamps = seq.timestamps_ns
+    by_frame: dict[int, list[str]] = {}
+    for tid in track_ids:
+        for k in tracks[tid].frames:
+            if k not in excluded:
+                by_frame.setdefault(k, []).append(tid)
+    parts: dict[str, list[np.ndarray]] = {tid: [] for tid in track_ids}
+    used: dict[str, list[int]] = {tid: [] for tid in track_ids}
+    for k in tqdm(sorted(by_frame), desc="aggregating", unit="frame", disable=not progress, leave=False):
+        pts_world = seq.points_world(k)
+        offsets = seq.sweep(k).time_offset_ns
+        for tid in by_frame[k]:
+            track = tracks[tid]
+            box = track.box_at(k)
+            near = np.flatnonzero(points_in_box(pts_world, box, scale=(1.3, 1.3, 1.05)))
+            if near.size == 0:
+                continue
+            t = stamps[k] + (offsets[near] if offsets is not None else 0)
+            st = _states_at(stamps[track.frames], track.boxes, np.broadcast_to(t, near.shape))
+            d = pts_world[near] - st[:, :3]
+            c, s = np.cos(st[:, 3]), np.sin(st[:, 3])
+            local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+            half = box.size / 2.0 * 1.02
+            inside = (np.abs(local) <= half).all(axis=1) & (local[:, 2] > -box.height / 2 + ground_clearance)
+            if inside.any():
+                parts[tid].append(local[inside])
+                used[tid].append(k)
+    return {tid: (np.vstack(parts[tid]) if parts[tid] else np.zeros((0, 3)), used[tid]) for tid in track_ids}
+
+
+def aggregate_track_points(seq: Sequence, track_id: str, exclude_frames: Iterable[int] = ()
+                           ) -> tuple[np.ndarray, list[int], Box]:
+    """One track's aggregated object-frame points, the frames used and its first box."""
+    points, used = aggregate_tracks_points(seq, [track_id], exclude_frames)[track_id]
+    return points, used, seq.tracks()[track_id].boxes[0]
+
+
+def entries_from_annotations(bank_root: Path, seq: Sequence, track_ids: list[str], mirror: bool = False,
+                             params: SurfelParams = SurfelParams(), min_points: int = 50,
+                             progress: bool = False) -> tuple[list[BankEntry], list[str]]:
+    """Entries for annotated tracks; returns (entries, messages about skipped tracks)."""
+    from tqdm import tqdm
+
+    entries, skipped = [], []
+    tracks = seq.tracks()
+    start = time.perf_counter()
+    aggregated = aggregate_tracks_points(seq, track_ids, progress=progress)
+    read_seconds = (time.perf_counter() - start) / max(1, len(track_ids))
+    for tid in track_ids:
+        start = time.perf_counter()
+        points, frames = aggregated[tid]
+        box = tracks[tid].boxes[0]
+        if len(points) < min_points:
+            skipped.append(f"{tid}: only {len(points)} points (< {min_points})")
+            continue
+        source = {"kind": "annotations", "sequence": seq.id, "track": tid, "frames": len(frames)}
+        entry = entry_from_points(bank_root, f"{seq.id}_{tid[:8]}", points, source,
+                                  quality=min(1.0, len(points) / 1000.0), label=tracks[tid].label, mirror=mirror,
+                                  params=params, size=(box.length, box.width, box.height))
+        entry.build_seconds = round(time.perf_counter() - start + read_seconds, 4)
+        entries.append(entry)
+    return entries, skipped
+
+
+def entry_from_mesh_file(bank_root: Path, path: str | Path, entry_id: str | None = None,
+                         label: str | None = None) -> BankEntry:
+    import trimesh
+
+    path = Path(path)
+    start = time.perf_counter()
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types on bad files
+        raise InputError(path, f"cannot read mesh ({type(exc).__name__}: {exc})") from exc
+    if len(getattr(mesh, "faces", [])) == 0:
+        raise InputError(path, "mesh has no triangles")
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    vertices = vertices - (lo + hi) / 2.0
+    entry_id = _safe_id(entry_id or path.stem)
+    rel = f"entries/{entry_id}/mesh.ply"
+    write_ply_mesh(bank_root / rel, vertices, np.asarray(mesh.faces))
+    ext = hi - lo
+    return BankEntry(entry_id, rel, None, {"kind": "mesh", "path": str(path)},
+                     {"length": float(ext[0]), "width": float(ext[1]), "height": float(ext[2])},
+                     int(len(vertices)), 1.0, label, False, round(time.perf_counter() - start, 4))
+
+
+def is_track_dir(path: Path) -> bool:
+    return (path / "track.json").is_file()
+
+
+def load_points_file(path: Path) -> np.ndarray:
+    return read_ply_points(path)
+
+
+def bank_summary_rows(bank: Bank) -> list[list[str]]:
+    rows = []
+    for e in bank.entries:
+        s = e.size
+        rows.append([e.id, e.label or "-", f"{s['length']:.2f}x{s['width']:.2f}x{s['height']:.2f}",
+                     str(e.point_count), f"{e.quality:.2f}", str(e.source.get("kind", "")),
+                     str(e.source.get("sequence", e.source.get("path", ""))), str(e.source.get("track", "-"))])
+    return rows
+
+
+def entry_json_text(entry: BankEntry) -> str:
+    return json.dumps(entry.to_json())

@@ -1,0 +1,67 @@
+"""Bird's-eye-view preview PNG of a scan with its boxes (OpenCV).
+
+Image up = sensor +x (forward), image left = sensor +y. Background points are grey (brighter = higher),
+each object's points and box outline get their own colour; a short line marks each box's heading.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracker.geometry import Box
+
+from ..io.atomic import write_bytes
+
+__all__ = ["bev_image", "write_bev_png"]
+
+_PALETTE = np.array([[66, 135, 245], [245, 66, 93], [66, 245, 135], [245, 185, 66], [185, 66, 245], [66, 230, 245],
+                     [245, 120, 200], [160, 245, 66], [245, 100, 40], [120, 120, 255]], dtype=np.uint8)  # BGR
+
+
+def bev_image(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], extent: float = 50.0, size: int = 800,
+              centre: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """(size, size, 3) uint8 BGR image covering +-extent metres around ``centre``."""
+    image = np.full((size, size, 3), 18, dtype=np.uint8)
+    scale = size / (2.0 * extent)
+
+    def to_px(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        col = (size / 2.0 - (y - centre[1]) * scale)
+        row = (size / 2.0 - (x - centre[0]) * scale)
+        return col, row
+
+    for r in (10, 20, 30, 40, 50, 75, 100):
+        if r < extent * 1.5:
+            cv2.circle(image, (size // 2, size // 2), int(r * scale), (48, 48, 48), 1, cv2.LINE_AA)
+    col, row = to_px(xyz[:, 0], xyz[:, 1])
+    inside = (col >= 0) & (col < size) & (row >= 0) & (row < size)
+    col, row = col[inside].astype(int), row[inside].astype(int)
+    inst = instance[inside]
+    z = xyz[inside, 2]
+    grey = np.clip(120 + (z - np.percentile(z, 5) if len(z) else z) * 40, 110, 240).astype(np.uint8)
+    bg = inst < 0
+    image[row[bg], col[bg]] = grey[bg, None]
+    fg = ~bg
+    image[row[fg], col[fg]] = _PALETTE[inst[fg] % len(_PALETTE)]
+    for i, box in enumerate(boxes):
+        corners = box.bev_corners()
+        c, r = to_px(corners[:, 0], corners[:, 1])
+        pts = np.stack([c, r], axis=1).round().astype(np.int32)
+        color = tuple(int(v) for v in _PALETTE[i % len(_PALETTE)])
+        cv2.polylines(image, [pts], True, color, 1, cv2.LINE_AA)
+        front = np.array([box.x + np.cos(box.heading) * box.length / 2, box.y + np.sin(box.heading) * box.length / 2])
+        c0, r0 = to_px(np.array([box.x]), np.array([box.y]))
+        c1, r1 = to_px(front[:1], front[1:])
+        cv2.line(image, (int(c0[0]), int(r0[0])), (int(c1[0]), int(r1[0])), color, 1, cv2.LINE_AA)
+    cv2.drawMarker(image, (size // 2, size // 2), (255, 255, 255), cv2.MARKER_TRIANGLE_UP, 10, 1)
+    return image
+
+
+def write_bev_png(path: Path, xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], extent: float = 50.0,
+                  size: int = 800) -> None:
+    ok, data = cv2.imencode(".png", bev_image(xyz, instance, boxes, extent, size))
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    write_bytes(path, data.tobytes())

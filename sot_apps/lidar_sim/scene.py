@@ -1,0 +1,214 @@
+"""Scenes for ``simulate-lidar``: bank vehicles placed around a sensor, optionally inside a real sweep.
+
+Everything is in the SENSOR frame (x forward, y left, z up). Without a background the sensor sees the
+vehicles and, when ``ground_z`` is a number, a flat ground plane at that height.
+
+With a background sweep (a real scan, e.g. PandaSet) the vehicles are inserted with correct occlusion
+both ways:
+
+- a background return is removed when the ray from the sensor to it hits an inserted vehicle first
+  (Embree is asked along exactly that ray: the removed set is exactly the occluded set);
+- a simulated vehicle return is removed when a background return within the sensor's angular resolution
+  (half the azimuth step, at least 0.1 deg) of its direction is nearer by more than 0.3 m (a real object,
+  e.g. a pole or another car, stands in front of the inserted vehicle).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from tracker.geometry import Box
+
+from ..errors import InputError
+from ..schemas import validate
+from .bank import Bank
+from .noise import Realism
+from .raycast import RaycastScene
+from .scan import Scan, SimObject, Trajectory, simulate_scan
+from .sensors import Sensor, load_sensor
+
+__all__ = ["SceneObject", "SceneSpec", "SimResult", "load_scene", "random_scene", "simulate_scene",
+           "insert_into_background", "OCCLUDER_MARGIN_M"]
+
+OCCLUDER_MARGIN_M = 0.3
+
+
+@dataclass
+class SceneObject:
+    bank_id: str
+    x: float
+    y: float
+    z: float | None
+    heading: float
+    label: str | None = None
+    reflectivity: float = 0.5
+
+
+@dataclass
+class SceneSpec:
+    sensor: Sensor
+    ground_z: float | None
+    objects: list[SceneObject]
+    realism: Realism = field(default_factory=lambda: Realism(motion_distortion=False))
+
+    def to_json(self) -> dict:
+        return {"version": 1, "sensor": self.sensor.name, "ground_z": self.ground_z,
+                "objects": [{"bank_id": o.bank_id, "x": o.x, "y": o.y, "z": o.z, "heading": o.heading}
+                            for o in self.objects]}
+
+
+@dataclass
+class SimResult:
+    scan: Scan
+    boxes: list[Box]                 # sensor frame, one per scene object
+    objects: list[SceneObject]
+    labels: list[str]
+    removed_background: int = 0
+    removed_vehicle: int = 0
+
+
+def load_scene(path: str | Path) -> SceneSpec:
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "scene file is missing")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"not valid JSON ({exc})") from exc
+    validate("scene", doc, path)
+    sensor_spec = doc["sensor"]
+    candidate = path.parent / sensor_spec
+    sensor = load_sensor(str(candidate) if candidate.is_file() else sensor_spec)
+    realism_doc = doc.get("realism", {})
+    realism = Realism(motion_distortion=False, **realism_doc)
+    objects = [SceneObject(o["bank_id"], float(o["x"]), float(o["y"]), None if o.get("z") is None else float(o["z"]),
+                           float(o["heading"]), o.get("label"), float(o.get("reflectivity", 0.5)))
+               for o in doc["objects"]]
+    return SceneSpec(sensor, doc.get("ground_z"), objects, realism)
+
+
+def random_scene(bank: Bank, count: int, seed: int, sensor: Sensor, ground_z: float | None = -1.8,
+                 min_range: float = 6.0, max_range: float = 45.0) -> SceneSpec:
+    """``count`` bank vehicles at random non-overlapping places and headings around the sensor."""
+    if not bank.entries:
+        raise InputError(bank.root / "index.json", "the bank has no entries")
+    rng = np.random.default_rng(seed)
+    placed: list[tuple[float, float, float]] = []
+    objects = []
+    for _ in range(count):
+        entry = bank.entries[int(rng.integers(len(bank.entries)))]
+        radius = math.hypot(entry.box_size()[0], entry.box_size()[1]) / 2
+        for _attempt in range(200):
+            r = rng.uniform(min_range, max_range)
+            az = rng.uniform(-math.pi, math.pi)
+            x, y = r * math.cos(az), r * math.sin(az)
+            if all(math.hypot(x - px, y - py) > radius + pr + 0.5 for px, py, pr in placed):
+                break
+        placed.append((x, y, radius))
+        objects.append(SceneObject(entry.id, round(x, 3), round(y, 3), None, round(float(rng.uniform(-math.pi, math.pi)), 4)))
+    return SceneSpec(sensor, ground_z, objects, Realism(motion_distortion=False, seed=seed))
+
+
+def _local_ground(background_xyz: np.ndarray | None, x: float, y: float, radius: float, fallback: float | None) -> float:
+    if background_xyz is not None and len(background_xyz):
+        near = np.hypot(background_xyz[:, 0] - x, background_xyz[:, 1] - y) < radius
+        if near.sum() >= 5:
+            return float(np.percentile(background_xyz[near, 2], 5))
+    if fallback is None:
+        raise InputError(None, "an object has no z and the scene has no ground_z (and no background ground near it)")
+    return float(fallback)
+
+
+def _placed_objects(spec: SceneSpec, bank: Bank, background_xyz: np.ndarray | None
+                    ) -> tuple[list[SimObject], list[Box], list[str]]:
+    sims, boxes, labels = [], [], []
+    for i, o in enumerate(spec.objects):
+        entry = bank.get(o.bank_id)
+        vertices, faces = bank.mesh(o.bank_id)
+        length, width, height = entry.box_size()
+        z = o.z
+        if z is None:
+            z = _local_ground(background_xyz, o.x, o.y, max(length, width) / 2 + 1.0, spec.ground_z) + height / 2
+        sims.append(SimObject(vertices, faces, Trajectory.static(o.x, o.y, z, o.heading), instance=i,
+                              reflectivity=o.reflectivity, name=o.bank_id))
+        boxes.append(Box(o.x, o.y, z, o.heading, length, width, height))
+        labels.append(o.label or entry.label or "Car")
+    return sims, boxes, labels
+
+
+def _ground(z: float) -> SimObject:
+    v = np.array([[-400, -400, z], [400, -400, z], [400, 400, z], [-400, 400, z]], dtype=float)
+    return SimObject(v, np.array([[0, 1, 2], [0, 2, 3]]), Trajectory.static(0, 0, 0, 0), -1, 0.2, "ground")
+
+
+def simulate_scene(spec: SceneSpec, bank: Bank) -> SimResult:
+    """Simulate the scene alone (vehicles + optional ground plane)."""
+    vehicles, boxes, labels = _placed_objects(spec, bank, None)
+    objects = vehicles + ([_ground(float(spec.ground_z))] if spec.ground_z is not None else [])
+    scan = simulate_scan(spec.sensor, objects, np.eye(4), realism=spec.realism)
+    return SimResult(scan, boxes, spec.objects, labels)
+
+
+def insert_into_background(spec: SceneSpec, bank: Bank, background_xyz: np.ndarray,
+                           background_intensity: np.ndarray | None = None,
+                           background_time_ns: np.ndarray | None = None) -> SimResult:
+    """Insert the scene's vehicles into a real sweep (points in the sensor frame) with occlusion both ways."""
+    bg = np.asarray(background_xyz, dtype=np.float64)
+    vehicles, boxes, labels = _placed_objects(spec, bank, bg)
+    scene = RaycastScene()
+    for v in vehicles:
+        x, y, z, h = v.trajectory.states[0]
+        c, s = math.cos(h), math.sin(h)
+        scene.add_mesh(v.vertices @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + [x, y, z], v.faces)
+    rng_bg = np.linalg.norm(bg, axis=1)
+    valid = rng_bg > 1e-6
+    dirs = np.zeros_like(bg)
+    dirs[valid] = bg[valid] / rng_bg[valid, None]
+    hits = scene.cast(np.zeros(3), dirs)
+    occluded = valid & hits.hit & (hits.distance < rng_bg)
+    keep_bg = ~occluded
+
+    sim = simulate_scan(spec.sensor, vehicles, np.eye(4), realism=spec.realism)
+    removed_vehicle = 0
+    if len(sim) and keep_bg.any():
+        kept = bg[keep_bg & valid]
+        kept_r = np.linalg.norm(kept, axis=1)
+        tree = cKDTree(kept / kept_r[:, None])
+        sim_r = np.linalg.norm(sim.xyz.astype(np.float64), axis=1)
+        tol = max(math.radians(spec.sensor.azimuth_resolution_deg) / 2.0, math.radians(0.1))
+        dist, idx = tree.query(sim.xyz / sim_r[:, None], k=8, distance_upper_bound=tol)
+        found = np.isfinite(dist)
+        near_r = np.where(found, kept_r[np.minimum(idx, len(kept_r) - 1)], np.inf)
+        blocked = (near_r < sim_r[:, None] - OCCLUDER_MARGIN_M).any(axis=1)
+        removed_vehicle = int(blocked.sum())
+        sim = _subset(sim, ~blocked)
+
+    n_bg = int(keep_bg.sum())
+    intensity_bg = np.zeros(n_bg, np.float32) if background_intensity is None else \
+        np.asarray(background_intensity, dtype=np.float32)[keep_bg]
+    if background_intensity is not None and intensity_bg.size and intensity_bg.max() > 1.0:
+        intensity_bg = intensity_bg / 255.0
+    time_bg = np.zeros(n_bg, np.int64) if background_time_ns is None else np.asarray(background_time_ns, np.int64)[keep_bg]
+    scan = Scan(xyz=np.vstack([bg[keep_bg].astype(np.float32), sim.xyz]),
+                instance=np.concatenate([np.full(n_bg, -1, np.int32), sim.instance]),
+                intensity=np.concatenate([intensity_bg, sim.intensity]).astype(np.float32),
+                time_offset_ns=np.concatenate([time_bg, sim.time_offset_ns]),
+                beam=np.concatenate([np.full(n_bg, -1, np.int32), sim.beam]),
+                column=np.concatenate([np.full(n_bg, -1, np.int32), sim.column]),
+                distance=np.concatenate([rng_bg[keep_bg].astype(np.float32), sim.distance]),
+                object_index=np.concatenate([np.full(n_bg, -1, np.int32), sim.object_index]),
+                num_beams=spec.sensor.beams, num_columns=spec.sensor.columns,
+                extra={"background_kept": keep_bg})
+    return SimResult(scan, boxes, spec.objects, labels, removed_background=int(occluded.sum()),
+                     removed_vehicle=removed_vehicle)
+
+
+def _subset(scan: Scan, mask: np.ndarray) -> Scan:
+    return Scan(scan.xyz[mask], scan.instance[mask], scan.intensity[mask], scan.time_offset_ns[mask], scan.beam[mask],
+                scan.column[mask], scan.distance[mask], scan.object_index[mask], scan.num_beams, scan.num_columns)
