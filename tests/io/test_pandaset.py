@@ -81,3 +81,20 @@ def test_native_pickles_read_identically(pandaset_root, tmp_path):
         np.testing.assert_array_equal(a.time_offset_ns, b.time_offset_ns)
         assert len(ours.annotations[k]) > 50
         assert ours.annotations[k] == reference.annotations[k]
+
+
+def test_pandaset_converts_to_canonical(pandaset_root, tmp_path):
+    """PandaSet -> canonical keeps points, poses, times and boxes (incl. the stationary flag) exactly."""
+    from sot_apps.io.canonical import write_sequence
+
+    native = read_pandaset(_native_copy(pandaset_root, tmp_path / "native"))
+    write_sequence(native, tmp_path / "canonical", progress=False)
+    canonical = open_sequence(tmp_path / "canonical")
+    assert canonical.format == "sequence" and canonical.id == "native"
+    for k in range(2):
+        assert canonical.frames[k].timestamp_ns == native.frames[k].timestamp_ns
+        np.testing.assert_array_equal(canonical.frames[k].world_from_ego, native.frames[k].world_from_ego)
+        np.testing.assert_array_equal(canonical.sweep(k).xyz, native.sweep(k).xyz)
+        np.testing.assert_array_equal(canonical.sweep(k).time_offset_ns, native.sweep(k).time_offset_ns)
+    assert canonical.annotations == native.annotations
+    assert {a.stationary for a in canonical.annotations[0]} == {True, False}

@@ -114,3 +114,20 @@ def test_read_track_validates(tmp_path):
     (tmp_path / "u" / "shape.ply").unlink()
     with pytest.raises(InputError, match="PLY file is missing"):
         read_track(tmp_path / "u")
+
+
+def test_ply_round_trip_property(tmp_path):
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from hypothesis.extra.numpy import arrays
+
+    @settings(max_examples=25, deadline=None)
+    @given(arrays(np.float32, st.tuples(st.integers(0, 40), st.just(3)),
+                  elements=st.floats(-1e4, 1e4, allow_nan=False, width=32)))
+    def check(xyz):
+        path = tmp_path / "h.ply"
+        write_ply_points(path, xyz, value=np.arange(len(xyz), dtype=np.int32))
+        np.testing.assert_array_equal(read_ply_points(path), xyz.astype(np.float64))
+        np.testing.assert_array_equal(read_ply(path)["value"], np.arange(len(xyz)))
+
+    check()
