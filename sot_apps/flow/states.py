@@ -62,6 +62,23 @@ class ObjectTrajectory:
         alpha = (time_ns - int(t[i])) / float(int(t[i + 1]) - int(t[i]))
         return self.states[i] + alpha * (self.states[i + 1] - self.states[i])
 
+    def states_at(self, times_ns: np.ndarray) -> np.ndarray:
+        """(N, 4) states at many times (linear, extrapolating the end segments; no coverage check)."""
+        times = np.asarray(times_ns, dtype=np.int64).ravel()
+        t = self.times_ns
+        if len(t) == 1:
+            return np.repeat(self.states, len(times), axis=0)
+        i = np.clip(np.searchsorted(t, times) - 1, 0, len(t) - 2)
+        alpha = (times - t[i]).astype(np.float64) / (t[i + 1] - t[i]).astype(np.float64)
+        return self.states[i] + alpha[:, None] * (self.states[i + 1] - self.states[i])
+
+    def object_from_world_points(self, points_world: np.ndarray, times_ns: np.ndarray) -> np.ndarray:
+        """Object-frame coordinates of world points captured at their own times (rolling-shutter LiDAR)."""
+        states = self.states_at(times_ns)
+        d = np.asarray(points_world, dtype=np.float64).reshape(-1, 3) - states[:, :3]
+        c, s = np.cos(states[:, 3]), np.sin(states[:, 3])
+        return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+
     def world_from_object_at(self, time_ns: int) -> np.ndarray | None:
         state = self.state_at(time_ns)
         return None if state is None else world_from_object(state)
