@@ -76,6 +76,17 @@ class MotionAccuracy:
         """(mean over tracks at k = 1..horizon, number of tracks contributing)."""
         return self._per_k(attr)
 
+    def median_curve(self, attr: str = "centre_3d") -> np.ndarray:
+        """Median over tracks at k = 1..horizon (NaN where no track has a valid sample)."""
+        values = np.full((max(len(self.tracks), 1), self.horizon), np.nan)
+        for i, t in enumerate(self.tracks):
+            row = getattr(t, attr)
+            values[i, : len(row)] = [np.nan if v is None else v for v in row]
+        out = np.full(self.horizon, np.nan)
+        ok = np.isfinite(values).any(axis=0)
+        out[ok] = np.nanmedian(values[:, ok], axis=0)
+        return out
+
     def pooled(self, attr: str) -> float:
         vals = np.array([getattr(t, attr) for t in self.tracks], dtype=float)
         w = np.array([t.valid_frames for t in self.tracks], dtype=float)
@@ -87,6 +98,7 @@ class MotionAccuracy:
         for attr in ("centre_3d", "centre_bev", "raw_centre_3d"):
             mean, n = self.curve(attr)
             out[f"mean_{attr}_by_k"] = [None if not np.isfinite(v) else float(v) for v in mean]
+            out[f"median_{attr}_by_k"] = [None if not np.isfinite(v) else float(v) for v in self.median_curve(attr)]
             out[f"n_{attr}_by_k"] = [int(v) for v in n]
         return out
 
@@ -173,10 +185,13 @@ def format_table(acc: MotionAccuracy, ks: Seq[int] = (1, 2, 5, 10, 15, 20, 25, 3
     mb, _ = acc.curve("centre_bev")
     mr, _ = acc.curve("raw_centre_3d")
     lines = [f"Centre error k frames after the start ({acc.source}; mean over tracks, cm)", "",
-             "| k | tracks | exported 3D | exported BEV | raw tracker 3D |", "|---:|---:|---:|---:|---:|"]
+             "| k | tracks | exported 3D | exported BEV | raw tracker 3D | exported 3D, median over tracks |",
+             "|---:|---:|---:|---:|---:|---:|"]
+    med = acc.median_curve("centre_3d")
     for k in ks:
         if k <= acc.horizon:
-            lines.append(f"| {k} | {n3[k - 1]} | {_cm(m3[k - 1])} | {_cm(mb[k - 1])} | {_cm(mr[k - 1])} |")
+            lines.append(f"| {k} | {n3[k - 1]} | {_cm(m3[k - 1])} | {_cm(mb[k - 1])} | {_cm(mr[k - 1])} "
+                         f"| {_cm(med[k - 1])} |")
     within = m3[: acc.horizon]
     lines += ["", f"mean over k = 1..{acc.horizon}: exported {_cm(_nanmean(within))} cm 3D, "
                   f"{_cm(_nanmean(mb))} cm BEV; raw {_cm(_nanmean(mr))} cm 3D; max over k: exported "

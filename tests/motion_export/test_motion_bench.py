@@ -40,6 +40,7 @@ def test_known_offset_and_velocity_are_recovered(tmp_path):
     assert abs(errors.speed - 9.0) < 0.1
     table = format_table(acc)
     assert "| 30 | 1 | 5.0 |" in table
+    assert np.allclose(acc.median_curve("centre_3d")[ok], curve[ok])
     plot_accuracy(acc, tmp_path / "motion.png")
     image = cv2.imread(str(tmp_path / "motion.png"))
     assert image is not None and image.shape == (560, 900, 3)
