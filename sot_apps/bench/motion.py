@@ -230,7 +230,8 @@ def plot_accuracy(acc: MotionAccuracy, path: str | Path, title: str = "") -> Non
     img = np.full((H, W, 3), 255, np.uint8)
     curves = [("exported (smoothed) 3D", acc.curve("centre_3d")[0], (200, 90, 20)),
               ("exported (smoothed) BEV", acc.curve("centre_bev")[0], (60, 160, 60)),
-              ("raw tracker 3D", acc.curve("raw_centre_3d")[0], (60, 60, 220))]
+              ("raw tracker 3D", acc.curve("raw_centre_3d")[0], (60, 60, 220)),
+              ("exported 3D, median over tracks", acc.median_curve("centre_3d"), (160, 60, 160))]
     values = np.concatenate([c[1] for c in curves])
     ymax_cm = max(12.0, float(np.nanmax(values) * 100 * 1.1) if np.isfinite(values).any() else 12.0)
     ystep = 2.0 if ymax_cm <= 20 else 5.0 if ymax_cm <= 60 else 20.0
