@@ -24,3 +24,19 @@ def pandaset(pandaset_root):
     from sot_apps.io import open_sequence
 
     return open_sequence(pandaset_root)
+
+
+@pytest.fixture(scope="session")
+def tiny_dir(tmp_path_factory) -> Path:
+    """The tiny synthetic canonical sequence, generated once per session."""
+    from sot_apps.io.tiny import make_tiny_sequence
+
+    return make_tiny_sequence(tmp_path_factory.mktemp("tiny") / "seq")
+
+
+@pytest.fixture
+def tiny_copy(tiny_dir, tmp_path) -> Path:
+    """A private, writable copy of the tiny sequence."""
+    import shutil
+
+    return Path(shutil.copytree(tiny_dir, tmp_path / "tiny"))
