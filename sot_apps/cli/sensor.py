@@ -1,0 +1,85 @@
+"""``sot-apps sensor fit``: estimate a LiDAR's beam table and azimuth resolution from real sweeps."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from ..errors import InputError
+from .common import add_sequence_argument, add_subcommand, load_sequence
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    parser = add_subcommand(
+        subparsers, "sensor", help="fit a sensor model (beam elevations, azimuth step) to real sweeps",
+        description="Fit a spinning-LiDAR model to sweeps of a sequence: beam elevations are the peaks of the "
+                    "elevation histogram, the azimuth step is the median gap between a beam's consecutive returns, "
+                    "spin rate and direction come from per-point times. Writes a sensor JSON (schema sensor) usable "
+                    "by simulate-lidar and synth. See docs/lidar_sim.md for how it fares on PandaSet.",
+        examples=["sot-apps sensor fit ../shared/data/pandaset_002 --out pandar64_fit.json --compare pandar64",
+                  "sot-apps sensor fit out/world --frames 0,5 --out fitted.json"])
+    sub = parser.add_subparsers(dest="sensor_command", metavar="ACTION")
+    fit = sub.add_parser("fit", help="fit beam elevations and azimuth resolution",
+                         description="Fit a sensor model to sweeps (points in the LiDAR frame).")
+    add_sequence_argument(fit)
+    fit.add_argument("--frames", default="0,10,20", help="comma-separated frames to use (default 0,10,20)")
+    fit.add_argument("--out", required=True, metavar="SENSOR.json", help="output sensor JSON")
+    fit.add_argument("--name", default=None, help="sensor name (default: fitted_<sequence id>)")
+    fit.add_argument("--min-range", type=float, default=2.0, help="ignore points closer than this (m)")
+    fit.add_argument("--min-separation", type=float, default=0.09,
+                     help="minimum angle between two beams in degrees (default 0.09)")
+    fit.add_argument("--align", action="store_true",
+                     help="first search roll, pitch and a vertical origin offset that sharpen the beams (for sweeps "
+                          "not given in the optical-centre frame, e.g. PandaSet)")
+    fit.add_argument("--compare", default=None, metavar="PRESET", help="print a comparison with a preset")
+    fit.set_defaults(func=run_fit)
+    parser.set_defaults(func=lambda args: (parser.print_help(), 2)[1])
+    return parser
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    from tracker.geometry import invert_transform, transform_points
+
+    from ..io.atomic import write_json
+    from ..lidar_sim.fit import compare_to_preset, fit_sensor
+    from ..lidar_sim.sensors import preset
+
+    seq = load_sequence(args)
+    try:
+        frames = [int(f) for f in args.frames.split(",") if f.strip()]
+    except ValueError:
+        raise InputError(None, f"--frames must be comma-separated integers, got {args.frames!r}") from None
+    lidar_from_ego = invert_transform(seq.ego_from_lidar)
+    sweeps, times = [], []
+    for k in frames:
+        seq.check_index(k)
+        sweep = seq.sweep(k)
+        sweeps.append(transform_points(lidar_from_ego, sweep.xyz))
+        times.append(sweep.time_offset_ns)
+    alignment = None
+    if args.align:
+        from ..lidar_sim.fit import align_sensor_frame
+
+        sensor_from_frame, alignment = align_sensor_frame(sweeps)
+        sweeps = [transform_points(sensor_from_frame, s) for s in sweeps]
+        print(f"alignment: {json.dumps(alignment)}")
+    try:
+        result = fit_sensor(sweeps, times, name=args.name or f"fitted_{seq.id}", min_range=args.min_range,
+                            min_separation_deg=args.min_separation)
+    except ValueError as exc:
+        raise InputError(args.sequence, f"sensor fit failed: {exc}") from exc
+    doc = result.to_json()
+    if alignment is not None:
+        doc["fit"]["alignment"] = alignment
+    if args.compare:
+        doc["fit"]["comparison"] = compare_to_preset(result.sensor, preset(args.compare))
+    write_json(Path(args.out), doc)
+    s = result.sensor
+    print(f"{s.beams} beams, elevations {max(s.elevations_deg):+.3f} ... {min(s.elevations_deg):+.3f} deg, "
+          f"azimuth step {result.azimuth_step_deg:.4f} deg ({s.columns} columns), {s.rotation_hz:g} Hz, "
+          f"direction {s.direction:+d}, max range {s.max_range:g} m")
+    if args.compare:
+        print(json.dumps(doc["fit"]["comparison"]))
+    print(f"wrote {args.out}")
+    return 0
