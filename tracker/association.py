@@ -1,0 +1,124 @@
+"""Point association: 1-NN pairs through a kd-tree, and RANSAC with a 2D (bird's-eye) rigid model.
+
+RANSAC is vectorised: hypotheses are drawn in batches, each fitted in closed form (2D Kabsch) and scored
+against all pairs at once; the number of iterations adapts to the inlier ratio (confidence) up to a cap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = ["NearestNeighbors", "RansacResult", "fit_rigid_2d", "ransac_rigid_2d", "random_subset"]
+
+
+class NearestNeighbors:
+    """A kd-tree over fixed target points; ``query`` returns distances and target indices."""
+
+    def __init__(self, target: np.ndarray) -> None:
+        self.target = np.asarray(target, dtype=np.float64).reshape(-1, 3)
+        self.tree = cKDTree(self.target) if len(self.target) else None
+
+    def __len__(self) -> int:
+        return len(self.target)
+
+    def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.tree is None or len(points) == 0:
+            return np.zeros(0), np.zeros(0, dtype=np.int64)
+        dist, idx = self.tree.query(points, k=1)
+        return dist, idx
+
+
+def random_subset(points: np.ndarray, max_points: int, rng: np.random.Generator) -> np.ndarray:
+    """At most ``max_points`` rows of ``points`` chosen at random (order kept); all of them if fewer."""
+    if len(points) <= max_points:
+        return points
+    keep = np.sort(rng.choice(len(points), size=max_points, replace=False))
+    return points[keep]
+
+
+def fit_rigid_2d(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """Least-squares 2D rotation angle and translation with dst ~ R(angle) @ src + t (closed form)."""
+    w = np.ones(len(src)) if weights is None else weights
+    wsum = max(float(w.sum()), 1e-12)
+    cs = (w[:, None] * src).sum(axis=0) / wsum
+    cd = (w[:, None] * dst).sum(axis=0) / wsum
+    a, b = src - cs, dst - cd
+    cos_sum = float((w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])).sum())
+    sin_sum = float((w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])).sum())
+    angle = float(np.arctan2(sin_sum, cos_sum))
+    c, s = np.cos(angle), np.sin(angle)
+    t = cd - np.array([c * cs[0] - s * cs[1], s * cs[0] + c * cs[1]])
+    return angle, t
+
+
+@dataclass(frozen=True)
+class RansacResult:
+    inliers: np.ndarray     # (N,) bool
+    angle: float
+    translation: np.ndarray  # (2,)
+    iterations: int
+
+    @property
+    def num_inliers(self) -> int:
+        return int(self.inliers.sum())
+
+
+def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, *, max_iterations: int = 200,
+                    confidence: float = 0.99, sample_size: int = 3, threshold: float = 0.2,
+                    batch_size: int = 50, max_score_pairs: int = 300) -> RansacResult:
+    """RANSAC for a 2D rigid transform between paired (N, 2) points ``src`` -> ``dst``.
+
+    Inlier: BEV residual <= ``threshold``. Hypotheses are scored on at most ``max_score_pairs`` random
+    pairs (for speed); the best one is refitted on its inliers among all pairs once.
+    """
+    src = np.asarray(src, dtype=np.float64)[:, :2]
+    dst = np.asarray(dst, dtype=np.float64)[:, :2]
+    n = len(src)
+    if n < sample_size:
+        return RansacResult(np.zeros(n, dtype=bool), 0.0, np.zeros(2), 0)
+    score_src, score_dst = src, dst
+    if n > max_score_pairs:
+        pick = rng.choice(n, size=max_score_pairs, replace=False)
+        score_src, score_dst = src[pick], dst[pick]
+    m = len(score_src)
+    best_count, best_angle, best_t = -1, 0.0, np.zeros(2)
+    done, needed = 0, max_iterations
+    thr2 = threshold * threshold
+    while done < min(needed, max_iterations):
+        b = min(batch_size, max_iterations - done)
+        samples = np.argpartition(rng.random((b, m)), sample_size - 1, axis=1)[:, :sample_size]
+        ps, pd = score_src[samples], score_dst[samples]                     # (b, s, 2)
+        cs, cd = ps.mean(axis=1), pd.mean(axis=1)
+        a, c_ = ps - cs[:, None], pd - cd[:, None]
+        cos_sum = (a[..., 0] * c_[..., 0] + a[..., 1] * c_[..., 1]).sum(axis=1)
+        sin_sum = (a[..., 0] * c_[..., 1] - a[..., 1] * c_[..., 0]).sum(axis=1)
+        ang = np.arctan2(sin_sum, cos_sum)
+        co, si = np.cos(ang), np.sin(ang)
+        tx = cd[:, 0] - (co * cs[:, 0] - si * cs[:, 1])
+        ty = cd[:, 1] - (si * cs[:, 0] + co * cs[:, 1])
+        rx = co[:, None] * score_src[None, :, 0] - si[:, None] * score_src[None, :, 1] + tx[:, None] - score_dst[None, :, 0]
+        ry = si[:, None] * score_src[None, :, 0] + co[:, None] * score_src[None, :, 1] + ty[:, None] - score_dst[None, :, 1]
+        counts = ((rx * rx + ry * ry) <= thr2).sum(axis=1)
+        j = int(np.argmax(counts))
+        if counts[j] > best_count:
+            best_count, best_angle, best_t = int(counts[j]), float(ang[j]), np.array([tx[j], ty[j]])
+        done += b
+        ratio = best_count / m
+        if ratio >= 1.0:
+            needed = done
+        elif ratio > 0:
+            needed = int(np.ceil(np.log(1.0 - confidence) / np.log(1.0 - ratio ** sample_size)))
+    co, si = np.cos(best_angle), np.sin(best_angle)
+    moved = src @ np.array([[co, si], [-si, co]]) + best_t
+    inliers = ((moved - dst) ** 2).sum(axis=1) <= thr2
+    if inliers.sum() >= sample_size:
+        angle, t = fit_rigid_2d(src[inliers], dst[inliers])
+        co, si = np.cos(angle), np.sin(angle)
+        moved = src @ np.array([[co, si], [-si, co]]) + t
+        refit = ((moved - dst) ** 2).sum(axis=1) <= thr2
+        if refit.sum() >= inliers.sum():
+            inliers, best_angle, best_t = refit, angle, t
+    return RansacResult(inliers, best_angle, best_t, done)

@@ -1,0 +1,140 @@
+"""All SOTracker parameters in one frozen dataclass, plus the named presets of the paper's ablations.
+
+Defaults are the paper's / the authors' implementation's values (see docs/tracker.md for where we
+deviate and why). ``full`` is the complete method tuned for speed (few outer iterations with an
+early stop); ``faithful`` is the same method with the upstream iteration counts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["TrackerConfig", "PRESETS", "get_preset", "preset_names"]
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Parameters of one tracking run. Lengths in metres, angles in radians."""
+
+    # --- loss weights (paper: ICP 1, Shape 1, MC 0.1, MP 0.1); a zero weight disables the term
+    weight_icp: float = 1.0
+    weight_shape: float = 1.0
+    weight_mc: float = 0.1
+    weight_mp: float = 0.1
+    # --- search regions (box size factors, applied to length, width AND height)
+    search_scale: float = 1.5            # gamma_in
+    first_search_scale: float = 3.0      # frame-1 wide search
+    first_icp_iterations: int = 50       # ICP-only outer iterations of the frame-1 search
+    crop_scale: float = 1.1              # gamma_aft: previous-frame points for the ICP term
+    shape_crop_scale: float = 1.0        # points added to the shape / sub-shape
+    # --- shape model
+    use_shape: bool = True               # shape term at all
+    shape_update: bool = True            # S(All): aggregate at key frames; False = S(1)
+    keyframe_interval: int = 5
+    voxel_size: float = 0.05
+    use_subshape: bool = True
+    subshape_frames: int = 2
+    # --- association / RANSAC for the shape term
+    use_ransac: bool = True
+    ransac_max_iterations: int = 200
+    ransac_confidence: float = 0.99
+    ransac_sample_size: int = 3
+    ransac_inlier_threshold: float = 0.2
+    ransac_min_inliers: int = 10
+    max_points: int = 1000               # random subsample of each point set
+    min_points: int = 10                 # a term with fewer pairs contributes 0
+    icp_metric: str = "point"            # "point" (paper) or "plane": point-to-plane + plane_point_weight * point
+    plane_point_weight: float = 0.1
+    normal_neighbors: int = 8
+    normal_radius: float = 0.5
+    max_pair_distance: float = 0.0       # > 0: ICP pairs farther than this are dropped (0 = keep all, upstream)
+    # --- motion prior
+    alpha: float = 0.5                   # prior <- alpha * prior + (1 - alpha) * delta
+    mp_reference: str = "prior"          # "prior" (paper) or "iteration" (upstream: previous outer iteration)
+    symmetric_mc: bool = True            # MC on both components; False = upstream's x-only form
+    # --- ground removal (GPF, Zermas et al. 2017)
+    ground_removal: bool = True
+    gpf_lpr_count: int = 20              # lowest-point representative: mean z of this many lowest points
+    gpf_seed_threshold: float = 1.2      # seeds: points lower than LPR + this
+    gpf_distance_threshold: float = 0.3  # ground: distance to the plane below this
+    gpf_iterations: int = 10
+    gpf_segment_length: float = 8.0      # per-segment planes along the principal direction
+    gpf_outlier_depth: float = 0.5       # drop points this far below the robust lowest level (sub-ground noise)
+    gpf_margin: float = 1.5              # ground is fitted on the search box grown by this much (BEV)
+    # --- solver
+    outer_iterations: int = 20           # max outer iterations (correspondences recomputed each)
+    solver_iterations: int = 10          # max Gauss-Newton/LM steps per outer iteration
+    convergence_tolerance: float = 1e-4  # stop the outer loop when the update is smaller (m / rad)
+    # --- misc
+    seed: int = 0
+    deskew: bool = False                 # de-skew ego motion with per-point times (needs the previous pose)
+    preset: str = "custom"
+
+    def replace(self, **changes: Any) -> "TrackerConfig":
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "TrackerConfig":
+        """Config from a dict; unknown keys are an error (ValueError)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(f"unknown tracker config keys: {', '.join(unknown)}")
+        base = cls()
+        values = {}
+        for f in dataclasses.fields(cls):
+            if f.name in data:
+                default = getattr(base, f.name)
+                value = data[f.name]
+                if isinstance(default, bool):
+                    value = bool(value)
+                elif isinstance(default, int):
+                    value = int(value)
+                elif isinstance(default, float):
+                    value = float(value)
+                values[f.name] = value
+        return cls(**values)
+
+    def __post_init__(self) -> None:
+        if self.icp_metric not in ("point", "plane"):
+            raise ValueError(f"icp_metric must be 'point' or 'plane', not {self.icp_metric!r}")
+        if self.mp_reference not in ("prior", "iteration"):
+            raise ValueError(f"mp_reference must be 'prior' or 'iteration', not {self.mp_reference!r}")
+        for name in ("search_scale", "first_search_scale", "crop_scale", "voxel_size", "keyframe_interval",
+                     "max_points", "ransac_max_iterations", "outer_iterations"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive")
+
+
+_FULL = TrackerConfig(outer_iterations=8, first_icp_iterations=20, solver_iterations=6, preset="full")
+_FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
+                          convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
+                          preset="faithful")
+
+PRESETS: dict[str, TrackerConfig] = {
+    "full": _FULL,
+    "faithful": _FAITHFUL,
+    "icp_mp": _FULL.replace(use_shape=False, weight_mc=0.0, preset="icp_mp"),
+    "icp_mp_s1": _FULL.replace(shape_update=False, weight_mc=0.0, preset="icp_mp_s1"),
+    "icp_mp_sall": _FULL.replace(weight_mc=0.0, preset="icp_mp_sall"),
+    "no_ground_removal": _FULL.replace(ground_removal=False, preset="no_ground_removal"),
+    "no_ransac": _FULL.replace(use_ransac=False, preset="no_ransac"),
+    "no_subshape": _FULL.replace(use_subshape=False, preset="no_subshape"),
+}
+
+
+def preset_names() -> list[str]:
+    return list(PRESETS)
+
+
+def get_preset(name: str, **overrides: Any) -> TrackerConfig:
+    """A named preset (see PRESETS), optionally with fields replaced. Unknown name: ValueError."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown tracker preset {name!r}; known: {', '.join(PRESETS)}")
+    config = PRESETS[name]
+    return config.replace(**overrides) if overrides else config

@@ -1,0 +1,73 @@
+"""Levenberg–Marquardt (damped Gauss–Newton) on the 4 motion parameters [dx, dy, dz, dtheta]."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .terms import ResidualBlock
+
+__all__ = ["SolverResult", "total_loss", "solve"]
+
+BlockFunction = Callable[[np.ndarray], list[ResidualBlock]]
+
+
+@dataclass(frozen=True)
+class SolverResult:
+    x: np.ndarray
+    loss: float
+    iterations: int
+
+
+def total_loss(blocks: list[ResidualBlock]) -> float:
+    return float(sum(b.loss for b in blocks))
+
+
+def _normal_equations(blocks: list[ResidualBlock]) -> tuple[np.ndarray, np.ndarray]:
+    hessian = np.zeros((4, 4))
+    gradient = np.zeros(4)
+    for b in blocks:
+        hessian += b.weight * (b.jacobian.T @ b.jacobian)
+        gradient += b.weight * (b.jacobian.T @ b.residuals)
+    return hessian, gradient
+
+
+def solve(blocks_at: BlockFunction, x0: np.ndarray, max_iterations: int = 10, tolerance: float = 1e-6,
+          damping: float = 1e-6) -> SolverResult:
+    """Minimise sum_b weight_b * ||r_b(x)||^2 from ``x0``.
+
+    ``blocks_at(x)`` returns the residual blocks (with Jacobians) at x. Steps are Gauss–Newton steps
+    damped by ``lambda * (diag(H) + eps)``; lambda grows when a step does not decrease the loss.
+    """
+    x = np.asarray(x0, dtype=np.float64).copy()
+    blocks = blocks_at(x)
+    loss = total_loss(blocks)
+    lam = damping
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):
+        hessian, gradient = _normal_equations(blocks)
+        if not np.isfinite(hessian).all() or not np.any(hessian):
+            break
+        diag = np.diag(hessian) + 1e-9
+        accepted = False
+        step = np.zeros(4)
+        for _ in range(8):
+            try:
+                step = -np.linalg.solve(hessian + lam * np.diag(diag), gradient)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            candidate = x + step
+            new_blocks = blocks_at(candidate)
+            new_loss = total_loss(new_blocks)
+            if new_loss <= loss:
+                x, blocks, loss = candidate, new_blocks, new_loss
+                lam = max(lam * 0.1, 1e-9)
+                accepted = True
+                break
+            lam *= 10.0
+        if not accepted or np.max(np.abs(step)) < tolerance:
+            break
+    return SolverResult(x, loss, iterations)

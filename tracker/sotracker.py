@@ -1,0 +1,417 @@
+"""SOTracker: the streaming tracker (``Tracker.start`` / ``Tracker.step``) and ``track()``.
+
+Per frame k (the paper's Algorithms 1 and 2):
+
+1. predict S^_k = S_{k-1} + dS_prior;
+2. take the sweep's points near the prediction (a cheap radius test in the EGO frame first, so only
+   those points are moved to the world — de-skewed if asked), and remove the ground there (GPF);
+3. outer loop: crop the local points with S^_k scaled gamma_in, pair the ICP source (previous-frame
+   object points + sub-shape, moved by the current estimate) with the crop by 1-NN, pair the shape
+   (placed likewise) with the crop and keep RANSAC's inliers, then minimise the loss over
+   [dx, dy, dz, dtheta] (Levenberg–Marquardt, analytic Jacobians); stop when the update is tiny;
+4. keep the object points, grow the shape at key frames and update the motion prior.
+
+Frame 1 has no motion prior: an ICP-only search in the start box scaled 3.0 precedes the normal step.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .association import NearestNeighbors, random_subset, ransac_rigid_2d
+from .config import TrackerConfig
+from .frames import FrameSource, LidarFrame
+from .geometry import Box, State, invert_transform, points_in_box, transform_points, wrap_angle
+from .ground import GroundParams, ground_mask
+from .motion import MotionPrior
+from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
+from .solver import solve
+from .terms import ResidualBlock, apply_motion, motion_consistency_block, motion_prior_block, point_pair_block
+
+__all__ = ["FrameEstimate", "TrackResult", "Tracker", "track", "deskew_points"]
+
+
+@dataclass(frozen=True)
+class FrameEstimate:
+    """The tracker's output for one frame (world frame).
+
+    ``num_points``: object points (ground removed) in the estimated box; ``points``: those points (N, 3);
+    ``quality``: 0..1 (share of those points that the registration explains, scaled down when sparse);
+    ``flags``: e.g. "init", "no_points", "prior_only", "low_points", "nan_points", "no_shape_inliers".
+    """
+
+    frame: int
+    state: State
+    box: Box
+    num_points: int
+    quality: float
+    flags: tuple[str, ...]
+    time_ms: float
+    points: np.ndarray = field(repr=False)
+
+
+@dataclass
+class TrackResult:
+    """A whole track: one estimate per frame from ``start`` to ``end`` (the start frame is the init box)."""
+
+    estimates: list[FrameEstimate]
+    size: np.ndarray          # (length, width, height)
+    shape: np.ndarray         # (M, 3) object-frame points
+    config: TrackerConfig
+
+    @property
+    def frames(self) -> list[int]:
+        return [e.frame for e in self.estimates]
+
+    @property
+    def states(self) -> list[State]:
+        return [e.state for e in self.estimates]
+
+    @property
+    def boxes(self) -> list[Box]:
+        return [e.box for e in self.estimates]
+
+    def diagnostics(self) -> list[dict]:
+        return [{"frame": e.frame, "num_points": e.num_points, "quality": e.quality, "flags": list(e.flags),
+                 "time_ms": e.time_ms} for e in self.estimates]
+
+
+def _axis_angle(rotation: np.ndarray) -> tuple[np.ndarray, float]:
+    """Unit axis and angle of a 3x3 rotation."""
+    angle = float(np.arccos(np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)))
+    axis = np.array([rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0], rotation[1, 0] - rotation[0, 1]])
+    norm = np.linalg.norm(axis)
+    if norm < 1e-12:
+        return np.array([0.0, 0.0, 1.0]), 0.0
+    return axis / norm, angle
+
+
+def deskew_points(points_ego: np.ndarray, offsets_ns: np.ndarray, timestamp_ns: int, world_from_ego: np.ndarray,
+                  previous_timestamp_ns: int, previous_world_from_ego: np.ndarray) -> np.ndarray:
+    """World points with each point moved by the ego pose at its capture time.
+
+    The pose at time t is interpolated between the previous frame's pose and this frame's (SLERP of the
+    rotation, linear translation); times outside the interval extrapolate.
+    """
+    dt = float(timestamp_ns - previous_timestamp_ns)
+    s = 1.0 + np.asarray(offsets_ns, dtype=np.float64) / dt if dt != 0 else np.ones(len(points_ego))
+    r0, r1 = previous_world_from_ego[:3, :3], world_from_ego[:3, :3]
+    t0, t1 = previous_world_from_ego[:3, 3], world_from_ego[:3, 3]
+    axis, angle = _axis_angle(r0.T @ r1)
+    p = np.asarray(points_ego, dtype=np.float64)
+    a = s * angle
+    ca, sa = np.cos(a)[:, None], np.sin(a)[:, None]
+    rotated = p * ca + np.cross(axis, p) * sa + np.outer(p @ axis, axis) * (1.0 - ca)  # Rodrigues
+    return rotated @ r0.T + t0 + s[:, None] * (t1 - t0)
+
+
+class _Target:
+    """A frame's local (non-ground) points with one kd-tree and lazily computed normals."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        self.nn = NearestNeighbors(points)
+        self.normals = np.zeros((len(points), 3))
+        self.has_normal = np.zeros(len(points), dtype=bool)
+
+
+def _box_moved(box: Box, x: np.ndarray) -> Box:
+    return Box(box.x + x[0], box.y + x[1], box.z + x[2], float(wrap_angle(box.heading + x[3])),
+               box.length, box.width, box.height)
+
+
+class Tracker:
+    """Online SOTracker. ``start(frame, box)`` once, then ``step(frame)`` for each following frame."""
+
+    def __init__(self, config: TrackerConfig | None = None) -> None:
+        self.config = config or TrackerConfig()
+        c = self.config
+        self.ground_params = GroundParams(lpr_count=c.gpf_lpr_count, seed_threshold=c.gpf_seed_threshold,
+                                          distance_threshold=c.gpf_distance_threshold, iterations=c.gpf_iterations,
+                                          segment_length=c.gpf_segment_length, outlier_depth=c.gpf_outlier_depth)
+        self._started = False
+
+    # ------------------------------------------------------------------ points
+    def _local_points(self, frame: LidarFrame, box: Box, scale: float) -> tuple[np.ndarray, list[str]]:
+        """Non-ground world points near ``box`` (BEV radius of the box scaled by ``scale`` plus a margin)."""
+        c = self.config
+        flags: list[str] = []
+        pts = np.asarray(frame.points_ego)
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
+            return np.zeros((0, 3)), flags
+        ego_from_world = invert_transform(np.asarray(frame.world_from_ego, dtype=np.float64))
+        centre_ego = transform_points(ego_from_world, box.center[None])[0]
+        radius = 0.5 * float(np.hypot(box.length, box.width)) * scale + c.gpf_margin
+        deskew = (c.deskew and frame.point_time_offset_ns is not None and self._previous_pose is not None
+                  and len(frame.point_time_offset_ns) == len(pts))
+        if deskew:
+            radius += float(np.linalg.norm(frame.world_from_ego[:3, 3] - self._previous_pose[1][:3, 3])) + 0.5
+        # cheap BEV radius test in the ego frame on the whole sweep (contiguous ops only)
+        diff = pts - centre_ego.astype(pts.dtype)
+        near = (diff * diff) @ np.array([1.0, 1.0, 0.0], dtype=pts.dtype) <= radius * radius
+        if not np.isfinite(pts).all():
+            flags.append("nan_points")
+            near &= np.isfinite(pts).all(axis=1)
+        idx = np.flatnonzero(near)
+        local = pts[idx].astype(np.float64)
+        if deskew:
+            prev_t, prev_pose = self._previous_pose
+            world = deskew_points(local, np.asarray(frame.point_time_offset_ns)[idx], frame.timestamp_ns,
+                                  frame.world_from_ego, prev_t, prev_pose)
+        else:
+            world = transform_points(frame.world_from_ego, local)
+        # ground removal on the region the search can reach: the box scaled by ``scale``, grown by a margin
+        ca, sa = np.cos(box.heading), np.sin(box.heading)
+        d = world[:, :2] - box.center[:2]
+        u = np.abs(d @ np.array([ca, sa]))
+        v = np.abs(d @ np.array([-sa, ca]))
+        world = world[(u <= 0.5 * box.length * scale + c.gpf_margin) & (v <= 0.5 * box.width * scale + c.gpf_margin)]
+        if c.ground_removal and len(world) >= 3:
+            world = world[~ground_mask(world, self.ground_params)]
+        # keep only what a search box can contain
+        d = world[:, :2] - box.center[:2]
+        keep_radius = 0.5 * float(np.hypot(box.length, box.width)) * scale
+        world = world[(d * d).sum(axis=1) <= keep_radius * keep_radius]
+        return world, flags
+
+    # ------------------------------------------------------------------ API
+    def start(self, frame: LidarFrame, box: Box, previous_pose: tuple[int, np.ndarray] | None = None) -> FrameEstimate:
+        """Begin a track at ``frame`` with the (world-frame) ``box``.
+
+        ``previous_pose``: (timestamp_ns, world_from_ego) of the frame before, used only to de-skew.
+        """
+        t0 = time.perf_counter()
+        c = self.config
+        values = box.to_array()
+        if not np.isfinite(values).all() or min(box.length, box.width, box.height) <= 0:
+            raise ValueError(f"init box must be finite with positive size, got {box}")
+        self.rng = np.random.default_rng(c.seed)
+        self.first_box = box
+        self.box = box
+        self.prior = MotionPrior(c.alpha)
+        self.shape = ShapeModel(c.voxel_size)
+        self.subshape = SubShape(c.subshape_frames if c.use_subshape else 0, c.voxel_size)
+        self.steps = 0
+        self._shape_nn: NearestNeighbors | None = None
+        self._shape_nn_size = -1
+        self._previous_pose = previous_pose
+        local, flags = self._local_points(frame, box, max(c.first_search_scale, c.search_scale))
+        self._finish_frame(frame, box, local, keyframe=True)
+        self._started = True
+        obj = local[points_in_box(local, box, 1.0)]
+        if len(obj) == 0:
+            flags.append("no_points")
+        est = FrameEstimate(frame.index, box.state, box, len(obj), 1.0, tuple(["init"] + flags),
+                            (time.perf_counter() - t0) * 1e3, obj)
+        return est
+
+    def shape_points(self) -> np.ndarray:
+        """The aggregated shape (object frame)."""
+        return self.shape.points.copy()
+
+    def _finish_frame(self, frame: LidarFrame, box: Box, local: np.ndarray, keyframe: bool) -> np.ndarray:
+        c = self.config
+        self.prev_points = local[points_in_box(local, box, c.crop_scale)]
+        obj_world = local[points_in_box(local, box, c.shape_crop_scale)]
+        obj = to_object_frame(obj_world, box)
+        self.subshape.add(obj)
+        if keyframe:
+            self.shape.add(obj)
+        self._previous_pose = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+        return obj_world
+
+    def _normals(self, target: _Target, idx: np.ndarray) -> np.ndarray:
+        """Unit normals (zeros where undefined) of local points ``idx``, computed on demand and cached."""
+        c = self.config
+        missing = np.unique(idx[~target.has_normal[idx]])
+        if len(missing):
+            k = min(c.normal_neighbors, len(target.nn))
+            dist, nbr = target.nn.tree.query(target.nn.target[missing], k=k, distance_upper_bound=c.normal_radius)
+            dist = dist.reshape(len(missing), k)
+            nbr = nbr.reshape(len(missing), k)
+            valid = np.isfinite(dist)
+            nbr = np.where(valid, nbr, 0)
+            pts = target.nn.target[nbr]                                   # (m, k, 3)
+            w = valid[..., None].astype(np.float64)
+            count = w.sum(axis=1)                                         # (m, 1)
+            mean = (pts * w).sum(axis=1) / np.maximum(count, 1.0)
+            d = (pts - mean[:, None]) * w
+            cov = np.einsum("mki,mkj->mij", d, d)
+            evals, evecs = np.linalg.eigh(cov)
+            normal = evecs[:, :, 0]
+            # a normal needs enough neighbours and a flat neighbourhood (smallest eigenvalue well below the next)
+            ok = (count[:, 0] >= 4) & (evals[:, 0] < 0.3 * evals[:, 1])
+            target.normals[missing] = np.where(ok[:, None], normal, 0.0)
+            target.has_normal[missing] = True
+        return target.normals[idx]
+
+    def _pairs(self, x: np.ndarray, source: np.ndarray, target: _Target, mask: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """1-NN pairs (moved source -> local points); pairs whose target is outside the crop are dropped."""
+        moved = apply_motion(x, source, self.box.center)
+        dist, idx = target.nn.query(moved)
+        keep = mask[idx]
+        return source[keep], idx[keep], dist[keep], moved[keep]
+
+    def _estimate(self, target: _Target, x0: np.ndarray, scale: float, outer: int, icp_only: bool,
+                  mp_reference: np.ndarray | None, flags: list[str]) -> tuple[np.ndarray, dict]:
+        """Outer loop of Algorithm 2 from motion ``x0``; returns the motion and diagnostics."""
+        c = self.config
+        prev = self.box
+        pivot = prev.center
+        local = target.nn.target
+        source = self.prev_points
+        sub = self.subshape.points
+        if len(sub):
+            source = np.vstack([source, to_world_frame(sub, prev)])
+        source = random_subset(source, c.max_points, self.rng)
+        shape_src = np.zeros((0, 3))
+        if not icp_only and c.use_shape and c.weight_shape > 0:
+            model = self.shape.points if c.shape_update else self._first_shape
+            shape_src = random_subset(to_world_frame(model, prev), c.max_points, self.rng)
+        x = np.asarray(x0, dtype=np.float64).copy()
+        reference = None if mp_reference is None else mp_reference.copy()
+        info = {"crop": 0, "icp_pairs": 0, "shape_inliers": 0, "iterations": 0}
+        plane = c.icp_metric == "plane"
+        ransac_seed = int(self.rng.integers(2**62))
+        for it in range(outer):
+            info["iterations"] = it + 1
+            mask = points_in_box(local, _box_moved(prev, x), scale)
+            info["crop"] = int(mask.sum())
+            if info["crop"] == 0:
+                break
+            fixed: list = []  # (name, source, target, normals, weight)
+            info["icp_pairs"] = info["shape_inliers"] = 0
+            if c.weight_icp > 0 and len(source) >= c.min_points:
+                src, idx, dist, _ = self._pairs(x, source, target, mask)
+                if c.max_pair_distance > 0:
+                    keep = dist <= c.max_pair_distance
+                    src, idx = src[keep], idx[keep]
+                if len(src) >= c.min_points:
+                    normals = self._normals(target, idx) if plane else None
+                    fixed.append(("icp", src, local[idx], normals, c.weight_icp))
+                    info["icp_pairs"] = len(src)
+            if len(shape_src) >= c.min_points:
+                src, idx, _, moved = self._pairs(x, shape_src, target, mask)
+                if c.use_ransac:
+                    keep = np.zeros(len(src), dtype=bool)
+                    if len(src) >= c.ransac_min_inliers:
+                        # the same hypotheses every outer iteration: the loop can settle
+                        keep = ransac_rigid_2d(moved[:, :2], local[idx, :2], np.random.default_rng(ransac_seed),
+                                               max_iterations=c.ransac_max_iterations, confidence=c.ransac_confidence,
+                                               sample_size=c.ransac_sample_size,
+                                               threshold=c.ransac_inlier_threshold).inliers
+                    src, idx = (src[keep], idx[keep]) if keep.sum() >= c.ransac_min_inliers else (src[:0], idx[:0])
+                if len(src) >= c.min_points:
+                    normals = self._normals(target, idx) if plane else None
+                    fixed.append(("shape", src, local[idx], normals, c.weight_shape))
+                    info["shape_inliers"] = len(src)
+            if not fixed:
+                break
+            use_priors = not icp_only
+
+            def blocks_at(xx: np.ndarray) -> list[ResidualBlock]:
+                blocks = [point_pair_block(name, xx, s, t, pivot, w, n, c.plane_point_weight)
+                          for name, s, t, n, w in fixed]
+                if use_priors and c.weight_mc > 0:
+                    blocks.append(motion_consistency_block(xx, prev.heading, c.weight_mc, c.symmetric_mc))
+                if use_priors and c.weight_mp > 0 and reference is not None:
+                    blocks.append(motion_prior_block(xx, reference, c.weight_mp))
+                return blocks
+
+            result = solve(blocks_at, x, max_iterations=c.solver_iterations)
+            change = float(np.max(np.abs(result.x - x)))
+            x = result.x
+            if c.mp_reference == "iteration" and reference is not None:
+                reference = x.copy()
+            if change < c.convergence_tolerance:
+                break
+        if not icp_only and c.use_shape and c.weight_shape > 0 and info["shape_inliers"] == 0:
+            flags.append("no_shape_inliers")
+        return x, info
+
+    def step(self, frame: LidarFrame) -> FrameEstimate:
+        """Estimate the object's state in ``frame`` (the frame after the previous call)."""
+        if not self._started:
+            raise RuntimeError("Tracker.step called before Tracker.start")
+        t0 = time.perf_counter()
+        c = self.config
+        self.steps += 1
+        flags: list[str] = []
+        prev = self.box
+        first = self.steps == 1
+        if first:
+            self._first_shape = self.shape.points.copy()
+        prior = self.prior.delta.copy()
+        search_scale = c.first_search_scale if first else c.search_scale
+        reach_box = _box_moved(prev, prior)
+        local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale) + 0.5)
+        flags += point_flags
+        x = prior.copy()
+        info: dict = {"crop": 0}
+        if len(local) == 0 or not points_in_box(local, reach_box, search_scale).any():
+            flags += ["no_points", "prior_only"]
+        else:
+            target = _Target(local)
+            if first:
+                x, info = self._estimate(target, x, c.first_search_scale, c.first_icp_iterations, True, None, flags)
+                reference = x.copy()
+            else:
+                reference = prior
+            x, info = self._estimate(target, x, c.search_scale, c.outer_iterations, False, reference, flags)
+            if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
+                flags.append("prior_only")
+                if first:
+                    x = np.zeros(4)
+                else:
+                    x = prior.copy()
+        if not np.isfinite(x).all():
+            flags.append("prior_only")
+            x = prior.copy()
+        x[3] = wrap_angle(x[3])
+        box = _box_moved(prev, x)
+        quality = self._quality(local, box)
+        obj_world = self._finish_frame(frame, box, local, keyframe=c.shape_update and self.steps % c.keyframe_interval == 0)
+        if 0 < len(obj_world) < c.min_points:
+            flags.append("low_points")
+        self.prior.update(x)
+        self.box = box
+        return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
+                             (time.perf_counter() - t0) * 1e3, obj_world)
+
+    def _quality(self, local: np.ndarray, box: Box) -> float:
+        """Share of the frame's object points within 0.2 m of the shape placed at ``box``, damped when sparse."""
+        obj = to_object_frame(local[points_in_box(local, box, 1.0)], box)
+        if len(obj) == 0 or len(self.shape) == 0:
+            return 0.0
+        if self._shape_nn is None or self._shape_nn_size != len(self.shape):
+            self._shape_nn = NearestNeighbors(self.shape.points)
+            self._shape_nn_size = len(self.shape)
+        dist, _ = self._shape_nn.query(obj)
+        explained = float((dist <= 0.2).mean())
+        return float(np.clip(explained * min(1.0, len(obj) / 20.0), 0.0, 1.0))
+
+
+def track(source: FrameSource, init_box: Box, start: int = 0, end: int | None = None,
+          config: TrackerConfig | None = None, progress=None) -> TrackResult:
+    """Track from ``init_box`` (world frame, at frame ``start``) through frame ``end`` (inclusive, default: last).
+
+    ``progress``: optional callable(iterable) -> iterable (e.g. tqdm) wrapping the frame loop.
+    """
+    config = config or TrackerConfig()
+    n = len(source)
+    end = n - 1 if end is None else end
+    if not 0 <= start < n or not start <= end < n:
+        raise IndexError(f"frames {start}..{end} are outside 0..{n - 1}")
+    tracker = Tracker(config)
+    previous_pose = None
+    if config.deskew and start > 0:
+        prev = source.lidar_frame(start - 1)
+        previous_pose = (int(prev.timestamp_ns), np.asarray(prev.world_from_ego, dtype=np.float64))
+    estimates = [tracker.start(source.lidar_frame(start), init_box, previous_pose)]
+    frames = range(start + 1, end + 1)
+    for k in (progress(frames) if progress else frames):
+        estimates.append(tracker.step(source.lidar_frame(k)))
+    return TrackResult(estimates, init_box.size, tracker.shape_points(), config)

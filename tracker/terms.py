@@ -1,0 +1,93 @@
+"""The four terms of the SOTracker loss as residual blocks with analytic Jacobians.
+
+Parameters x = [dx, dy, dz, dtheta]: rotate by dtheta about the vertical axis through ``pivot`` (the
+previous box centre), then translate by (dx, dy, dz) — the paper's Eq. (3). Every term is a sum of
+squares ``weight * sum(r**2)``; point terms are means over their pairs (weight / |A|).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ResidualBlock", "apply_motion", "point_pair_block", "motion_consistency_block", "motion_prior_block"]
+
+
+@dataclass(frozen=True)
+class ResidualBlock:
+    """residuals (m,), jacobian (m, 4), weight: the block contributes weight * sum(residuals**2)."""
+
+    name: str
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    weight: float
+
+    @property
+    def loss(self) -> float:
+        return float(self.weight * (self.residuals @ self.residuals))
+
+
+def apply_motion(x: np.ndarray, points: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """Points moved by x = [dx, dy, dz, dtheta] (rotation about z through ``pivot``, then translation)."""
+    c, s = np.cos(x[3]), np.sin(x[3])
+    a = points - pivot
+    out = np.empty_like(a)
+    out[:, 0] = c * a[:, 0] - s * a[:, 1] + pivot[0] + x[0]
+    out[:, 1] = s * a[:, 0] + c * a[:, 1] + pivot[1] + x[1]
+    out[:, 2] = points[:, 2] + x[2]
+    return out
+
+
+def point_pair_block(name: str, x: np.ndarray, source: np.ndarray, target: np.ndarray, pivot: np.ndarray,
+                     weight: float, normals: np.ndarray | None = None, point_weight: float = 0.1) -> ResidualBlock:
+    """Mean squared distance between moved ``source`` points and their paired ``target`` points.
+
+    With ``normals`` (unit target normals; zero rows = undefined), each pair contributes its
+    point-to-plane distance squared plus ``point_weight`` times its point-to-point distance squared
+    (pairs without a normal: the point-to-point distance alone).
+    """
+    n = len(source)
+    c, s = np.cos(x[3]), np.sin(x[3])
+    a = source - pivot
+    moved = apply_motion(x, source, pivot)
+    e = moved - target
+    jac = np.zeros((n, 3, 4))
+    jac[:, 0, 0] = 1.0
+    jac[:, 1, 1] = 1.0
+    jac[:, 2, 2] = 1.0
+    jac[:, 0, 3] = -s * a[:, 0] - c * a[:, 1]
+    jac[:, 1, 3] = c * a[:, 0] - s * a[:, 1]
+    if normals is None:
+        return ResidualBlock(name, e.reshape(-1), jac.reshape(-1, 4), weight / max(n, 1))
+    has = np.any(normals != 0.0, axis=1)
+    scale = np.where(has, np.sqrt(point_weight), 1.0)
+    r_plane = (normals * e).sum(axis=1)
+    j_plane = np.einsum("ni,nij->nj", normals, jac)
+    r = np.concatenate([r_plane, (e * scale[:, None]).reshape(-1)])
+    j = np.concatenate([j_plane, (jac * scale[:, None, None]).reshape(-1, 4)])
+    return ResidualBlock(name, r, j, weight / max(n, 1))
+
+
+def motion_consistency_block(x: np.ndarray, previous_heading: float, weight: float,
+                             symmetric: bool = True) -> ResidualBlock:
+    """The motion direction agrees with the heading: r = |v| cos(mean heading) - dx (and the sin/dy part).
+
+    The mean heading is (theta_{k-1} + theta_k) / 2 = previous_heading + dtheta / 2.
+    """
+    dx, dy = float(x[0]), float(x[1])
+    speed = float(np.hypot(dx, dy))
+    mean_heading = previous_heading + 0.5 * float(x[3])
+    c, s = np.cos(mean_heading), np.sin(mean_heading)
+    ux, uy = (dx / speed, dy / speed) if speed > 1e-9 else (0.0, 0.0)
+    rows = [speed * c - dx]
+    jac = [[ux * c - 1.0, uy * c, 0.0, -0.5 * speed * s]]
+    if symmetric:
+        rows.append(speed * s - dy)
+        jac.append([ux * s, uy * s - 1.0, 0.0, 0.5 * speed * c])
+    return ResidualBlock("mc", np.array(rows), np.array(jac), weight)
+
+
+def motion_prior_block(x: np.ndarray, reference: np.ndarray, weight: float) -> ResidualBlock:
+    """||x - reference||^2: stay close to the predicted motion."""
+    return ResidualBlock("mp", np.asarray(x, dtype=np.float64) - reference, np.eye(4), weight)
