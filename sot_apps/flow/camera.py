@@ -17,7 +17,7 @@ import numpy as np
 
 from ..io.sequence import Camera
 
-__all__ = ["CameraModel", "project", "pixel_rays", "grid_pixels"]
+__all__ = ["CameraModel", "project", "pixel_rays", "grid_pixels", "apply_transform"]
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,14 @@ class CameraModel:
     @property
     def has_distortion(self) -> bool:
         return bool(np.any(self.distortion != 0.0))
+
+
+def apply_transform(target_from_source: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 points mapped by a 4x4 transform (cv2.transform: ~10x faster than ``p @ R.T``)."""
+    p = np.ascontiguousarray(points, dtype=np.float64).reshape(1, -1, 3)
+    if p.shape[1] == 0:
+        return np.zeros((0, 3))
+    return cv2.transform(p, np.ascontiguousarray(target_from_source[:3], dtype=np.float64)).reshape(-1, 3)
 
 
 def _coefficients(distortion: np.ndarray) -> np.ndarray:

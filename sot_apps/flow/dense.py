@@ -18,7 +18,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .camera import CameraModel, grid_pixels, pixel_rays, project
+from .camera import CameraModel, apply_transform, grid_pixels, pixel_rays, project
 from .occlusion import depth_map, lookup_depth
 from .raycast import MultiMeshScene
 from .scene import FlowObject, ObjectPairStats, PairFlow, PairSetup, image_roi, project_vertices
@@ -47,18 +47,23 @@ _DEFAULT_CACHE = RayCache()
 
 
 def _ray_pixels(footprints: list[tuple[tuple[int, int, int, int], np.ndarray | None]], model: CameraModel) -> np.ndarray:
-    """Pixels to cast: each object's projected silhouette (convex hull of its projected vertices,
-    grown by 2 px) or, with lens distortion or vertices behind the camera, its bounding box."""
-    mask = np.zeros((model.height, model.width), dtype=np.uint8)
+    """Pixels to cast (unique, (M, 2) u, v): each object's projected silhouette (convex hull of its
+    projected vertices, grown by 2 px) or, with lens distortion or vertices behind the camera, its
+    bounding box. Work stays inside each object's box, never over the whole image."""
+    flat_parts = []
     for (x0, y0, x1, y1), uv in footprints:
         if uv is None or model.has_distortion or np.isnan(uv).any():
-            mask[y0:y1, x0:x1] = 1
-            continue
-        hull = cv2.convexHull(np.round(uv * 16).astype(np.int32))
-        cv2.fillConvexPoly(mask, hull, 1, lineType=cv2.LINE_8, shift=4)
-    mask = cv2.dilate(mask, np.ones((5, 5), np.uint8))
-    vs, us = np.nonzero(mask)
-    return np.stack([us, vs], axis=1)
+            vs, us = np.mgrid[y0:y1, x0:x1]
+        else:
+            mask = np.zeros((y1 - y0, x1 - x0), dtype=np.uint8)
+            hull = cv2.convexHull(np.round((uv - [x0, y0]) * 16).astype(np.int32))
+            cv2.fillConvexPoly(mask, hull, 1, lineType=cv2.LINE_8, shift=4)
+            mask = cv2.dilate(mask, np.ones((5, 5), np.uint8))
+            vs, us = np.nonzero(mask)
+            vs, us = vs + y0, us + x0
+        flat_parts.append((vs.ravel().astype(np.int64) * model.width + us.ravel()))
+    flat = flat_parts[0] if len(flat_parts) == 1 else np.unique(np.concatenate(flat_parts))
+    return np.stack([flat % model.width, flat // model.width], axis=1)
 
 
 def _in_image(uv: np.ndarray, model: CameraModel) -> np.ndarray:
@@ -138,7 +143,7 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
                      hidden_k=int(hidden.sum()), mean_flow=0.0, mean_flow_noc=0.0, has_flow=False)
         if obj.world_from_object_k1 is not None and len(pix):
             motion = setup.motion(obj)
-            points_k1 = points_k @ motion[:3, :3].T + motion[:3, 3]
+            points_k1 = apply_transform(motion, points_k)
             uv1, z1 = project(points_k1, model)
             flow = uv1 - pix
             good = np.isfinite(flow).all(axis=1)

@@ -20,11 +20,19 @@ __all__ = ["encode_kitti_flow", "decode_kitti_flow", "write_kitti_flow", "read_k
 
 def encode_kitti_flow(flow: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """(H, W, 3) uint16 array in cv2 (BGR) order: [valid, v, u]."""
-    flow = np.asarray(flow, dtype=np.float64)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(flow).all(axis=-1)
-    scaled = np.clip(np.rint(np.nan_to_num(flow) * 64.0 + 2.0 ** 15), 0, 65535).astype(np.uint16)
-    scaled[~valid] = 2 ** 15
-    return np.dstack([valid.astype(np.uint16), scaled[..., 1], scaled[..., 0]])
+    flow = np.asarray(flow)
+    valid = np.asarray(valid, dtype=bool)
+    out = np.zeros(flow.shape[:2] + (3,), dtype=np.uint16)
+    out[..., 1:] = 2 ** 15
+    values = flow[valid].astype(np.float64)
+    finite = np.isfinite(values).all(axis=1)
+    vs, us = np.nonzero(valid)
+    vs, us, values = vs[finite], us[finite], values[finite]
+    scaled = np.clip(np.rint(values * 64.0 + 2.0 ** 15), 0, 65535).astype(np.uint16)
+    out[vs, us, 0] = 1
+    out[vs, us, 1] = scaled[:, 1]
+    out[vs, us, 2] = scaled[:, 0]
+    return out
 
 
 def decode_kitti_flow(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,7 @@ class Mesh:
     faces: np.ndarray
 
     def transformed(self, target_from_source: np.ndarray) -> "Mesh":
-        v = self.vertices @ target_from_source[:3, :3].T + target_from_source[:3, 3]
+        v = self.vertices @ np.ascontiguousarray(target_from_source[:3, :3].T) + target_from_source[:3, 3]
         return Mesh(v, self.faces)
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .camera import CameraModel, project
+from .camera import CameraModel, apply_transform, project
 
 __all__ = ["ProjectedPoints", "project_lidar", "depth_map", "lookup_depth", "NO_DEPTH"]
 
@@ -38,7 +38,7 @@ def project_lidar(points_world: np.ndarray, camera_from_world: np.ndarray, model
                   min_depth: float = 0.5) -> ProjectedPoints:
     """Project world points into the image; keeps those in front of the camera and inside the image."""
     pts = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
-    cam = pts @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+    cam = apply_transform(camera_from_world, pts)
     front = cam[:, 2] > min_depth
     uv, depth = project(cam[front], model)
     inside = (uv[:, 0] > -0.5) & (uv[:, 0] < model.width - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < model.height - 0.5)

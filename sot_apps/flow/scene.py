@@ -8,7 +8,7 @@ import numpy as np
 
 from tracker.geometry import invert_transform
 
-from .camera import CameraModel, project
+from .camera import CameraModel, apply_transform, project
 from .meshing import Mesh
 from .occlusion import ProjectedPoints
 
@@ -33,7 +33,7 @@ class FlowObject:
 
     def bottom_z(self, world_from_object: np.ndarray) -> float:
         """World height of the mesh's lowest vertex."""
-        return float((self.mesh.vertices @ world_from_object[:3, :3].T + world_from_object[:3, 3])[:, 2].min())
+        return float(apply_transform(world_from_object, self.mesh.vertices)[:, 2].min())
 
 
 @dataclass(frozen=True)
@@ -135,7 +135,7 @@ def image_roi(uv: np.ndarray, model: CameraModel, margin: int = 2) -> tuple[int,
 
 
 def project_vertices(mesh: Mesh, camera_from_object: np.ndarray, model: CameraModel) -> np.ndarray:
-    cam = mesh.vertices @ camera_from_object[:3, :3].T + camera_from_object[:3, 3]
+    cam = apply_transform(camera_from_object, mesh.vertices)
     uv, z = project(cam, model)
     uv[z <= 0.05] = np.nan
     return uv

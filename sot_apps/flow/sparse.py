@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .camera import CameraModel, project
+from .camera import CameraModel, apply_transform, project
 from .occlusion import NO_DEPTH, ProjectedPoints, depth_map, lookup_depth
 from .scene import FlowObject, ObjectPairStats, PairFlow, PairSetup
 
@@ -69,7 +69,7 @@ def sparse_flow(setup: PairSetup, objects: list[FlowObject]) -> PairFlow:
             if pose is None:
                 continue
             m = camera_from_world @ pose
-            parts.append(o.points @ m[:3, :3].T + m[:3, 3])
+            parts.append(apply_transform(m, o.points))
             owners.append(np.full(len(o.points), pos))
         if not parts:
             return np.zeros((0, 3)), np.zeros(0, int)
@@ -99,7 +99,7 @@ def sparse_flow(setup: PairSetup, objects: list[FlowObject]) -> PairFlow:
                      hidden_k=int(hidden.sum()), mean_flow=0.0, mean_flow_noc=0.0, has_flow=False)
         if obj.world_from_object_k1 is not None and len(pix):
             motion = setup.motion(obj)
-            p1 = p0 @ motion[:3, :3].T + motion[:3, 3]
+            p1 = apply_transform(motion, p0)
             uv1, z1 = project(p1, model)
             flow = uv1 - uv0
             good = np.isfinite(flow).all(axis=1)

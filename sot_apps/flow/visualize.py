@@ -21,13 +21,20 @@ def color_wheel() -> np.ndarray:
 
 
 def flow_to_color(flow: np.ndarray, valid: np.ndarray | None = None, max_flow: float | None = None) -> np.ndarray:
-    """(H, W, 3) uint8 RGB: hue = direction, saturation = magnitude / ``max_flow``; invalid pixels black."""
-    flow = np.nan_to_num(np.asarray(flow, dtype=np.float64))
+    """(H, W, 3) uint8 RGB: hue = direction, saturation = magnitude / ``max_flow``; invalid pixels black.
+
+    Only valid pixels are computed (object masks are a small part of an image).
+    """
+    flow = np.asarray(flow)
     valid = np.ones(flow.shape[:2], bool) if valid is None else np.asarray(valid, bool)
-    u, v = flow[..., 0], flow[..., 1]
+    out = np.zeros(flow.shape[:2] + (3,), np.uint8)
+    if not valid.any():
+        return out
+    f = np.nan_to_num(flow[valid].astype(np.float64))
+    u, v = f[:, 0], f[:, 1]
     rad = np.hypot(u, v)
     if max_flow is None:
-        max_flow = float(rad[valid].max()) if valid.any() else 1.0
+        max_flow = float(rad.max())
     max_flow = max(max_flow, 1e-6)
     u, v, rad = u / max_flow, v / max_flow, rad / max_flow
     wheel = color_wheel().astype(np.float64) / 255.0
@@ -36,12 +43,11 @@ def flow_to_color(flow: np.ndarray, valid: np.ndarray | None = None, max_flow: f
     fk = (angle + 1.0) / 2.0 * (ncols - 1)
     k0 = np.floor(fk).astype(int)
     k1 = (k0 + 1) % ncols
-    f = (fk - k0)[..., None]
-    col = (1 - f) * wheel[k0] + f * wheel[k1]
-    small = (rad <= 1)[..., None]
-    col = np.where(small, 1 - rad[..., None] * (1 - col), col * 0.75)
-    out = np.floor(255 * col).astype(np.uint8)
-    out[~valid] = 0
+    frac = (fk - k0)[:, None]
+    col = (1 - frac) * wheel[k0] + frac * wheel[k1]
+    small = (rad <= 1)[:, None]
+    col = np.where(small, 1 - rad[:, None] * (1 - col), col * 0.75)
+    out[valid] = np.floor(255 * col).astype(np.uint8)
     return out
 
 
