@@ -71,6 +71,13 @@ class DoneMarker:
                                "finished_unix": time.time(), **(extra or {})})
         return checksums
 
+    def record(self) -> dict:
+        """The marker's JSON (empty when missing or unreadable)."""
+        try:
+            return dict(json.loads(self.path.read_text()))
+        except (OSError, json.JSONDecodeError, ValueError):
+            return {}
+
     def outputs(self) -> dict[str, str]:
         try:
             return dict(json.loads(self.path.read_text()).get("outputs", {}))

@@ -1,0 +1,188 @@
+"""From a :class:`PipelineConfig` to the list of objects to track (one tracking task each).
+
+Object rules (docs/pipeline.md):
+
+- ``annotations``: the listed ``track_ids`` (unique prefixes), or every annotated VEHICLE whose box moves
+  (``sot_apps.summary.motion_of``; ``moving_only: false`` takes parked ones too), in id order. Each is
+  tracked from its first to its last annotated frame inside the sequence's ``frames`` range, starting
+  from its annotated box.
+- ``detections``: every box of the seed frame (``frame``, default the file's first frame) with
+  ``score >= min_score`` (a box without a score counts as 1), highest score first, starts a track that
+  runs to the end of the range. Ids are the box ``id`` or ``det<frame>_<index>``.
+- ``boxes``: each explicit box starts a track at its ``frame`` and runs to ``end_frame`` (default: the
+  end of the range).
+
+``max_objects`` keeps the first N after ordering; ``stages.track.max_frames`` caps every track's length.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from tracker.geometry import Box
+
+from ..errors import InputError
+from ..io import open_sequence
+from ..io.sequence import Sequence
+from .config import ObjectSource, PipelineConfig, SequenceConfig
+
+__all__ = ["ObjectPlan", "SequencePlan", "Plan", "make_plan", "open_cached", "safe_name"]
+
+
+def safe_name(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(text)).strip("_")[:100] or "unnamed"
+
+
+@functools.lru_cache(maxsize=4)
+def open_cached(path: str, format: str | None = None) -> Sequence:
+    """A sequence opened once per process (tasks running in one worker share it)."""
+    return open_sequence(path, format=format)
+
+
+@dataclass(frozen=True)
+class ObjectPlan:
+    sequence: str            # output name of the sequence
+    sequence_path: str
+    format: str | None
+    object_id: str
+    label: str | None
+    start: int
+    end: int
+    init_box: Box
+
+    @property
+    def key(self) -> str:
+        return f"{self.sequence}/{self.object_id}"
+
+    def to_json(self) -> dict:
+        b = self.init_box
+        return {"sequence": self.sequence, "object_id": self.object_id, "label": self.label, "start": self.start,
+                "end": self.end, "init_box": [b.x, b.y, b.z, b.heading, b.length, b.width, b.height]}
+
+
+@dataclass(frozen=True)
+class SequencePlan:
+    name: str
+    path: str
+    format: str | None
+    id: str
+    frames: tuple[int, int]
+    cameras: tuple[str, ...]
+    objects: tuple[ObjectPlan, ...]
+
+
+@dataclass(frozen=True)
+class Plan:
+    sequences: tuple[SequencePlan, ...]
+
+    @property
+    def objects(self) -> list[ObjectPlan]:
+        return [o for s in self.sequences for o in s.objects]
+
+
+def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int) -> list[tuple[str, str | None, int, int, Box]]:
+    from ..summary import is_vehicle, motion_of
+
+    tracks = seq.tracks()
+    if not tracks:
+        raise InputError(seq.root, "objects from annotations: the sequence has no annotations")
+    if src.track_ids is not None:
+        ids = [seq.resolve_track_id(t) for t in src.track_ids]
+    else:
+        ids = []
+        for tid in sorted(tracks):
+            t = tracks[tid]
+            if not is_vehicle(t.label):
+                continue
+            if src.moving_only and not motion_of(t, seq.timestamps_ns)[0]:
+                continue
+            ids.append(tid)
+    out = []
+    for tid in ids:
+        t = tracks[tid]
+        frames = [k for k in t.frames if first <= k <= last]
+        if len(frames) < 2:
+            continue
+        out.append((tid, t.label, frames[0], frames[-1], t.box_at(frames[0])))
+    return out
+
+
+def _detection_objects(seq: Sequence, src: ObjectSource, first: int, last: int) -> list[tuple[str, str | None, int, int, Box]]:
+    from ..schemas import load_json_validated
+
+    doc = load_json_validated(Path(src.path), "detections")
+    frames = sorted(doc["frames"], key=lambda f: f["frame"])
+    frames = [f for f in frames if first <= f["frame"] <= last]
+    if not frames:
+        raise InputError(src.path, f"no detections in frames {first}..{last}")
+    seed = frames[0] if src.frame is None else next((f for f in frames if f["frame"] == src.frame), None)
+    if seed is None:
+        raise InputError(src.path, f"no detections listed for seed frame {src.frame}")
+    k = int(seed["frame"])
+    if k >= last:
+        raise InputError(src.path, f"seed frame {k} leaves nothing to track (last frame {last})")
+    ranked = sorted(enumerate(seed["boxes"]), key=lambda ib: (-float(ib[1].get("score", 1.0)), ib[0]))
+    out = []
+    for i, b in ranked:
+        if float(b.get("score", 1.0)) < src.min_score:
+            continue
+        box = Box(*(float(b[f]) for f in ("x", "y", "z", "heading", "length", "width", "height")))
+        out.append((b.get("id") or f"det{k:04d}_{i:02d}", b.get("label"), k, last, box))
+    return out
+
+
+def _box_objects(src: ObjectSource, first: int, last: int, root) -> list[tuple[str, str | None, int, int, Box]]:
+    out = []
+    for b in src.boxes:
+        k = int(b["frame"])
+        end = min(int(b.get("end_frame", last)), last)
+        if not first <= k < end:
+            raise InputError(root, f"object {b['id']!r}: frame {k} must lie in {first}..{last - 1} and before end_frame")
+        box = Box(*(float(b["box"][f]) for f in ("x", "y", "z", "heading", "length", "width", "height")))
+        out.append((str(b["id"]), b.get("label"), k, end, box))
+    return out
+
+
+def plan_sequence(cfg: SequenceConfig, max_frames: int | None = None) -> SequencePlan:
+    seq = open_cached(cfg.path, cfg.format)
+    n = len(seq.frames)
+    first, last = cfg.frames if cfg.frames is not None else (0, n - 1)
+    if not 0 <= first < last <= n - 1:
+        raise InputError(cfg.path, f"frames [{first}, {last}] outside 0..{n - 1} (need first < last)")
+    name = cfg.name or safe_name(seq.id)
+    src = cfg.objects
+    if src.kind == "annotations":
+        found = _annotation_objects(seq, src, first, last)
+    elif src.kind == "detections":
+        found = _detection_objects(seq, src, first, last)
+    else:
+        found = _box_objects(src, first, last, cfg.path)
+    if src.max_objects is not None:
+        found = found[: src.max_objects]
+    objects, seen = [], set()
+    for object_id, label, start, end, box in found:
+        if max_frames is not None:
+            end = min(end, start + max_frames)
+        oid = safe_name(object_id)
+        if oid in seen:
+            raise InputError(cfg.path, f"object id {object_id!r} appears twice")
+        seen.add(oid)
+        objects.append(ObjectPlan(name, cfg.path, cfg.format, oid, label, start, end, box))
+    return SequencePlan(name, cfg.path, cfg.format, seq.id, (first, last), tuple(sorted(seq.cameras)), tuple(objects))
+
+
+def make_plan(config: PipelineConfig) -> Plan:
+    plans = [plan_sequence(s, config.stages.track.max_frames) for s in config.sequences]
+    names = [p.name for p in plans]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError(None, f"two sequences are both named {dup[0]!r}; give each a unique 'name'")
+    return Plan(tuple(plans))
+
+
+def plan_json(plan: Plan) -> str:
+    return json.dumps([o.to_json() for o in plan.objects], sort_keys=True)

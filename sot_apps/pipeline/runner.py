@@ -1,0 +1,256 @@
+"""``run_pipeline``: plan, then run the stages in three batches through one executor.
+
+1. tracking, one task per object (parallel over workers);
+2. bank entries, motion export and flow, one task per sequence (flow: per sequence and camera);
+   then the bank index is written;
+3. simulated scans, one task per (bank entry, range).
+
+A unit whose completion marker is valid is skipped (resume after a crash or Ctrl-C). A failed unit is
+recorded in ``OUT/failures.json`` with its stage, sequence and object, and the run goes on; the units
+that depend only on finished work still run. ``OUT/manifest.json`` records the config, versions, and
+per unit its status, time and output checksums.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from ..io.atomic import write_json
+from .config import PipelineConfig
+from .executors import ExecutorSpec, Task, TaskOutcome, run_tasks
+from .manifest import DoneMarker, config_digest, write_manifest
+from .plan import Plan, make_plan, safe_name
+from . import stages as st
+
+__all__ = ["UnitRecord", "PipelineResult", "run_pipeline"]
+
+
+@dataclass
+class UnitRecord:
+    stage: str
+    key: str                 # e.g. "track/seq/object", "flow/seq/front_camera"
+    sequence: str | None
+    object: str | None
+    status: str              # "done" (ran now), "cached" (finished before), "failed", "skipped"
+    seconds: float = 0.0
+    error: str | None = None
+    result: dict | None = None
+    outputs: dict[str, str] = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        out = {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+        out["seconds"] = round(self.seconds, 3)
+        return out
+
+
+@dataclass
+class PipelineResult:
+    out: Path
+    plan: Plan
+    units: list[UnitRecord]
+    seconds: float
+    manifest: Path
+    failures: Path
+    stage_seconds: dict[str, float] = field(default_factory=dict)
+
+    def by_stage(self, stage: str) -> list[UnitRecord]:
+        return [u for u in self.units if u.stage == stage]
+
+    @property
+    def failed(self) -> list[UnitRecord]:
+        return [u for u in self.units if u.status == "failed"]
+
+    def ran(self, stage: str) -> list[UnitRecord]:
+        return [u for u in self.by_stage(stage) if u.status == "done"]
+
+    def tracked_frames(self) -> int:
+        return sum(int((u.result or {}).get("tracked_frames", 0)) for u in self.ran("track"))
+
+    def summary(self) -> str:
+        lines = [f"{'stage':8s} {'done':>5s} {'cached':>6s} {'failed':>6s} {'skipped':>7s} {'seconds':>8s}"]
+        for stage in ("track", "bank", "motion", "flow", "scans"):
+            units = self.by_stage(stage)
+            if not units:
+                continue
+            count = {s: sum(u.status == s for u in units) for s in ("done", "cached", "failed", "skipped")}
+            lines.append(f"{stage:8s} {count['done']:5d} {count['cached']:6d} {count['failed']:6d} {count['skipped']:7d} "
+                         f"{self.stage_seconds.get(stage, 0.0):8.1f}")
+        return "\n".join(lines)
+
+
+@dataclass
+class _Unit:
+    stage: str
+    key: str
+    sequence: str | None
+    object: str | None
+    digest: str
+    task: Task | None          # None when the marker says it is finished
+
+
+def _marker(out: Path, key: str) -> DoneMarker:
+    return DoneMarker(out, key)
+
+
+def _make_unit(out: Path, stage: str, key: str, sequence: str | None, obj: str | None, digest_doc: dict,
+               fn: Callable, kwargs: dict) -> _Unit:
+    digest = config_digest(digest_doc)
+    if _marker(out, key).is_done(digest):
+        return _Unit(stage, key, sequence, obj, digest, None)
+    return _Unit(stage, key, sequence, obj, digest, Task(key, fn, kwargs={**kwargs, "digest": digest}))
+
+
+def _run_units(units: list[_Unit], out: Path, spec: ExecutorSpec, desc: str, progress: bool) -> list[UnitRecord]:
+    todo = [u for u in units if u.task is not None]
+    outcomes: dict[str, TaskOutcome] = {o.key: o for o in run_tasks([u.task for u in todo], spec, desc, progress)}
+    records = []
+    for u in units:
+        if u.task is None:
+            marker = _marker(out, u.key).record()
+            extra = {k: v for k, v in marker.items() if k not in ("name", "config", "outputs", "finished_unix")}
+            records.append(UnitRecord(u.stage, u.key, u.sequence, u.object, "cached", result=extra or None,
+                                      outputs=marker.get("outputs", {})))
+            continue
+        o = outcomes[u.key]
+        if o.ok:
+            records.append(UnitRecord(u.stage, u.key, u.sequence, u.object, "done", o.seconds, result=o.result,
+                                      outputs=_marker(out, u.key).outputs()))
+        else:
+            records.append(UnitRecord(u.stage, u.key, u.sequence, u.object, "failed", o.seconds, error=o.error))
+    return records
+
+
+def _track_checksums(out: Path, sequence: str, objects: list[str]) -> dict[str, dict[str, str]]:
+    return {o: _marker(out, f"track/{sequence}/{o}").outputs() for o in objects}
+
+
+def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec(), progress: bool = True,
+                 plan: Plan | None = None) -> PipelineResult:
+    """Run every enabled stage of ``config``; returns what ran, was cached or failed (see module doc)."""
+    started = time.time()
+    t0 = time.perf_counter()
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    plan = plan or make_plan(config)
+    stages = config.stages
+    records: list[UnitRecord] = []
+    stage_seconds: dict[str, float] = {}
+
+    # ---- 1. tracking (per object)
+    finished: dict[str, list[str]] = {s.name: [] for s in plan.sequences}
+    if stages.track.enabled:
+        track_stage = dataclasses.asdict(stages.track)
+        units = [_make_unit(out, "track", f"track/{o.key}", o.sequence, o.object_id,
+                            {"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage},
+                            st.track_object, {"out": str(out), "plan": o, "stage": track_stage})
+                 for o in plan.objects]
+        start = time.perf_counter()
+        track_records = _run_units(units, out, executor, "track", progress)
+        stage_seconds["track"] = time.perf_counter() - start
+        records += track_records
+        for r in track_records:
+            if r.status in ("done", "cached"):
+                finished[r.sequence].append(r.object)
+    else:   # later stages use tracks a previous run finished
+        for o in plan.objects:
+            if (st.track_dir(out, o.sequence, o.object_id) / "track.json").is_file():
+                finished[o.sequence].append(o.object_id)
+
+    # ---- 2. bank entries, motion, flow (per sequence / camera)
+    units, skipped = [], []
+    for s in plan.sequences:
+        objs = finished[s.name]
+        checks = _track_checksums(out, s.name, objs)
+        if not objs:
+            for stage in ("bank", "motion", "flow"):
+                if getattr(stages, stage).enabled:
+                    skipped.append(UnitRecord(stage, f"{stage}/{s.name}", s.name, None, "skipped",
+                                              error="no object of this sequence was tracked"))
+            continue
+        if stages.bank.enabled:
+            stage_doc = dataclasses.asdict(stages.bank)
+            units.append(_make_unit(out, "bank", f"bank/{s.name}", s.name, None, {"tracks": checks, "stage": stage_doc},
+                                    st.bank_sequence, {"out": str(out), "sequence": s.name, "object_ids": objs,
+                                                       "stage": stage_doc}))
+        if stages.motion.enabled:
+            stage_doc = dataclasses.asdict(stages.motion)
+            units.append(_make_unit(out, "motion", f"motion/{s.name}", s.name, None,
+                                    {"tracks": checks, "stage": stage_doc, "seq": s.path},
+                                    st.motion_sequence, {"out": str(out), "sequence": s.name, "path": s.path,
+                                                         "format": s.format, "object_ids": objs, "stage": stage_doc}))
+        if stages.flow.enabled:
+            stage_doc = dataclasses.asdict(stages.flow)
+            wanted = s.cameras if stages.flow.cameras is None else [c for c in stages.flow.cameras if c in s.cameras]
+            if not wanted:
+                skipped.append(UnitRecord("flow", f"flow/{s.name}", s.name, None, "skipped",
+                                          error="the sequence has no (selected) camera"))
+            for camera in wanted:
+                units.append(_make_unit(out, "flow", f"flow/{s.name}/{camera}", s.name, None,
+                                        {"tracks": checks, "stage": stage_doc, "seq": s.path, "camera": camera},
+                                        st.flow_camera, {"out": str(out), "sequence": s.name, "path": s.path,
+                                                         "format": s.format, "camera": camera, "object_ids": objs,
+                                                         "stage": stage_doc}))
+    start = time.perf_counter()
+    batch = _run_units(units, out, executor, "bank/motion/flow", progress)
+    elapsed = time.perf_counter() - start
+    for stage in ("bank", "motion", "flow"):
+        stage_seconds[stage] = sum(r.seconds for r in batch if r.stage == stage) if len(units) > 1 else elapsed
+    records += batch + skipped
+
+    # ---- bank index (written here, from every sequence's entries)
+    bank_entries: list[dict] = []
+    if stages.bank.enabled:
+        from ..lidar_sim.bank import Bank, BankEntry, write_bank_index
+
+        for r in batch:
+            if r.stage == "bank" and r.status in ("done", "cached") and r.result:
+                bank_entries += r.result.get("entries", [])
+        if bank_entries:
+            bank = Bank(out / "bank", [BankEntry.from_json(e) for e in bank_entries])
+            write_bank_index(bank)
+
+    # ---- 3. simulated scans (per bank entry and range)
+    if stages.scans.enabled:
+        from ..lidar_sim.bank import read_bank
+
+        scan_stage = stages.scans
+        bank = read_bank(out / "bank", must_exist=False)
+        entries = sorted(bank.entries, key=lambda e: (-e.quality, e.id))[: scan_stage.max_entries]
+        units = []
+        for e in entries:
+            mesh_sum = _sha_or_none(out / "bank" / e.mesh)
+            for r in scan_stage.ranges_m:
+                name = st.scene_name(e.id, float(r))
+                units.append(_make_unit(out, "scans", f"scans/{name}", None, e.id,
+                                        {"mesh": mesh_sum, "range": r, "stage": dataclasses.asdict(scan_stage)},
+                                        st.simulate_scene, {"out": str(out), "entry_id": e.id, "range_m": float(r),
+                                                            "headings_deg": list(scan_stage.headings_deg),
+                                                            "sensor": scan_stage.sensor}))
+        if not entries:
+            records.append(UnitRecord("scans", "scans", None, None, "skipped", error="the bank has no entries"))
+        start = time.perf_counter()
+        records += _run_units(units, out, executor, "scans", progress)
+        stage_seconds["scans"] = time.perf_counter() - start
+
+    failures = [{"stage": r.stage, "key": r.key, "sequence": r.sequence, "object": r.object, "error": r.error}
+                for r in records if r.status == "failed"]
+    failures_path = out / "failures.json"
+    write_json(failures_path, {"failures": failures})
+    stage_docs = [{"stage": r.stage, **r.to_json()} for r in records]
+    manifest = write_manifest(out, {**config.to_json(), "executor": executor.describe(),
+                                    "objects": [o.to_json() for o in plan.objects]}, stage_docs, started)
+    return PipelineResult(out, plan, records, time.perf_counter() - t0, manifest, failures_path, stage_seconds)
+
+
+def _sha_or_none(path: Path) -> str | None:
+    from .manifest import sha256_file
+
+    return sha256_file(path) if path.is_file() else None
+
+
+def default_name(path: str) -> str:
+    return safe_name(Path(path).name)

@@ -1,0 +1,199 @@
+"""The units of work of each stage, as top-level (picklable) functions run by the executors.
+
+Every unit writes its outputs through the atomic writers, then its completion marker (``OUT/.done``)
+listing the outputs' sha256 checksums; a unit whose marker is valid is skipped on a rerun.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .manifest import DoneMarker
+from .plan import ObjectPlan, open_cached
+
+__all__ = ["TrackingFailed", "track_object", "bank_sequence", "motion_sequence", "flow_camera", "simulate_scene",
+           "track_dir", "scene_name"]
+
+
+class TrackingFailed(RuntimeError):
+    """The object could not be tracked (e.g. no LiDAR points in its initial box)."""
+
+
+def track_dir(out: str | Path, sequence: str, object_id: str) -> Path:
+    return Path(out) / sequence / "tracks" / object_id
+
+
+def _files_under(directory: Path) -> list[Path]:
+    return sorted(p for p in directory.rglob("*") if p.is_file())
+
+
+# ---------------------------------------------------------------------------------------------- track
+
+def track_object(out: str, plan: ObjectPlan, stage: dict, digest: str) -> dict:
+    """Track one object and write ``OUT/<seq>/tracks/<object>/{track.json, shape.ply}``."""
+    from tracker.config import get_preset
+    from tracker.sotracker import track
+
+    from ..io.tracks import FrameRecord, Size, TrackFile, write_track
+
+    seq = open_cached(plan.sequence_path, plan.format)
+    config = get_preset(stage.get("preset", "full"), **dict(stage.get("overrides") or {}))
+    start = time.perf_counter()
+    result = track(seq, plan.init_box, plan.start, plan.end, config)
+    seconds = time.perf_counter() - start
+    first = result.estimates[0]
+    min_points = int(stage.get("min_init_points", 5))
+    if first.num_points < min_points:
+        raise TrackingFailed(f"{plan.key}: {first.num_points} LiDAR points in the initial box at frame {plan.start} "
+                             f"(need at least {min_points}); nothing to track")
+    later = result.estimates[1:]
+    if later and all("no_points" in e.flags for e in later):
+        raise TrackingFailed(f"{plan.key}: lost after the start frame (no points in any later frame)")
+    records = [FrameRecord(frame=e.frame, timestamp_ns=int(seq.frames[e.frame].timestamp_ns), state=e.state,
+                           num_points=int(e.num_points), quality=float(np.clip(e.quality, 0.0, 1.0)),
+                           flags=list(e.flags)) for e in result.estimates]
+    size = result.size
+    doc = TrackFile(sequence=seq.id, object_id=plan.object_id, size=Size(*(float(v) for v in size)),
+                    start_frame=plan.start, end_frame=plan.end, init_box=plan.init_box, config=config.to_dict(),
+                    frames=records, label=plan.label)
+    directory = track_dir(out, plan.sequence, plan.object_id)
+    # Per-frame time_ms is left out (it differs run to run): pipeline outputs are reproducible byte for byte;
+    # the unit's total time is in the manifest.
+    write_track(directory, doc, result.shape)
+    DoneMarker(Path(out), f"track/{plan.key}").mark(digest, [directory / "track.json", directory / "shape.ply"],
+                                                    extra={"frames": len(records)})
+    return {"sequence": plan.sequence, "object": plan.object_id, "frames": len(records),
+            "tracked_frames": len(records) - 1, "seconds": round(seconds, 3),
+            "mean_quality": round(float(np.mean([r.quality for r in records])), 4),
+            "shape_points": int(len(result.shape))}
+
+
+# ----------------------------------------------------------------------------------------------- bank
+
+def bank_sequence(out: str, sequence: str, object_ids: list[str], stage: dict, digest: str) -> dict:
+    """Bank entries (surfel meshes) from one sequence's tracked shapes; the index is written by the runner."""
+    from ..io.tracks import read_track
+    from ..lidar_sim.bank import entry_from_points
+
+    bank_root = Path(out) / "bank"
+    entries, skipped, outputs = [], [], []
+    for object_id in object_ids:
+        directory = track_dir(out, sequence, object_id)
+        track, shape = read_track(directory)
+        quality = float(np.mean([r.quality for r in track.frames])) if track.frames else 0.0
+        if len(shape) < int(stage.get("min_points", 30)) or quality < float(stage.get("min_quality", 0.0)):
+            skipped.append({"object": object_id, "shape_points": int(len(shape)), "quality": round(quality, 4)})
+            continue
+        size = (track.size.length, track.size.width, track.size.height)
+        source = {"kind": "track", "sequence": track.sequence, "object_id": object_id,
+                  "track": str(Path(sequence) / "tracks" / object_id)}
+        entry = entry_from_points(bank_root, f"{sequence}__{object_id}", shape, source, quality, label=track.label,
+                                  mirror=bool(stage.get("mirror", False)), size=size)
+        entry.build_seconds = None   # keep index.json reproducible
+        entries.append(entry.to_json())
+        outputs += [bank_root / entry.mesh, bank_root / entry.points]
+    DoneMarker(Path(out), f"bank/{sequence}").mark(digest, outputs, extra={"entries": entries, "skipped": skipped})
+    return {"sequence": sequence, "entries": entries, "skipped": skipped}
+
+
+# --------------------------------------------------------------------------------------------- motion
+
+def motion_sequence(out: str, sequence: str, path: str, format: str | None, object_ids: list[str], stage: dict,
+                    digest: str) -> dict:
+    """``OUT/<seq>/motion.mcap`` (+ ``motion.parquet``, ``motion.npz``) from the sequence's tracks."""
+    from ..motion_export.export import export_motion
+    from ..motion_export.sources import tracks_from_dirs
+
+    seq = open_cached(path, format)
+    root = Path(out) / sequence
+    dirs = [track_dir(out, sequence, o) for o in object_ids]
+    tracks = tracks_from_dirs(dirs, seq)
+    for t in tracks:   # relative sources keep the MCAP independent of where OUT lives
+        t.source = str(Path(t.source).relative_to(Path(out)))
+    outputs = {"mcap": root / "motion.mcap"}
+    if stage.get("parquet", True):
+        outputs["parquet"] = root / "motion.parquet"
+    if stage.get("npz", True):
+        outputs["npz"] = root / "motion.npz"
+    result = export_motion(seq, tracks, outputs["mcap"], parquet=outputs.get("parquet"), npz=outputs.get("npz"),
+                           with_points=bool(stage.get("with_points", False)), progress=False)
+    DoneMarker(Path(out), f"motion/{sequence}").mark(digest, list(outputs.values()))
+    return {"sequence": sequence, "objects": len(tracks), "messages": result.mcap.messages if result.mcap else 0,
+            "outputs": {k: str(v.relative_to(Path(out))) for k, v in outputs.items()}}
+
+
+# ----------------------------------------------------------------------------------------------- flow
+
+def flow_camera(out: str, sequence: str, path: str, format: str | None, camera: str, object_ids: list[str],
+                stage: dict, digest: str) -> dict:
+    """Optical flow of one camera's image pairs: ``OUT/<seq>/flow/<camera>/...`` (see docs/flow.md)."""
+    from ..flow.annotate import FlowOptions, annotate_camera
+    from ..flow.objects import objects_from_tracks
+
+    seq = open_cached(path, format)
+    flow_root = Path(out) / sequence / "flow"
+    cam_root = flow_root / camera
+    objects = objects_from_tracks([track_dir(out, sequence, o) for o in object_ids])
+    objects = [dataclasses.replace(o, source=f"track:{sequence}/tracks/{o.object_id}") for o in objects]
+    stats_path = cam_root / "stats.json"
+    if stats_path.is_file():   # a previous run with another set of objects: its pairs are stale
+        try:
+            previous = [i["object_id"] for i in json.loads(stats_path.read_text()).get("instances", [])]
+        except (OSError, json.JSONDecodeError):
+            previous = None
+        if previous != [o.object_id for o in objects]:
+            shutil.rmtree(cam_root)
+    last = len(seq.cameras[camera].frames) - 1
+    max_pairs = stage.get("max_pairs")
+    pairs = (0, last if max_pairs is None else min(last, int(max_pairs)))
+    options = FlowOptions(mode=stage.get("mode", "dense"), use_lidar=bool(stage.get("use_lidar", True)))
+    doc = annotate_camera(seq, camera, objects, flow_root, pairs=pairs, options=options, progress=False,
+                          source="pipeline tracks")
+    outputs = _files_under(cam_root)
+    DoneMarker(Path(out), f"flow/{sequence}/{camera}").mark(digest, outputs)
+    return {"sequence": sequence, "camera": camera, "pairs": len(doc["pairs"]), "objects": len(objects)}
+
+
+# ---------------------------------------------------------------------------------------------- scans
+
+def scene_name(entry_id: str, range_m: float) -> str:
+    return f"{entry_id}__r{range_m:g}m"
+
+
+def simulate_scene(out: str, entry_id: str, range_m: float, headings_deg: list[float], sensor: str,
+                   digest: str) -> dict:
+    """One bank vehicle placed ``len(headings)`` times at ``range_m`` (evenly spread azimuths, one heading each)
+    and ray cast: ``OUT/scans/<entry>__r<range>m/`` (scan.npz, boxes.json, labels_kitti.txt, preview.png, scene.json)."""
+    from ..lidar_sim.bank import read_bank
+    from ..lidar_sim.noise import Realism
+    from ..lidar_sim.scene import SceneObject, SceneSpec
+    from ..lidar_sim.sensors import load_sensor
+    from ..lidar_sim.simulate import run_simulation
+
+    bank = read_bank(Path(out) / "bank")
+    entry = bank.get(entry_id)
+    n = len(headings_deg)
+    objects = []
+    for i, heading in enumerate(headings_deg):
+        azimuth = 2.0 * math.pi * i / n + math.radians(20.0)
+        objects.append(SceneObject(entry.id, round(range_m * math.cos(azimuth), 4), round(range_m * math.sin(azimuth), 4),
+                                   None, math.radians(float(heading)), entry.label))
+    sensor_model = load_sensor(sensor)
+    spec = SceneSpec(sensor_model, -1.8, objects, Realism(motion_distortion=False, seed=0))
+    directory = Path(out) / "scans" / scene_name(entry_id, range_m)
+    outputs = run_simulation(spec, bank, directory, preview_extent=max(25.0, range_m * 1.25))
+    counts = [int((outputs.result.scan.instance == i).sum()) for i in range(len(objects))]
+    if not any(counts):
+        raise InputError(directory, f"no simulated points hit {entry_id} at {range_m:g} m")
+    DoneMarker(Path(out), f"scans/{scene_name(entry_id, range_m)}").mark(digest, outputs.files,
+                                                                         extra={"counts": counts})
+    return {"scene": scene_name(entry_id, range_m), "entry": entry_id, "range_m": range_m,
+            "headings_deg": list(headings_deg), "points": counts}
