@@ -40,7 +40,8 @@ from ..schemas import load_json_validated, validate
 from .meshing import SurfelParams, surfel_mesh
 
 __all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
-           "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points"]
+           "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points",
+           "track_points_by_frame"]
 
 GROUND_CLEARANCE = 0.15
 
@@ -161,10 +162,10 @@ def _states_at(track_times_ns: np.ndarray, boxes: list[Box], t_ns: np.ndarray) -
     return np.stack([np.interp(t, times, states[:, i]) for i in range(4)], axis=1)
 
 
-def aggregate_tracks_points(seq: Sequence, track_ids: list[str], exclude_frames: Iterable[int] = (),
-                            ground_clearance: float = GROUND_CLEARANCE, progress: bool = False
-                            ) -> dict[str, tuple[np.ndarray, list[int]]]:
-    """Object-frame points of annotated tracks, aggregated over their frames (each sweep read once).
+def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: Iterable[int] = (),
+                          ground_clearance: float = GROUND_CLEARANCE, progress: bool = False
+                          ) -> dict[str, dict[int, np.ndarray]]:
+    """Per track and frame, the object-frame points of the track's box (each sweep read once).
 
     Each point is put into the object frame of the box AT ITS CAPTURE TIME (boxes interpolated between
     annotated frames with the sweep's per-point time offsets), which undoes the rolling-scan smear of
@@ -183,8 +184,7 @@ def aggregate_tracks_points(seq: Sequence, track_ids: list[str], exclude_frames:
         for k in tracks[tid].frames:
             if k not in excluded:
                 by_frame.setdefault(k, []).append(tid)
-    parts: dict[str, list[np.ndarray]] = {tid: [] for tid in track_ids}
-    used: dict[str, list[int]] = {tid: [] for tid in track_ids}
+    out: dict[str, dict[int, np.ndarray]] = {tid: {} for tid in track_ids}
     for k in tqdm(sorted(by_frame), desc="aggregating", unit="frame", disable=not progress, leave=False):
         pts_world = seq.points_world(k)
         offsets = seq.sweep(k).time_offset_ns
@@ -202,9 +202,17 @@ def aggregate_tracks_points(seq: Sequence, track_ids: list[str], exclude_frames:
             half = box.size / 2.0 * 1.02
             inside = (np.abs(local) <= half).all(axis=1) & (local[:, 2] > -box.height / 2 + ground_clearance)
             if inside.any():
-                parts[tid].append(local[inside])
-                used[tid].append(k)
-    return {tid: (np.vstack(parts[tid]) if parts[tid] else np.zeros((0, 3)), used[tid]) for tid in track_ids}
+                out[tid][k] = local[inside]
+    return out
+
+
+def aggregate_tracks_points(seq: Sequence, track_ids: list[str], exclude_frames: Iterable[int] = (),
+                            ground_clearance: float = GROUND_CLEARANCE, progress: bool = False
+                            ) -> dict[str, tuple[np.ndarray, list[int]]]:
+    """Object-frame points of annotated tracks aggregated over their frames (see track_points_by_frame)."""
+    per = track_points_by_frame(seq, track_ids, exclude_frames, ground_clearance, progress)
+    return {tid: (np.vstack([per[tid][k] for k in sorted(per[tid])]) if per[tid] else np.zeros((0, 3)),
+                  sorted(per[tid])) for tid in track_ids}
 
 
 def aggregate_track_points(seq: Sequence, track_id: str, exclude_frames: Iterable[int] = ()

@@ -25,7 +25,7 @@ class SurfelParams:
     radius_scale: float = 0.9
     min_radius: float = 0.03
     max_radius: float = 0.25
-    voxel: float = 0.04
+    voxel: float = 0.05
 
 
 def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:

@@ -1,0 +1,187 @@
+"""``sot-apps bench raycast``: ray-casting speed of a ``waymo_top`` sweep and bank build time per vehicle.
+
+Scene: a ground plane 1.8 m below the sensor plus 20 bank vehicles (cycled through the bank's entries, at
+random non-overlapping places 6-45 m away, seed 0). Without ``--bank`` the vehicles are procedural meshes
+(sedan/SUV/van/truck) re-meshed with surfels from 30k surface samples each, like real bank entries.
+One core (the process is pinned). Reported (best of ``--repeats``):
+
+- raw Embree: ``EmbreeScene.run(origins, dirs, output=1)`` alone;
+- ``RaycastScene.cast``: Embree plus distances/normals/ids as numpy arrays;
+- full sweep: ``simulate_scan`` with range noise, grazing drop and intensity (ray generation included);
+- Open3D ``RaycastingScene`` on the same triangles when open3d is installed (it is not a dependency);
+- bank build time per vehicle: surfel meshing of each entry's points (``--bank``) or of the samples.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+__all__ = ["register", "run_benchmark"]
+
+
+def _pin_one_core() -> str:
+    if hasattr(os, "sched_setaffinity"):
+        cpu = sorted(os.sched_getaffinity(0))[0]
+        os.sched_setaffinity(0, {cpu})
+        return f"pinned to cpu {cpu}"
+    return "not pinned"
+
+
+def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[float], list[int]]:
+    """(meshes, meshing seconds per vehicle, points per vehicle)."""
+    from ..lidar_sim.meshing import surfel_mesh
+
+    meshes, seconds, npoints = [], [], []
+    if bank_dir:
+        from ..io.ply import read_ply_points
+        from ..lidar_sim.bank import read_bank
+
+        bank = read_bank(bank_dir)
+        for entry in bank.entries:
+            if entry.points:
+                pts = read_ply_points(bank.root / entry.points)
+                start = time.perf_counter()
+                surfel_mesh(pts, mirror=bool(entry.mirrored))
+                seconds.append(time.perf_counter() - start)
+                npoints.append(len(pts))
+        base = [bank.mesh(e.id) for e in bank.entries]
+        meshes = [base[i % len(base)] for i in range(count)]
+        return meshes, seconds, npoints
+    import trimesh
+
+    from ..lidar_sim.vehicles import random_vehicle
+
+    rng = np.random.default_rng(0)
+    for _ in range(count):
+        v = random_vehicle(rng)
+        samples, _ = trimesh.sample.sample_surface(trimesh.Trimesh(v.vertices, v.faces, process=False), 30_000, seed=1)
+        start = time.perf_counter()
+        vertices, faces, _ = surfel_mesh(samples)
+        seconds.append(time.perf_counter() - start)
+        npoints.append(len(samples))
+        meshes.append((vertices, faces))
+    return meshes, seconds, npoints
+
+
+def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int = 5, sensor_name: str = "waymo_top") -> dict:
+    from ..lidar_sim.noise import Realism
+    from ..lidar_sim.raycast import RaycastScene
+    from ..lidar_sim.scan import SimObject, Trajectory, simulate_scan
+    from ..lidar_sim.sensors import load_sensor
+
+    pinned = _pin_one_core()
+    sensor = load_sensor(sensor_name)
+    meshes, mesh_seconds, mesh_points = _vehicle_meshes(bank_dir, vehicles)
+    rng = np.random.default_rng(0)
+    objects = [SimObject(np.array([[-300, -300, -1.8], [300, -300, -1.8], [300, 300, -1.8], [-300, 300, -1.8]], float),
+                         np.array([[0, 1, 2], [0, 2, 3]]), Trajectory.static(0, 0, 0, 0), -1, 0.2, "ground")]
+    placed: list[tuple[float, float]] = []
+    for i, (v, f) in enumerate(meshes):
+        height = float(v[:, 2].max() - v[:, 2].min())
+        for _ in range(500):
+            r, az = rng.uniform(6, 45), rng.uniform(-np.pi, np.pi)
+            x, y = r * np.cos(az), r * np.sin(az)
+            if all(np.hypot(x - px, y - py) > 6.0 for px, py in placed):
+                break
+        placed.append((x, y))
+        objects.append(SimObject(v, f, Trajectory.static(x, y, -1.8 + height / 2 - float(v[:, 2].min() + height / 2),
+                                                         float(rng.uniform(-np.pi, np.pi))), i, 0.5))
+    from ..lidar_sim.scan import build_static_scene
+
+    start = time.perf_counter()
+    scene: RaycastScene = build_static_scene(objects)
+    build_s = time.perf_counter() - start
+    dirs, _, _ = sensor.ray_grid()
+    dirs32 = np.ascontiguousarray(dirs, dtype=np.float32)
+    origins32 = np.zeros_like(dirs32)
+    n = len(dirs32)
+
+    def best(fn) -> tuple[float, object]:
+        times, out = [], None
+        for _ in range(repeats):
+            t = time.perf_counter()
+            out = fn()
+            times.append(time.perf_counter() - t)
+        return min(times), out
+
+    raw_s, raw = best(lambda: scene._scene.run(origins32, dirs32, output=1))
+    cast_s, hits = best(lambda: scene.cast(origins32, dirs32))
+    ideal = Realism(range_noise=True, drop_grazing=True, intensity=True, motion_distortion=False)
+    sweep_s, scan = best(lambda: simulate_scan(sensor, objects, np.eye(4), realism=ideal, static_scene=scene))
+    result = {"sensor": sensor.name, "rays": n, "vehicles": len(meshes), "triangles": scene.num_triangles,
+              "hit_fraction": float(hits.hit.mean()), "vehicle_hits": int((hits.geom_id >= 1).sum()),
+              "scene_build_s": build_s, "raw_embree_s": raw_s, "cast_s": cast_s, "sweep_s": sweep_s,
+              "raw_rays_per_s": n / raw_s, "cast_rays_per_s": n / cast_s, "sweep_rays_per_s": n / sweep_s,
+              "points": len(scan), "pinned": pinned, "bank": bank_dir or "procedural (surfel re-meshed)",
+              "mesh_seconds_per_vehicle": float(np.mean(mesh_seconds)) if mesh_seconds else None,
+              "mesh_points_per_vehicle": float(np.mean(mesh_points)) if mesh_points else None,
+              "repeats": repeats}
+    try:
+        import open3d as o3d  # noqa: F401 - optional peer
+    except ImportError:
+        result["open3d"] = "not installed"
+    else:
+        result["open3d"] = _open3d_time(scene, origins32, dirs32, repeats)
+    return result
+
+
+def _open3d_time(scene, origins, dirs, repeats: int) -> float:
+    import open3d as o3d
+
+    rs = o3d.t.geometry.RaycastingScene()
+    for v, f in zip(scene.vertices, scene.faces):
+        rs.add_triangles(o3d.core.Tensor(v), o3d.core.Tensor(f.astype(np.uint32)))
+    rays = o3d.core.Tensor(np.hstack([origins, dirs]).astype(np.float32))
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        rs.cast_rays(rays, nthreads=1)
+        times.append(time.perf_counter() - t)
+    return len(dirs) / min(times)
+
+
+def format_table(r: dict) -> str:
+    lines = [f"raycast benchmark: {r['sensor']} sweep, {r['rays']:,} rays, ground + {r['vehicles']} vehicles "
+             f"({r['triangles']:,} triangles; {r['bank']}), one core ({r['pinned']}), best of {r['repeats']}",
+             "",
+             "| stage | time (ms) | rays/s |", "|---|---:|---:|",
+             f"| Embree run (raw, output=1) | {r['raw_embree_s'] * 1e3:.1f} | {r['raw_rays_per_s'] / 1e6:.2f} M |",
+             f"| RaycastScene.cast (numpy hits) | {r['cast_s'] * 1e3:.1f} | {r['cast_rays_per_s'] / 1e6:.2f} M |",
+             f"| full sweep (noise, drop, intensity) | {r['sweep_s'] * 1e3:.1f} | {r['sweep_rays_per_s'] / 1e6:.2f} M |"]
+    o3d = r["open3d"]
+    lines.append(f"| Open3D RaycastingScene | - | {o3d / 1e6:.2f} M |" if isinstance(o3d, float)
+                 else f"| Open3D RaycastingScene | - | {o3d} |")
+    lines += ["", f"scene build {r['scene_build_s'] * 1e3:.1f} ms; {r['points']:,} returns "
+                  f"({r['hit_fraction'] * 100:.1f}% of rays hit, {r['vehicle_hits']:,} on vehicles)"]
+    if r["mesh_seconds_per_vehicle"] is not None:
+        lines.append(f"bank build (surfel meshing) per vehicle: {r['mesh_seconds_per_vehicle'] * 1e3:.0f} ms "
+                     f"for {r['mesh_points_per_vehicle']:,.0f} points on average")
+    return "\n".join(lines)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--bank", metavar="BANK", help="vehicle bank (default: procedural vehicles)")
+    parser.add_argument("--vehicles", type=int, default=20, help="vehicles in the scene (default 20)")
+    parser.add_argument("--repeats", type=int, default=5, help="repeats, best is reported (default 5)")
+    parser.add_argument("--sensor", default="waymo_top", help="sensor preset or JSON (default waymo_top)")
+    parser.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..io.atomic import write_json
+
+    result = run_benchmark(args.bank, args.vehicles, args.repeats, args.sensor)
+    print(format_table(result))
+    if args.json:
+        write_json(args.json, result)
+    return 0
+
+
+def register(registry) -> None:
+    """Hook for the ``sot-apps bench`` registry (sot_apps/cli/bench.py)."""
+    registry.add("raycast", help="Embree rays/s for a waymo_top sweep of ground + 20 bank vehicles; bank build time",
+                 add_arguments=add_arguments, run=run)
