@@ -165,3 +165,30 @@ def test_bank_from_annotations_recovers_the_true_shape(tmp_path):
     ys = np.sort(vertices[:, 1])
     assert ys[0] == pytest.approx(-ys[-1], abs=0.05)
     assert main(["bank", "list", str(bank_root)]) == 0
+
+
+def test_bank_build_from_tracker_output_dir(tmp_path, capsys):
+    from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
+    from tracker.geometry import State
+
+    from sot_apps.lidar_sim.vehicles import make_vehicle
+
+    vehicle = make_vehicle("suv", 4.6, 1.9, 1.7)
+    shape, _ = trimesh.sample.sample_surface(trimesh.Trimesh(vehicle.vertices, vehicle.faces, process=False), 5000, seed=0)
+    shape = shape[shape[:, 1] > -0.2]          # one side seen only
+    frames = [FrameRecord(k, 1_000_000_000 + k * 100_000_000, State(10.0 + k, 2.0, 0.85, 0.0), 300, q, [])
+              for k, q in enumerate((0.9, 0.7))]
+    track = TrackFile("seqA", "car7", Size(4.6, 1.9, 1.7), 0, 1, Box(10.0, 2.0, 0.85, 0.0, 4.6, 1.9, 1.7),
+                      {"preset": "default"}, frames, label="Car")
+    write_track(tmp_path / "track_car7", track, shape)
+    bank_dir = tmp_path / "bank"
+    assert main(["bank", "build", str(tmp_path / "track_car7"), "--mirror", "--out", str(bank_dir)]) == 0
+    bank = read_bank(bank_dir)
+    (entry,) = bank.entries
+    assert entry.id == "seqA_car7" and entry.source["kind"] == "track" and entry.mirrored
+    assert entry.quality == pytest.approx(0.8) and entry.size == {"length": 4.6, "width": 1.9, "height": 1.7}
+    vertices, _ = bank.mesh(entry.id)
+    assert vertices[:, 1].min() < -0.8       # mirror completion filled the unseen side
+    out = capsys.readouterr().out
+    assert main(["bank", "list", str(bank_dir)]) == 0
+    assert "seqA_car7" in capsys.readouterr().out and "seqA_car7" in out
