@@ -188,8 +188,10 @@ def _ground_params(config: TrackerConfig) -> GroundParams:
 
 
 def prepare_tracks(sequence: LidarSequence, track_ids: Iterable[str], source: CachedSource,
-                   config: EvalConfig = EvalConfig(), end_frame: int | None = None) -> list[TrackSpec]:
-    """TrackSpecs for ``track_ids`` (unique prefixes allowed); spans are cut at ``end_frame``."""
+                   config: EvalConfig = EvalConfig(), end_frame: int | None = None,
+                   with_shape: bool = True) -> list[TrackSpec]:
+    """TrackSpecs for ``track_ids`` (unique prefixes allowed); spans are cut at ``end_frame``. Without
+    ``with_shape`` no pseudo-ground-truth shape is built (Shape is then NaN)."""
     tracks = sequence.tracks()
     ground = _ground_params(TrackerConfig())
     specs = []
@@ -206,7 +208,8 @@ def prepare_tracks(sequence: LidarSequence, track_ids: Iterable[str], source: Ca
         boxes = tuple(trk.box_at(k) for k in frames)
         n = min(config.difficulty_frames, len(frames))
         mean_pts = mean_points_in_boxes(source, frames[:n], boxes[:n])
-        pgt = pseudo_gt_shape(source, frames, boxes, ground, config.shape_voxel_m, config.pgt_ground_margin_m)
+        pgt = (pseudo_gt_shape(source, frames, boxes, ground, config.shape_voxel_m, config.pgt_ground_margin_m)
+               if with_shape else np.zeros((0, 3)))
         specs.append(TrackSpec(tid, trk.label, frames, boxes, mean_pts,
                                difficulty(mean_pts, config.difficulty_thresholds), pgt))
     return specs
@@ -306,10 +309,13 @@ def _summarise_row(name: str, preset: str, offline: bool, seeds: Sequence[int], 
                       "mean_points_first10": spec.mean_points_first10, "flags": flags})
         by_track[spec.track_id] = entry
     ms = np.concatenate([r.frame_ms for r in records]) if records else np.zeros(0)
-    timing = {"median_ms": float(np.median(ms)) if ms.size else float("nan"),
-              "mean_ms": float(ms.mean()) if ms.size else float("nan"),
-              "p90_ms": float(np.percentile(ms, 90)) if ms.size else float("nan"),
-              "frames": int(ms.size)}
+    later = np.concatenate([r.frame_ms[1:] for r in records]) if records else np.zeros(0)
+    first = np.array([r.frame_ms[0] for r in records if r.frame_ms.size])
+    stat = lambda a, f: float(f(a)) if a.size else float("nan")  # noqa: E731
+    timing = {"median_ms": stat(ms, np.median), "mean_ms": stat(ms, np.mean),
+              "p90_ms": stat(ms, lambda a: np.percentile(a, 90)), "frames": int(ms.size),
+              "median_ms_excl_frame1": stat(later, np.median), "mean_ms_excl_frame1": stat(later, np.mean),
+              "frame1_mean_ms": stat(first, np.mean)}
     return ResultRow(name, preset, offline, tuple(seeds), pooled, pooled_std, by_difficulty, by_track, timing)
 
 
@@ -325,7 +331,8 @@ def _score(spec: TrackSpec, result: TrackResult, config: EvalConfig) -> Tracklet
     predicted = np.array([b.to_array() for b in result.boxes])
     truth = np.array([b.to_array() for b in spec.boxes])
     scores = score_tracklet(spec.track_id, predicted, truth, mean_points_first10=spec.mean_points_first10)
-    cd = chamfer_distance(result.shape, spec.pgt_shape, voxel=config.shape_voxel_m)
+    cd = (chamfer_distance(result.shape, spec.pgt_shape, voxel=config.shape_voxel_m) if len(spec.pgt_shape)
+          else float("nan"))
     return dataclasses.replace(scores, shape_cd=cd)
 
 
@@ -346,7 +353,7 @@ def resolve_presets(names: Sequence[str] | None) -> list[str]:
 def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, presets: Sequence[str] = ("full",),
              offline: bool = False, seeds: Sequence[int] = (0,), config: EvalConfig = EvalConfig(),
              end_frame: int | None = None, progress: Callable[[Iterable], Iterable] | None = None,
-             refine: Callable[..., TrackResult] | None = None) -> EvalReport:
+             refine: Callable[..., TrackResult] | None = None, with_shape: bool = True) -> EvalReport:
     """Evaluate ``presets`` (online, plus offline-refined rows when ``offline``) on ``track_ids``
     (default: all moving vehicle tracks). ``refine(source, result, config) -> TrackResult`` overrides the
     offline refinement (default: :func:`tracker.offline.refine_offline`)."""
@@ -354,7 +361,7 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     ids = list(track_ids) if track_ids else select_moving_vehicle_tracks(sequence, config, source)
     if not ids:
         raise InputError(sequence.root, "no track to evaluate (no moving vehicle track matches the selection)")
-    specs = prepare_tracks(sequence, ids, source, config, end_frame)
+    specs = prepare_tracks(sequence, ids, source, config, end_frame, with_shape)
     if offline and refine is None:
         from tracker.offline import refine_offline as refine
     jobs = [(p, s, spec) for p in presets for s in seeds for spec in specs]

@@ -1,0 +1,39 @@
+"""``sot-apps bench NAME ...``: benchmarks registered by the modules of ``sot_apps.bench``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..bench import discover
+from .common import add_subcommand
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    registry = discover()
+    broken = "\n".join(f"  {m}: {e}" for m, e in registry.errors.items())
+    description = ("Benchmarks that print tables (README figures quote them). Each is a module of sot_apps/bench "
+                   "with register(registry); see `sot-apps bench BENCHMARK --help`."
+                   + (f"\n\nNot available (import failed):\n{broken}" if broken else ""))
+    parser = add_subcommand(subparsers, "bench", help="speed/accuracy benchmarks that print tables",
+                            description=description,
+                            examples=["sot-apps bench tracker ../shared/data/pandaset_002",
+                                      "sot-apps bench tracker ../shared/data/pandaset_002 --preset full faithful"])
+    sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", parser_class=type(parser))
+    for bench in registry.benchmarks.values():
+        child = sub.add_parser(bench.name, help=bench.help, description=bench.description or bench.help,
+                               formatter_class=argparse.RawDescriptionHelpFormatter)
+        bench.add_arguments(child)
+        child.set_defaults(bench_run=bench.run)
+    parser.set_defaults(func=lambda args: _run(args, parser, registry.errors))
+    return parser
+
+
+def _run(args: argparse.Namespace, parser: argparse.ArgumentParser, errors: dict[str, str]) -> int:
+    run = getattr(args, "bench_run", None)
+    if run is None:
+        parser.print_help()
+        for module, error in errors.items():
+            sys.stderr.write(f"warning: benchmark module {module} failed to import: {error}\n")
+        return 2
+    return int(run(args) or 0)
