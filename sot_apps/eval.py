@@ -254,13 +254,28 @@ class EvalReport:
     tracker_configs: dict[str, dict[str, Any]]
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """JSON-ready dict (non-finite numbers become null)."""
+        return _json_safe({
             "sequence": self.sequence,
             "eval_config": self.eval_config.to_dict(),
             "tracks": [t.summary() for t in self.tracks],
             "tracker_configs": self.tracker_configs,
             "rows": [r.to_dict() for r in self.rows],
-        }
+        })
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
 
 
 _METRIC_KEYS = ("acc", "rob", "shape", "success", "precision", "centre_error")
@@ -276,6 +291,8 @@ def _mean_over_seeds(dicts: list[dict[str, float]]) -> tuple[dict[str, float], d
         vals = np.array([d[key] for d in dicts], dtype=np.float64)
         finite = vals[np.isfinite(vals)]
         mean[key] = float(finite.mean()) if finite.size else float("nan")
+        if key.startswith("n_") and finite.size:
+            mean[key] = int(round(mean[key]))
         std[key] = float(finite.std()) if finite.size else float("nan")
     return mean, std
 
