@@ -10,13 +10,14 @@ from __future__ import annotations
 import os
 import time
 import traceback
+import uuid
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
 from tqdm import tqdm
 
-__all__ = ["Task", "TaskOutcome", "ExecutorSpec", "run_tasks"]
+__all__ = ["Task", "TaskOutcome", "ExecutorSpec", "ExecutorSession", "run_tasks"]
 
 
 @dataclass(frozen=True)
@@ -83,73 +84,136 @@ def _progress(total: int, desc: str, enabled: bool) -> tqdm:
     return tqdm(total=total, desc=desc, unit="task", disable=not enabled, dynamic_ncols=True, leave=False)
 
 
-def run_tasks(tasks: Iterable[Task], spec: ExecutorSpec = ExecutorSpec(), desc: str = "tasks",
-              progress: bool = True) -> list[TaskOutcome]:
-    """Run ``tasks``; outcomes come back in the order of ``tasks``."""
-    tasks = list(tasks)
-    if not tasks:
-        return []
-    if spec.kind == "inline" or (spec.kind == "local" and spec.workers <= 1):
-        outcomes = []
-        with _progress(len(tasks), desc, progress) as bar:
-            for task in tasks:
-                outcomes.append(_call(task))
-                bar.update(1)
-        return outcomes
-    if spec.kind == "local":
-        return _run_processes(tasks, spec.workers, desc, progress)
-    if spec.kind == "dask":
-        return _run_dask(tasks, spec, desc, progress)
-    raise ValueError(f"unknown executor kind {spec.kind!r}")
+class ExecutorSession:
+    """A pool (processes or a Dask client) kept open for several batches of tasks.
 
+    ``with ExecutorSession(spec) as session: session.run(tasks, desc)``; :func:`run_tasks` is a one-batch session.
+    Starting worker processes costs seconds (each imports the toolkit), so a pipeline opens one session for
+    all its stages.
+    """
 
-def _run_processes(tasks: list[Task], workers: int, desc: str, progress: bool) -> list[TaskOutcome]:
-    import multiprocessing
+    def __init__(self, spec: ExecutorSpec = ExecutorSpec()) -> None:
+        self.spec = spec
+        self._pool: ProcessPoolExecutor | None = None
+        self._client = None
+        self._cluster = None
 
-    context = multiprocessing.get_context("spawn")
-    outcomes: dict[str, TaskOutcome] = {}
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_init) as pool:
-        pending: dict[Future, Task] = {pool.submit(_call, task): task for task in tasks}
-        with _progress(len(tasks), desc, progress) as bar:
-            while pending:
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for future in done:
-                    task = pending.pop(future)
-                    try:
-                        outcomes[task.key] = future.result()
-                    except BaseException as exc:  # noqa: BLE001 - e.g. a worker process died
-                        outcomes[task.key] = TaskOutcome(task.key, False, error=f"{type(exc).__name__}: {exc}")
+    def __enter__(self) -> "ExecutorSession":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None
+
+    def run(self, tasks: Iterable[Task], desc: str = "tasks", progress: bool = True) -> list[TaskOutcome]:
+        """Run ``tasks``; outcomes come back in the order of ``tasks``."""
+        tasks = list(tasks)
+        if not tasks:
+            return []
+        spec = self.spec
+        if spec.kind == "inline" or (spec.kind == "local" and spec.workers <= 1):
+            outcomes = []
+            with _progress(len(tasks), desc, progress) as bar:
+                for task in tasks:
+                    outcomes.append(_call(task))
                     bar.update(1)
-    return [outcomes[t.key] for t in tasks]
+            return outcomes
+        if spec.kind == "local":
+            return self._run_processes(tasks, desc, progress)
+        if spec.kind == "dask":
+            return self._run_dask(tasks, desc, progress)
+        raise ValueError(f"unknown executor kind {spec.kind!r}")
 
+    # ------------------------------------------------------------------ local processes
+    def _process_pool(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            import multiprocessing
 
-def _run_dask(tasks: list[Task], spec: ExecutorSpec, desc: str, progress: bool) -> list[TaskOutcome]:
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError as exc:  # pragma: no cover - depends on the optional extra
-        raise RuntimeError("the Dask executor needs the 'dist' extra: pip install 'sot-apps[dist]'") from exc
-    cluster = None
-    if spec.address:
-        client = Client(spec.address)
-    else:
-        cluster = LocalCluster(n_workers=max(1, spec.workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
-    try:
-        client.run(_single_threaded_env)
-        futures = client.map(_call, tasks, key=[f"{t.key}-{i}" for i, t in enumerate(tasks)], pure=False)
+            context = multiprocessing.get_context("spawn")
+            self._pool = ProcessPoolExecutor(max_workers=self.spec.workers, mp_context=context,
+                                             initializer=_worker_init)
+        return self._pool
+
+    def _run_processes(self, tasks: list[Task], desc: str, progress: bool) -> list[TaskOutcome]:
+        from concurrent.futures.process import BrokenProcessPool
+
+        outcomes: dict[int, TaskOutcome] = {}
+        pool = self._process_pool()
+        pending: dict[Future, int] = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
+        broken = False
+        try:
+            with _progress(len(tasks), desc, progress) as bar:
+                while pending:
+                    done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in done:
+                        i = pending.pop(future)
+                        try:
+                            outcomes[i] = future.result()
+                        except BrokenProcessPool as exc:
+                            broken = True
+                            outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
+                        except BaseException as exc:  # noqa: BLE001 - e.g. an unpicklable result
+                            outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
+                        bar.update(1)
+        except BaseException:
+            self.close()   # Ctrl-C: do not leave workers running
+            raise
+        if broken:   # a worker died (e.g. killed): the next batch gets a fresh pool
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+        return [outcomes[i] for i in range(len(tasks))]
+
+    # ------------------------------------------------------------------ dask
+    def _dask_client(self):
+        if self._client is None:
+            try:
+                from distributed import Client, LocalCluster
+            except ImportError as exc:  # pragma: no cover - depends on the optional extra
+                raise RuntimeError("the Dask executor needs the 'dist' extra: pip install 'sot-apps[dist]'") from exc
+            if self.spec.address:
+                self._client = Client(self.spec.address)
+            else:
+                self._cluster = LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1,
+                                             processes=True, dashboard_address=None)
+                self._client = Client(self._cluster)
+            self._client.run(_single_threaded_env)
+        return self._client
+
+    def _run_dask(self, tasks: list[Task], desc: str, progress: bool) -> list[TaskOutcome]:
+        from distributed import as_completed
+
+        client = self._dask_client()
+        futures = client.map(_call, tasks, key=[f"{t.key}-{uuid.uuid4().hex[:8]}" for t in tasks], pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
         outcomes: list[TaskOutcome | None] = [None] * len(tasks)
-        with _progress(len(tasks), desc, progress) as bar:
-            for future in as_completed(futures):
-                i = index[future.key]
-                try:
-                    outcomes[i] = future.result()
-                except BaseException as exc:  # noqa: BLE001 - a lost worker
-                    outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
-                bar.update(1)
+        try:
+            with _progress(len(tasks), desc, progress) as bar:
+                for future in as_completed(futures):
+                    i = index[future.key]
+                    try:
+                        outcomes[i] = future.result()
+                    except BaseException as exc:  # noqa: BLE001 - a lost worker
+                        outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
+                    bar.update(1)
+        except BaseException:
+            client.cancel(futures)
+            self.close()
+            raise
         return [o for o in outcomes if o is not None]
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+
+
+def run_tasks(tasks: Iterable[Task], spec: ExecutorSpec = ExecutorSpec(), desc: str = "tasks",
+              progress: bool = True) -> list[TaskOutcome]:
+    """Run ``tasks`` in a one-batch :class:`ExecutorSession`; outcomes come back in the order of ``tasks``."""
+    with ExecutorSession(spec) as session:
+        return session.run(tasks, desc, progress)

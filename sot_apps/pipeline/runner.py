@@ -21,7 +21,7 @@ from typing import Callable
 
 from ..io.atomic import write_json
 from .config import PipelineConfig
-from .executors import ExecutorSpec, Task, TaskOutcome, run_tasks
+from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
 from .manifest import DoneMarker, config_digest, write_manifest
 from .plan import Plan, make_plan, safe_name
 from . import stages as st
@@ -104,9 +104,9 @@ def _make_unit(out: Path, stage: str, key: str, sequence: str | None, obj: str |
     return _Unit(stage, key, sequence, obj, digest, Task(key, fn, kwargs={**kwargs, "digest": digest}))
 
 
-def _run_units(units: list[_Unit], out: Path, spec: ExecutorSpec, desc: str, progress: bool) -> list[UnitRecord]:
+def _run_units(units: list[_Unit], out: Path, session: ExecutorSession, desc: str, progress: bool) -> list[UnitRecord]:
     todo = [u for u in units if u.task is not None]
-    outcomes: dict[str, TaskOutcome] = {o.key: o for o in run_tasks([u.task for u in todo], spec, desc, progress)}
+    outcomes: dict[str, TaskOutcome] = {o.key: o for o in session.run([u.task for u in todo], desc, progress)}
     records = []
     for u in units:
         if u.task is None:
@@ -129,8 +129,15 @@ def _track_checksums(out: Path, sequence: str, objects: list[str]) -> dict[str, 
 
 
 def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec(), progress: bool = True,
-                 plan: Plan | None = None) -> PipelineResult:
-    """Run every enabled stage of ``config``; returns what ran, was cached or failed (see module doc)."""
+                 plan: Plan | None = None, session: ExecutorSession | None = None) -> PipelineResult:
+    """Run every enabled stage of ``config``; returns what ran, was cached or failed (see module doc).
+
+    ``session``: an open :class:`ExecutorSession` to reuse (e.g. over several runs); by default one is
+    opened for this run from ``executor``.
+    """
+    if session is None:
+        with ExecutorSession(executor) as own:
+            return run_pipeline(config, executor, progress, plan, own)
     started = time.time()
     t0 = time.perf_counter()
     out = Path(config.out)
@@ -149,7 +156,7 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
                             st.track_object, {"out": str(out), "plan": o, "stage": track_stage})
                  for o in plan.objects]
         start = time.perf_counter()
-        track_records = _run_units(units, out, executor, "track", progress)
+        track_records = _run_units(units, out, session, "track", progress)
         stage_seconds["track"] = time.perf_counter() - start
         records += track_records
         for r in track_records:
@@ -195,7 +202,7 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
                                                          "format": s.format, "camera": camera, "object_ids": objs,
                                                          "stage": stage_doc}))
     start = time.perf_counter()
-    batch = _run_units(units, out, executor, "bank/motion/flow", progress)
+    batch = _run_units(units, out, session, "bank/motion/flow", progress)
     elapsed = time.perf_counter() - start
     for stage in ("bank", "motion", "flow"):
         stage_seconds[stage] = sum(r.seconds for r in batch if r.stage == stage) if len(units) > 1 else elapsed
@@ -233,7 +240,7 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
         if not entries:
             records.append(UnitRecord("scans", "scans", None, None, "skipped", error="the bank has no entries"))
         start = time.perf_counter()
-        records += _run_units(units, out, executor, "scans", progress)
+        records += _run_units(units, out, session, "scans", progress)
         stage_seconds["scans"] = time.perf_counter() - start
 
     failures = [{"stage": r.stage, "key": r.key, "sequence": r.sequence, "object": r.object, "error": r.error}
