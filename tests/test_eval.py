@@ -1,0 +1,77 @@
+"""sot_apps.eval and the ``eval`` / ``bench`` commands."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sot_apps.cli.main import main
+from sot_apps.eval import annotated_span, select_moving_vehicle_tracks
+
+DEV_TRACKS = {"20d13d1d", "8ac00bad", "0d238564", "f0b32b02", "91aa5b5c", "71a404f3", "8febbea0", "1a46fa13",
+              "b09e1c68"}
+
+
+def test_annotated_span_is_the_first_contiguous_run():
+    assert annotated_span([3, 4, 5, 7, 8]) == (3, 5)
+    assert annotated_span([0]) == (0, 0)
+    assert annotated_span([2, 1, 0]) == (0, 2)
+
+
+def test_bench_registry_discovers_tracker():
+    from sot_apps.bench import discover
+
+    registry = discover()
+    assert "tracker" in registry.benchmarks
+    assert registry.benchmarks["tracker"].module == "sot_apps.bench.tracker"
+
+
+def test_eval_rejects_unknown_preset(pandaset_root, capsys):
+    code = main(["eval", str(pandaset_root), "--tracks", "91aa5b5c", "--preset", "nonsense"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "unknown preset 'nonsense'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_eval_rejects_unknown_track(pandaset_root, capsys):
+    code = main(["eval", str(pandaset_root), "--tracks", "zzzz"])
+    err = capsys.readouterr().err
+    assert code == 2 and "no annotated track id starts with 'zzzz'" in err
+
+
+@pytest.mark.slow
+def test_all_moving_selects_exactly_the_dev_tracks(pandaset):
+    ids = select_moving_vehicle_tracks(pandaset)
+    assert {i[:8] for i in ids} == DEV_TRACKS
+    assert len(ids) == 9
+
+
+@pytest.mark.slow
+def test_eval_cli_prints_tables_and_writes_json(pandaset_root, tmp_path, capsys):
+    out = tmp_path / "eval.json"
+    code = main(["eval", str(pandaset_root), "--tracks", "91aa5b5c,1a46fa13", "--end-frame", "10", "--offline",
+                 "--json", str(out)])
+    printed = capsys.readouterr().out
+    assert code == 0
+    for text in ("Acc", "Rob", "Shape(m)", "Success", "Prec", "CE(m)", "ms/f med", "full+offline", "91aa5b5c",
+                 "1a46fa13", "medium Acc", "hard Acc"):
+        assert text in printed
+    report = json.loads(out.read_text())
+    rows = {r["name"]: r for r in report["rows"]}
+    assert set(rows) == {"full", "full+offline"}
+    assert [t["difficulty"] for t in report["tracks"]] == ["medium", "hard"]   # 216 and 33 points
+    for row in rows.values():
+        p = row["pooled"]
+        assert p["n_frames"] == 20 and p["n_tracklets"] == 2            # frames 1..10 of two tracks
+        assert 0.0 <= p["acc"] <= 1.0 and 0.0 <= p["rob"] <= 1.0
+        assert 0.0 <= p["success"] <= 100.0 and 0.0 <= p["precision"] <= 100.0
+        assert 0.0 < p["shape"] < 1.0 and p["centre_error"] >= 0.0
+        assert row["timing"]["frames"] == 20 and row["timing"]["median_ms"] > 0
+        # the printed pooled row is the JSON's
+        line = next(ln for ln in printed.splitlines() if ln.split()[:1] == [row["name"]])
+        assert line.split()[1] == f"{100 * p['acc']:.1f}"
+    # an easy sanity bound: tracking these two cars over 10 frames from the true box works
+    assert rows["full"]["pooled"]["acc"] > 0.5
+    assert np.isfinite(report["rows"][0]["by_track"][report["tracks"][0]["track_id"]]["acc"])
