@@ -347,4 +347,4 @@ def run(args: argparse.Namespace) -> int:
 def register(registry) -> None:
     """Hook for the ``sot-apps bench`` registry (sot_apps/cli/bench.py)."""
     registry.add("motion", help="accuracy of the motion export against ground truth (centre, velocity, yaw rate)",
-                 add_arguments=add_arguments, run=run)
+                 add_arguments=add_arguments, run=run, description=__doc__)
