@@ -29,6 +29,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     fit.add_argument("--min-range", type=float, default=2.0, help="ignore points closer than this (m)")
     fit.add_argument("--min-separation", type=float, default=0.09,
                      help="minimum angle between two beams in degrees (default 0.09)")
+    fit.add_argument("--origin-z", type=float, default=0.0,
+                     help="height of the optical centre above the LiDAR frame origin (m); PandaSet's pose origin "
+                          "sits about 1.6 m below it (docs/lidar_sim.md)")
     fit.add_argument("--align", action="store_true",
                      help="first search roll, pitch and a vertical origin offset that sharpen the beams (for sweeps "
                           "not given in the optical-centre frame, e.g. PandaSet)")
@@ -55,7 +58,7 @@ def run_fit(args: argparse.Namespace) -> int:
     for k in frames:
         seq.check_index(k)
         sweep = seq.sweep(k)
-        sweeps.append(transform_points(lidar_from_ego, sweep.xyz))
+        sweeps.append(transform_points(lidar_from_ego, sweep.xyz) - [0.0, 0.0, args.origin_z])
         times.append(sweep.time_offset_ns)
     alignment = None
     if args.align:

@@ -66,7 +66,13 @@ def run(args: argparse.Namespace) -> int:
         if args.random < 1:
             raise InputError(None, "--random must be >= 1")
         ground = args.ground_z if args.ground_z is not None else (None if background is not None else -1.8)
-        spec = random_scene(bank, args.random, args.seed, load_sensor(args.sensor or "pandar64"), ground_z=ground)
+        bg_xyz = None
+        if background is not None:
+            from tracker.geometry import invert_transform, transform_points
+
+            bg_xyz = transform_points(invert_transform(background.ego_from_lidar), background.sweep(args.frame).xyz)
+        spec = random_scene(bank, args.random, args.seed, load_sensor(args.sensor or "pandar64"), ground_z=ground,
+                            background_xyz=bg_xyz)
     outputs = run_simulation(spec, bank, Path(args.out), formats, background, args.frame, args.extent)
     result = outputs.result
     print("\n".join(counts_table(result)))

@@ -33,7 +33,7 @@ def bev_image(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], extent: f
         return col, row
 
     for r in (10, 20, 30, 40, 50, 75, 100):
-        if r < extent * 1.5:
+        if r < extent * 1.5 and centre == (0.0, 0.0):
             cv2.circle(image, (size // 2, size // 2), int(r * scale), (48, 48, 48), 1, cv2.LINE_AA)
     col, row = to_px(xyz[:, 0], xyz[:, 1])
     inside = (col >= 0) & (col < size) & (row >= 0) & (row < size)
@@ -55,13 +55,46 @@ def bev_image(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], extent: f
         c0, r0 = to_px(np.array([box.x]), np.array([box.y]))
         c1, r1 = to_px(front[:1], front[1:])
         cv2.line(image, (int(c0[0]), int(r0[0])), (int(c1[0]), int(r1[0])), color, 1, cv2.LINE_AA)
-    cv2.drawMarker(image, (size // 2, size // 2), (255, 255, 255), cv2.MARKER_TRIANGLE_UP, 10, 1)
+    if centre == (0.0, 0.0):
+        cv2.drawMarker(image, (size // 2, size // 2), (255, 255, 255), cv2.MARKER_TRIANGLE_UP, 10, 1)
     return image
 
 
 def write_bev_png(path: Path, xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], extent: float = 50.0,
                   size: int = 800) -> None:
     ok, data = cv2.imencode(".png", bev_image(xyz, instance, boxes, extent, size))
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    write_bytes(path, data.tobytes())
+
+
+def object_gallery(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], panel: int = 240, half_m: float = 3.5,
+                   columns: int | None = None) -> np.ndarray:
+    """One bird's-eye panel per object (+-``half_m`` around its box, sensor axes: up = +x), with range, heading
+    and point count; panels are ordered as the boxes, ``columns`` per row (default: up to 4)."""
+    n = len(boxes)
+    columns = columns or min(4, max(1, n))
+    rows = (n + columns - 1) // columns
+    image = np.full((rows * panel, columns * panel, 3), 18, dtype=np.uint8)
+    for i, box in enumerate(boxes):
+        sub = bev_image(xyz, instance, [], extent=half_m, size=panel, centre=(float(box.x), float(box.y)))
+        # keep only this object's colour inside the panel's box outline
+        corners = box.bev_corners()
+        scale = panel / (2 * half_m)
+        pts = np.stack([panel / 2 - (corners[:, 1] - box.y) * scale, panel / 2 - (corners[:, 0] - box.x) * scale], axis=1)
+        color = tuple(int(v) for v in _PALETTE[i % len(_PALETTE)])
+        cv2.polylines(sub, [pts.round().astype(np.int32)], True, color, 1, cv2.LINE_AA)
+        count = int((instance == i).sum())
+        label = f"{np.hypot(box.x, box.y):.0f} m, {np.degrees(box.heading):.0f} deg, {count} pts"
+        cv2.putText(sub, label, (6, panel - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (230, 230, 230), 1, cv2.LINE_AA)
+        r, c = divmod(i, columns)
+        image[r * panel:(r + 1) * panel, c * panel:(c + 1) * panel] = sub
+        cv2.rectangle(image, (c * panel, r * panel), ((c + 1) * panel - 1, (r + 1) * panel - 1), (60, 60, 60), 1)
+    return image
+
+
+def write_object_gallery(path: Path, xyz: np.ndarray, instance: np.ndarray, boxes: list[Box]) -> None:
+    ok, data = cv2.imencode(".png", object_gallery(xyz, instance, boxes))
     if not ok:
         raise RuntimeError("PNG encoding failed")
     write_bytes(path, data.tobytes())

@@ -93,9 +93,27 @@ def load_scene(path: str | Path) -> SceneSpec:
     return SceneSpec(sensor, doc.get("ground_z"), objects, realism)
 
 
+def _free_spot(background_xyz: np.ndarray, x: float, y: float, heading: float, size: tuple[float, float, float]) -> bool:
+    """True when the background has ground near (x, y) and nothing standing inside the (enlarged) footprint."""
+    d = background_xyz[:, :2] - [x, y]
+    near = np.hypot(d[:, 0], d[:, 1]) < max(size[0], size[1]) / 2 + 1.5
+    if near.sum() < 5:
+        return False
+    ground = float(np.percentile(background_xyz[near, 2], 5))
+    c, s = math.cos(heading), math.sin(heading)
+    lx, ly = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    inside = (np.abs(lx) < size[0] / 2 + 0.5) & (np.abs(ly) < size[1] / 2 + 0.5)
+    standing = inside & (background_xyz[:, 2] > ground + 0.3) & (background_xyz[:, 2] < ground + size[2] + 1.0)
+    return not standing.any()
+
+
 def random_scene(bank: Bank, count: int, seed: int, sensor: Sensor, ground_z: float | None = -1.8,
-                 min_range: float = 6.0, max_range: float = 45.0) -> SceneSpec:
-    """``count`` bank vehicles at random non-overlapping places and headings around the sensor."""
+                 min_range: float = 6.0, max_range: float = 45.0, background_xyz: np.ndarray | None = None) -> SceneSpec:
+    """``count`` bank vehicles at random non-overlapping places and headings around the sensor.
+
+    With ``background_xyz`` (a real sweep, sensor frame) places are only accepted on visible free ground:
+    ground returns nearby and no return standing inside the footprint enlarged by 0.5 m.
+    """
     if not bank.entries:
         raise InputError(bank.root / "index.json", "the bank has no entries")
     rng = np.random.default_rng(seed)
@@ -104,14 +122,18 @@ def random_scene(bank: Bank, count: int, seed: int, sensor: Sensor, ground_z: fl
     for _ in range(count):
         entry = bank.entries[int(rng.integers(len(bank.entries)))]
         radius = math.hypot(entry.box_size()[0], entry.box_size()[1]) / 2
-        for _attempt in range(200):
+        for _attempt in range(500):
             r = rng.uniform(min_range, max_range)
             az = rng.uniform(-math.pi, math.pi)
+            heading = round(float(rng.uniform(-math.pi, math.pi)), 4)
             x, y = r * math.cos(az), r * math.sin(az)
-            if all(math.hypot(x - px, y - py) > radius + pr + 0.5 for px, py, pr in placed):
+            if all(math.hypot(x - px, y - py) > radius + pr + 0.5 for px, py, pr in placed) and (
+                    background_xyz is None or _free_spot(background_xyz, x, y, heading, entry.box_size())):
                 break
+        else:
+            raise InputError(bank.root, f"could not find a free place for vehicle {len(objects) + 1} of {count}")
         placed.append((x, y, radius))
-        objects.append(SceneObject(entry.id, round(x, 3), round(y, 3), None, round(float(rng.uniform(-math.pi, math.pi)), 4)))
+        objects.append(SceneObject(entry.id, round(x, 3), round(y, 3), None, heading))
     return SceneSpec(sensor, ground_z, objects, Realism(motion_distortion=False, seed=seed))
 
 
@@ -134,7 +156,7 @@ def _placed_objects(spec: SceneSpec, bank: Bank, background_xyz: np.ndarray | No
         length, width, height = entry.box_size()
         z = o.z
         if z is None:
-            z = _local_ground(background_xyz, o.x, o.y, max(length, width) / 2 + 1.0, spec.ground_z) + height / 2
+            z = _local_ground(background_xyz, o.x, o.y, max(length, width) / 2 + 1.5, spec.ground_z) + height / 2
         sims.append(SimObject(vertices, faces, Trajectory.static(o.x, o.y, z, o.heading), instance=i,
                               reflectivity=o.reflectivity, name=o.bank_id))
         boxes.append(Box(o.x, o.y, z, o.heading, length, width, height))

@@ -12,7 +12,7 @@ from tracker.geometry import invert_transform, transform_points
 from ..io.atomic import write_json
 from .bank import Bank
 from .export import write_bin, write_boxes, write_pcd, write_ply, write_scan_npz
-from .preview import write_bev_png
+from .preview import write_bev_png, write_object_gallery
 from .scene import SceneSpec, SimResult, insert_into_background, simulate_scene
 
 __all__ = ["SimulationOutputs", "run_simulation"]
@@ -26,7 +26,7 @@ class SimulationOutputs:
 
 def run_simulation(spec: SceneSpec, bank: Bank, out: Path, formats: tuple[str, ...] = (),
                    background=None, frame: int = 0, preview_extent: float = 50.0) -> SimulationOutputs:
-    """Simulate and write DIR/scan.npz, boxes.json, labels_kitti.txt, preview.png, scene.json (+ formats).
+    """Simulate and write DIR/scan.npz, boxes.json, labels_kitti.txt, preview.png, objects.png, scene.json (+ formats).
 
     ``background`` is a Sequence: its frame ``frame`` (in the LiDAR frame: ego points mapped through
     ``inv(ego_from_lidar)``) becomes the background sweep.
@@ -45,6 +45,9 @@ def run_simulation(spec: SceneSpec, bank: Bank, out: Path, formats: tuple[str, .
     counts = [int((scan.instance == i).sum()) for i in range(len(result.boxes))]
     write_boxes(out, result.boxes, result.labels, [o.bank_id for o in result.objects], counts)
     write_bev_png(out / "preview.png", scan.xyz, scan.instance, result.boxes, extent=preview_extent)
+    if result.boxes:
+        write_object_gallery(out / "objects.png", scan.xyz, scan.instance, result.boxes)
+        files.append(out / "objects.png")
     doc = spec.to_json()
     doc["sensor"] = spec.sensor.name
     if background is not None:

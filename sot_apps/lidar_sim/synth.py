@@ -24,6 +24,8 @@ Ground truth beyond the sequence (``DIR/gt/``, see docs/synth.md):
 - ``gt/labels/NNNNNN.npz``: ``instance`` (N,) int32 per point of frame k: index into ``objects`` (-1 =
   background: ground, walls, poles).
 
+``DIR/preview.png`` is a bird's-eye view of the last frame (ego frame) with the ground-truth boxes.
+
 Same arguments, same bytes: every random draw comes from ``numpy.random.default_rng(seed)``.
 """
 
@@ -352,8 +354,20 @@ def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: st
     ids = {o.id: o.trajectory.at(world.ego.times_ns) for o in world.objects}
     write_npz(out / "gt" / "trajectories.npz", times_ns=world.ego.times_ns, ego=world.ego.states, **ids)
     write_json(out / "gt" / "objects.json", _gt_document(world, camera_times))
+    _write_preview(out / "preview.png", world, scan, infos[-1])
     write_sequence(seq, out, progress=progress)
     return out
+
+
+def _write_preview(path: Path, world: World, scan: Scan, info: FrameInfo) -> None:
+    """Bird's-eye view of the last frame (ego frame) with its ground-truth boxes."""
+    from tracker.geometry import invert_transform
+
+    from .preview import write_bev_png
+
+    ego_from_world = invert_transform(info.world_from_ego)
+    boxes = [o.box_at(info.timestamp_ns).transformed(ego_from_world) for o in world.objects]
+    write_bev_png(path, scan.xyz, scan.instance, boxes, extent=40.0)
 
 
 def clean_output(out: Path) -> None:
