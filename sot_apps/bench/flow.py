@@ -143,12 +143,13 @@ def format_quality_tables(synthetic: dict | None, photometric: dict | None) -> s
                 lines.append(f"| {r['method']} | {r['epe']:.3f} | {r['fl_percent']:.2f} | {r['coverage_percent']:.1f} | {wrong} |")
             lines.append("")
     if photometric:
-        m = photometric["mean_abs_error"]
+        m, mi = photometric["mean_abs_error"], photometric["mean_abs_error_interior"]
         lines += [f"(b) PandaSet {photometric['camera']}: {photometric['pairs']} pairs, {photometric['pixels']} object "
-                  f"pixels (flow_noc), states from {photometric.get('source', '?')}; mean |I_k - warp(I_k+1)| (grey levels)", "",
-                  "| flow | photometric error |", "|---|---|"]
-        for name, value in m.items():
-            lines.append(f"| {name} | {value:.2f} |")
+                  f"pixels (flow_noc; {photometric['interior_pixels']} of them >= 5 px inside the mask), states from "
+                  f"{photometric.get('source', '?')}; mean |I_k - warp(I_k+1)| (grey levels 0-255)", "",
+                  "| flow | all object pixels | interior pixels |", "|---|---|---|"]
+        for name in m:
+            lines.append(f"| {name} | {m[name]:.2f} | {mi[name]:.2f} |")
     return "\n".join(lines)
 
 
@@ -159,11 +160,13 @@ def _quality_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--camera-size", default="960x540", metavar="WxH")
     parser.add_argument("--no-tracker", action="store_true", help="skip the tracker-states row")
+    parser.add_argument("--no-synthetic", action="store_true", help="skip (a)")
     parser.add_argument("--pandaset", metavar="SEQUENCE", help="also run (b) on this PandaSet sequence")
     parser.add_argument("--pandaset-pairs", default="0:10", metavar="A:B")
     parser.add_argument("--pandaset-ids", nargs="+", default=list(DEV_TRACKS), metavar="ID")
     parser.add_argument("--pandaset-states", choices=("tracker", "annotations"), default="tracker",
                         help="object states for (b): SOTracker run from the first GT box (default) or the GT boxes")
+    parser.add_argument("--smooth", action="store_true", help="(b): smooth the states (as sot-apps flow --smooth)")
     parser.add_argument("--json", metavar="FILE", help="also write all figures as JSON")
 
 
@@ -177,10 +180,12 @@ def _run_quality(args: argparse.Namespace) -> int:
         w, h = (int(v) for v in args.camera_size.lower().split("x"))
     except ValueError:
         raise InputError(None, f"--camera-size expects WxH, got {args.camera_size!r}") from None
-    with tempfile.TemporaryDirectory() as tmp:
-        world = Path(args.world) if args.world else Path(tmp) / "world"
-        synthetic = synthetic_quality(world, args.frames, args.vehicles, args.seed, (w, h),
-                                      with_tracker=not args.no_tracker)
+    synthetic = None
+    if not args.no_synthetic:
+        with tempfile.TemporaryDirectory() as tmp:
+            world = Path(args.world) if args.world else Path(tmp) / "world"
+            synthetic = synthetic_quality(world, args.frames, args.vehicles, args.seed, (w, h),
+                                          with_tracker=not args.no_tracker)
     photometric = None
     if args.pandaset:
         seq = open_sequence(args.pandaset)
@@ -192,6 +197,11 @@ def _run_quality(args: argparse.Namespace) -> int:
         else:
             objects = objects_from_annotations(seq, args.pandaset_ids, frames=frames)
             source = "ground-truth boxes"
+        if args.smooth:
+            from ..flow.objects import smoothed
+
+            objects = smoothed(objects, "tracks" if args.pandaset_states == "tracker" else "annotations")
+            source += ", smoothed (CTRV EKF + RTS)"
         photometric = photometric_quality(seq, "front_camera", objects, pairs)
         photometric["source"] = source
     print(format_quality_tables(synthetic, photometric))

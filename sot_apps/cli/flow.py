@@ -48,6 +48,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="dense: raycast meshes (default); sparse: project shape points with a z-buffer")
     parser.add_argument("--mesh", choices=("hull", "surfel", "auto"), default="hull",
                         help="meshing of shape points (default: convex hull, closed silhouettes)")
+    parser.add_argument("--smooth", action="store_true",
+                        help="smooth the states with the motion export's CTRV smoother before interpolating "
+                             "(removes per-frame box jitter; see docs/flow.md)")
     parser.add_argument("--no-lidar-occlusion", action="store_true", help="ignore LiDAR points as occluders")
     parser.add_argument("--dilate-px", type=int, default=7, help="min-filter size densifying LiDAR depth (default 7)")
     parser.add_argument("--no-vis", action="store_true", help="do not write vis/ pictures")
@@ -81,6 +84,10 @@ def run(args: argparse.Namespace) -> int:
         source = "tracks"
     if not objects:
         raise InputError(seq.root, "no objects to annotate")
+    if args.smooth:
+        from ..flow.objects import smoothed
+
+        objects = smoothed(objects, source)
     options = FlowOptions(mode=args.mode, occlusion=OcclusionParams(dilate_px=args.dilate_px),
                           use_lidar=not args.no_lidar_occlusion, write_vis=not args.no_vis)
     stats = annotate_camera(seq, args.camera, objects, args.out, args.pairs, options, progress=not args.quiet,
