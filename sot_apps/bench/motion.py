@@ -16,7 +16,6 @@ Invalid (flagged) frames are excluded; ``n`` counts the samples that entered eac
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Sequence as Seq

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence as Seq
 
 from .. import __version__
 from ..io.sequence import Sequence

@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from ..io.atomic import atomic_path
 from ..io.sequence import Sequence
-from ..schemas import load_schema
+from ..schemas import load_schema, validate
 from .kinematics import Kinematics
 
 __all__ = ["write_motion_mcap", "McapSummary", "object_color", "METADATA_NAME", "WORLD_FRAME", "EGO_FRAME",
@@ -115,6 +115,7 @@ class _Writer:
         self.shape = {k.object_id: channels.PointCloudChannel(f"/objects/{k.object_id}/shape", context=ctx)
                       for k in kinematics if k.shape_points is not None and len(k.shape_points) > 0}
         self.points = None
+        self.checked: set[tuple[str, bool]] = set()  # (object, valid) pairs whose message was schema-checked
         # frame index -> sample index per object
         self.index = [{int(f): i for i, f in enumerate(k.frames)} for k in kinematics]
         self.first_valid = [int(k.frames[np.flatnonzero(k.valid)[0]]) if k.valid.any() else None for k in kinematics]
@@ -139,6 +140,9 @@ class _Writer:
                 continue
             oid = k.object_id
             sample = k.sample(i)
+            if (oid, bool(k.valid[i])) not in self.checked:  # guard the contract once per object and validity
+                validate("kinematics", sample, f"/objects/{oid}/kinematics")
+                self.checked.add((oid, bool(k.valid[i])))
             self._log(self.kin_channels[oid], f"/objects/{oid}/kinematics", sample, t_ns)
             if not k.valid[i]:
                 continue
