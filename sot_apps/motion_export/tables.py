@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..io.atomic import atomic_path, write_npz, write_text
 from .kinematics import Kinematics
 
@@ -186,8 +187,11 @@ def write_parquet(path: str | Path, scenario: Scenario) -> int:
 
     Rows are sorted by track then timestep (AV2 order). Needs pyarrow.
     """
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError as exc:
+        raise InputError(path, "writing parquet needs pyarrow (pip install pyarrow)") from exc
 
     columns = _parquet_columns(scenario)
     types = {"bool": pa.bool_(), "string": pa.string(), "int64": pa.int64(), "double": pa.float64()}
