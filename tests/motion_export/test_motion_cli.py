@@ -84,3 +84,17 @@ def test_motion_export_from_track_files_marks_flagged_frames(tmp_path, pandaset_
     counts = {c.topic: summary.statistics.channel_message_counts[cid] for cid, c in summary.channels.items()}
     assert counts[f"/objects/{tid}/pose"] == 19 and counts[f"/objects/{tid}/kinematics"] == 21
     assert counts["/objects/" + tid + "/shape"] == 1
+
+
+def test_track_of_another_sequence_is_refused(tmp_path, pandaset_root, pandaset, capsys):
+    import json as _json
+
+    _write_flagged_track(tmp_path / "t", pandaset, "8ac00bad", 5, {0: ["init"]})
+    doc = _json.loads((tmp_path / "t" / "track.json").read_text())
+    doc["sequence"] = "some_other_sequence"
+    (tmp_path / "t" / "track.json").write_text(_json.dumps(doc))
+    code = main(["motion-export", str(pandaset_root), "--tracks", str(tmp_path / "t"), "--out",
+                 str(tmp_path / "m.mcap"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "some_other_sequence" in err
+    assert not (tmp_path / "m.mcap").exists()
