@@ -98,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(pairs)} pairs, {len(objects)} objects, {pixels} object pixels "
           f"({noc} non-occluded) -> {args.out}/{args.camera}", file=sys.stdout)
     for o in stats["objects"][:20]:
-        print(f"  {o['object_id'][:8]}  pairs {o['pairs']:3d}  pixels {o['pixels']:8d}  mean |flow| "
+        name = o["object_id"] if len(o["object_id"]) <= 16 else o["object_id"][:8]
+        print(f"  {name:16s}  pairs {o['pairs']:3d}  pixels {o['pixels']:8d}  mean |flow| "
               f"{o['mean_flow_px']:7.2f} px  occluded {100 * o['occluded_share']:5.1f} %")
     return 0
