@@ -5,7 +5,7 @@ random non-overlapping places 6-45 m away, seed 0). Without ``--bank`` the vehic
 (sedan/SUV/van/truck) re-meshed with surfels from 30k surface samples each, like real bank entries.
 One core (the process is pinned). Reported (best of ``--repeats``):
 
-- raw Embree: ``EmbreeScene.run(origins, dirs, output=1)`` alone;
+- raw Embree: ``EmbreeScene.run(origins, dirs, output=1)`` alone, and on ground + 20 plain boxes for reference;
 - ``RaycastScene.cast``: Embree plus distances/normals/ids as numpy arrays;
 - full sweep: ``simulate_scan`` with range noise, grazing drop and intensity (ray generation included);
 - Open3D ``RaycastingScene`` on the same triangles when open3d is installed (it is not a dependency);
@@ -109,13 +109,21 @@ def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int 
         return min(times), out
 
     raw_s, raw = best(lambda: scene._scene.run(origins32, dirs32, output=1))
+    import trimesh
+
+    boxes = RaycastScene()
+    boxes.add_mesh(objects[0].vertices, objects[0].faces)
+    cube = trimesh.creation.box(extents=[4.5, 1.9, 1.6])
+    for (x, y) in placed:
+        boxes.add_mesh(np.asarray(cube.vertices) + [x, y, -1.0], cube.faces)
+    box_s, _ = best(lambda: boxes._scene.run(origins32, dirs32, output=1))
     cast_s, hits = best(lambda: scene.cast(origins32, dirs32))
     ideal = Realism(range_noise=True, drop_grazing=True, intensity=True, motion_distortion=False)
     sweep_s, scan = best(lambda: simulate_scan(sensor, objects, np.eye(4), realism=ideal, static_scene=scene))
     result = {"sensor": sensor.name, "rays": n, "vehicles": len(meshes), "triangles": scene.num_triangles,
               "hit_fraction": float(hits.hit.mean()), "vehicle_hits": int((hits.geom_id >= 1).sum()),
               "scene_build_s": build_s, "raw_embree_s": raw_s, "cast_s": cast_s, "sweep_s": sweep_s,
-              "raw_rays_per_s": n / raw_s, "cast_rays_per_s": n / cast_s, "sweep_rays_per_s": n / sweep_s,
+              "raw_rays_per_s": n / raw_s, "boxes_s": box_s, "boxes_rays_per_s": n / box_s, "cast_rays_per_s": n / cast_s, "sweep_rays_per_s": n / sweep_s,
               "points": len(scan), "pinned": pinned, "bank": bank_dir or "procedural (surfel re-meshed)",
               "mesh_seconds_per_vehicle": float(np.mean(mesh_seconds)) if mesh_seconds else None,
               "mesh_points_per_vehicle": float(np.mean(mesh_points)) if mesh_points else None,
@@ -150,6 +158,8 @@ def format_table(r: dict) -> str:
              "",
              "| stage | time (ms) | rays/s |", "|---|---:|---:|",
              f"| Embree run (raw, output=1) | {r['raw_embree_s'] * 1e3:.1f} | {r['raw_rays_per_s'] / 1e6:.2f} M |",
+             f"| reference: Embree run, ground + 20 plain boxes (12 triangles each) | {r['boxes_s'] * 1e3:.1f} | "
+             f"{r['boxes_rays_per_s'] / 1e6:.2f} M |",
              f"| RaycastScene.cast (numpy hits) | {r['cast_s'] * 1e3:.1f} | {r['cast_rays_per_s'] / 1e6:.2f} M |",
              f"| full sweep (noise, drop, intensity) | {r['sweep_s'] * 1e3:.1f} | {r['sweep_rays_per_s'] / 1e6:.2f} M |"]
     o3d = r["open3d"]

@@ -1,6 +1,6 @@
 """Surfel meshing of aggregated object points (as LiDARsim does).
 
-Every point becomes a small disk (a ``segments``-gon fan) centred on it and oriented by the normal of a
+Every point becomes a small disk (a ``segments``-gon, triangulated as a fan of ``segments - 2`` triangles) centred on it and oriented by the normal of a
 plane fitted to its k nearest neighbours (PCA). Normals are oriented away from the object's centre.
 The disk radius follows the local point spacing: ``radius_scale`` times the mean distance to the k
 nearest neighbours, clipped to ``[min_radius, max_radius]``. Optional mirror completion reflects the
@@ -87,8 +87,9 @@ def surfel_mesh(points: np.ndarray, params: SurfelParams = SurfelParams(), mirro
     ang = 2 * np.pi * np.arange(s) / s
     rim = (pts[:, None, :] + radius[:, None, None] * (np.cos(ang)[None, :, None] * u[:, None, :]
                                                       + np.sin(ang)[None, :, None] * v[:, None, :]))
-    vertices = np.concatenate([pts[:, None, :], rim], axis=1).reshape(-1, 3)   # (N*(s+1), 3)
-    base = (np.arange(len(pts)) * (s + 1))[:, None]
-    j = np.arange(s)
-    faces = np.stack([np.broadcast_to(base, (len(pts), s)), base + 1 + j, base + 1 + (j + 1) % s], axis=-1)
+    vertices = rim.reshape(-1, 3)                                  # (N*s, 3): the disk's rim polygon
+    base = (np.arange(len(pts)) * s)[:, None]
+    j = np.arange(1, s - 1)
+    # fan from the first rim vertex: s - 2 triangles per disk (4 for a hexagon)
+    faces = np.stack([np.broadcast_to(base, (len(pts), s - 2)), base + j, base + j + 1], axis=-1)
     return vertices, faces.reshape(-1, 3).astype(np.int64), pts

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker.geometry import invert_transform, transform_points
+from tracker.geometry import invert_transform
 
 from .noise import Realism, apply_range_noise, drop_mask, incidence_cosine, lambertian_intensity
 from .raycast import RaycastScene, RayHits
@@ -58,6 +58,11 @@ class Trajectory:
         out = np.stack(cols, axis=-1)
         out[..., 3] = (out[..., 3] + np.pi) % (2 * np.pi) - np.pi
         return out
+
+
+def rotate(rotation: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N, 3) points rotated by a 3x3 matrix, without BLAS (OpenBLAS threads stall on a pinned, loaded core)."""
+    return np.einsum("ij,nj->ni", rotation, points, optimize=False)
 
 
 def state_to_matrix(states: np.ndarray) -> np.ndarray:
@@ -147,9 +152,12 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
     else:
         sensor_T_col = np.broadcast_to(np.asarray(world_from_sensor, dtype=np.float64), (sensor.columns, 4, 4))
         world_from_sensor_frame = np.asarray(world_from_sensor, dtype=np.float64)
-    rot = sensor_T_col[column, :3, :3]
-    origins = sensor_T_col[column, :3, 3]
-    dirs = np.einsum("nij,nj->ni", rot, dirs_s)
+    if isinstance(world_from_sensor, Trajectory):
+        origins = sensor_T_col[column, :3, 3]
+        dirs = np.einsum("nij,nj->ni", sensor_T_col[column, :3, :3], dirs_s)
+    else:  # a fixed sensor: one rotation for every ray
+        origins = np.broadcast_to(world_from_sensor_frame[:3, 3], dirs_s.shape)
+        dirs = rotate(world_from_sensor_frame[:3, :3], dirs_s)
 
     static_idx = [i for i, o in enumerate(objects) if o.trajectory.is_static]
     moving_idx = [i for i, o in enumerate(objects) if not o.trajectory.is_static]
@@ -195,7 +203,8 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
         intensity = np.zeros_like(measured)
     keep = np.flatnonzero(valid)
     pts_world = origins[keep] + dirs[keep] * measured[keep, None]
-    xyz = transform_points(invert_transform(world_from_sensor_frame), pts_world).astype(np.float32)
+    sensor_from_world = invert_transform(world_from_sensor_frame)
+    xyz = (rotate(sensor_from_world[:3, :3], pts_world) + sensor_from_world[:3, 3]).astype(np.float32)
     inst_of_obj = np.array([o.instance for o in objects] + [-1], dtype=np.int32)
     return Scan(xyz=xyz, instance=inst_of_obj[object_index[keep]], intensity=intensity[keep].astype(np.float32),
                 time_offset_ns=col_t[column[keep]].astype(np.int64), beam=beam[keep], column=column[keep],
@@ -208,7 +217,8 @@ def build_static_scene(objects: list[SimObject]) -> RaycastScene:
     scene = RaycastScene()
     for o in objects:
         if o.trajectory.is_static:
-            scene.add_mesh(transform_points(state_to_matrix(o.trajectory.states[0]), o.vertices), o.faces)
+            T = state_to_matrix(o.trajectory.states[0])
+            scene.add_mesh(rotate(T[:3, :3], np.asarray(o.vertices, dtype=np.float64)) + T[:3, 3], o.faces)
     return scene
 
 

@@ -22,6 +22,7 @@ Beam tables (degrees, in laser-id order) — see docs/lidar_sim.md for sources:
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import asdict, dataclass, field, replace
@@ -104,7 +105,11 @@ class Sensor:
         """Unit ray directions of a full sweep, beam-major: (B*C, 3) float64, plus beam and column indices.
 
         Ray ``b * C + c`` is beam ``b`` at column ``c`` (so a range image is ``values.reshape(B, C)``).
+        Cached per sensor: do not modify the returned arrays.
         """
+        return _ray_grid_cached(self)
+
+    def _ray_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         el = self.elevations()[:, None]
         az = np.broadcast_to(self.column_azimuths()[None, :], (self.beams, self.columns))
         if self.azimuth_offsets_deg is not None:
@@ -113,7 +118,8 @@ class Sensor:
         dirs = np.stack([cos_el * np.cos(az), cos_el * np.sin(az), np.broadcast_to(np.sin(el), az.shape)], axis=-1)
         beam = np.repeat(np.arange(self.beams, dtype=np.int32), self.columns)
         column = np.tile(np.arange(self.columns, dtype=np.int32), self.beams)
-        return dirs.reshape(-1, 3), beam, column
+        # (not flagged read-only: numpy's matmul falls off its BLAS path for read-only operands)
+        return np.ascontiguousarray(dirs.reshape(-1, 3)), beam, column
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -123,6 +129,11 @@ class Sensor:
         else:
             data["azimuth_offsets_deg"] = list(self.azimuth_offsets_deg)
         return {"version": 1, **data}
+
+
+@functools.lru_cache(maxsize=16)
+def _ray_grid_cached(sensor: Sensor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return sensor._ray_grid()
 
 
 _PANDAR64 = (
