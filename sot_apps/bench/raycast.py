@@ -184,8 +184,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..io.atomic import write_json
 
+    from . import format_machine, machine_description
+
     result = run_benchmark(args.bank, args.vehicles, args.repeats, args.sensor)
     print(format_table(result))
+    print(format_machine(machine_description()))
     if args.json:
         write_json(args.json, result)
     return 0
@@ -194,4 +197,4 @@ def run(args: argparse.Namespace) -> int:
 def register(registry) -> None:
     """Hook for the ``sot-apps bench`` registry (sot_apps/cli/bench.py)."""
     registry.add("raycast", help="Embree rays/s for a waymo_top sweep of ground + 20 bank vehicles; bank build time",
-                 add_arguments=add_arguments, run=run)
+                 add_arguments=add_arguments, run=run, description=__doc__)

@@ -178,6 +178,8 @@ def run(args: argparse.Namespace) -> int:
     rows = evaluate_realism(seq, args.ids, args.sensor, args.frames_per_track, args.min_points, args.origin_z,
                             progress=sys.stderr.isatty())
     print(format_tables(rows, args.sensor, time.perf_counter() - start))
+    if args.origin_z:
+        print(f"simulated optical centre {args.origin_z:g} m above the LiDAR frame origin")
     if args.json:
         write_json(args.json, [dict(r.__dict__, ratio=r.ratio) for r in rows])
     return 0
@@ -186,4 +188,4 @@ def run(args: argparse.Namespace) -> int:
 def register(registry) -> None:
     """Hook for the ``sot-apps bench`` registry (sot_apps/cli/bench.py)."""
     registry.add("realism", help="simulated vs real vehicle scans on PandaSet (Chamfer, point-count ratio)",
-                 add_arguments=add_arguments, run=run)
+                 add_arguments=add_arguments, run=run, description=__doc__)
