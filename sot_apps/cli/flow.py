@@ -38,8 +38,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--track-id", nargs="+", metavar="ID", help="with --from-annotations: only these track ids (prefixes)")
     parser.add_argument("--moving-only", action="store_true", help="with --from-annotations: skip objects that never move 0.5 m")
     parser.add_argument("--box-time", choices=("points", "frame"), default="points",
-                        help="with --from-annotations: time of a box = median capture time of its points (default; "
-                             "PandaSet) or the frame timestamp (boxes given at frame time, e.g. sot-apps synth)")
+                        help="time of a box/track state = median capture time of the LiDAR points inside it (default; "
+                             "PandaSet boxes and tracker states fit unmotion-compensated sweeps) or the frame "
+                             "timestamp (track.json's timestamp_ns; boxes given at frame time, e.g. sot-apps synth)")
     parser.add_argument("--shape-frames", type=_pairs, metavar="A:B",
                         help="with --from-annotations: sweeps A <= k < B build the shapes (default: pairs +- 10 frames)")
     parser.add_argument("--camera", required=True, metavar="NAME", help="camera name, e.g. front_camera")
@@ -80,7 +81,9 @@ def run(args: argparse.Namespace) -> int:
                                            mesh_method=args.mesh, box_time=args.box_time, progress=not args.quiet)
         source = "annotations"
     else:
-        objects = objects_from_tracks(args.tracks, mesh_method=args.mesh)
+        a, b = args.pairs or (0, len(seq.frames) - 1)
+        objects = objects_from_tracks(args.tracks, mesh_method=args.mesh, seq=seq, box_time=args.box_time,
+                                      frames=range(max(a - 2, 0), b + 3))
         source = "tracks"
     if not objects:
         raise InputError(seq.root, "no objects to annotate")

@@ -17,7 +17,7 @@ from typing import Iterable
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import Box, transform_points
+from tracker.geometry import Box, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence
@@ -65,15 +65,37 @@ def mesh_for(points: np.ndarray, size: np.ndarray, method: str = "hull", extend_
     return mesh if mesh is not None else box_mesh(*(float(v) for v in size))
 
 
-def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hull") -> list[TrackedObject]:
+def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hull", seq: Sequence | None = None,
+                        box_time: str = "points", frames: Iterable[int] | None = None) -> list[TrackedObject]:
+    """Objects from track directories (track.json + shape.ply).
+
+    ``box_time="points"`` (needs ``seq``) restamps the states of ``frames`` (default: all) with the median
+    capture time of the sweep points inside the track's box: the tracker fits sweeps whose object
+    motion is not compensated, so its state at frame k describes the object when the beam passed it,
+    while track.json records the frame timestamp. ``"frame"`` keeps track.json's ``timestamp_ns``.
+    """
     from ..io.tracks import read_track
 
+    if box_time not in ("points", "frame"):
+        raise ValueError(f"box_time must be 'points' or 'frame', not {box_time!r}")
+    wanted = None if frames is None else set(frames)
     out = []
     for directory in track_dirs:
         track, shape = read_track(directory)
         if not track.frames:
             raise InputError(directory, "track has no frames")
         times = [r.timestamp_ns for r in track.frames]
+        if box_time == "points" and seq is not None:
+            for i, record in enumerate(track.frames):
+                if (wanted is not None and record.frame not in wanted) or not 0 <= record.frame < len(seq.frames):
+                    continue
+                sweep = seq.sweep(record.frame)
+                if sweep.time_offset_ns is None:
+                    continue
+                world = transform_points(seq.frames[record.frame].world_from_ego, sweep.xyz)
+                inside = points_in_box(world, track.box_at_record(record))
+                if inside.sum() >= 3:
+                    times[i] = seq.frames[record.frame].timestamp_ns + int(np.median(sweep.time_offset_ns[inside]))
         states = [r.state.to_array() for r in track.frames]
         size = track.size.to_array()
         out.append(TrackedObject(track.object_id, track.label or "", ObjectTrajectory.from_samples(times, states),

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from tracker.geometry import Box, State
 from sot_apps.flow.annotate import FlowOptions, build_pair, compute_pair
 from sot_apps.flow.objects import objects_from_tracks
+from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
 from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
 
 from test_occlusion_timing import CAMERA_POSE, K, _sequence
@@ -35,3 +38,25 @@ def test_track_directory_drives_the_flow(tmp_path):
     flow = result.flow[result.valid_occ]
     assert np.all(flow[:, 0] < -15) and np.all(flow[:, 0] > -20)
     assert np.abs(flow[:, 1]).max() < 1.5
+
+
+def test_track_states_are_restamped_with_the_capture_time_of_their_points(tmp_path):
+    times = [1_000_000_000 + k * 100_000_000 for k in range(2)]
+    records = [FrameRecord(k, t, State(10.0 + k, 0.0, 1.0, 0.0), 50, 0.9, []) for k, t in enumerate(times)]
+    box = Box(10.0, 0.0, 1.0, 0.0, 4.0, 2.0, 1.5)
+    write_track(tmp_path / "car", TrackFile("s", "car", Size(4.0, 2.0, 1.5), 0, 1, box, {"preset": "test"}, records),
+                np.random.default_rng(0).uniform(-1, 1, (50, 3)))
+    # Sweeps (ego = world): 30 points on the car captured 40 ms (frame 0) / 70 ms (frame 1) before the frame
+    # time, 30 points elsewhere captured 5 ms before it.
+    def sweep(k):
+        car = np.column_stack([np.full(30, 10.0 + k), np.linspace(-0.8, 0.8, 30), np.full(30, 1.0)])
+        other = car + [0.0, 20.0, 0.0]
+        offsets = np.r_[np.full(30, -40_000_000 - 30_000_000 * k), np.full(30, -5_000_000)].astype(np.int64)
+        return Sweep(np.concatenate([car, other]).astype(np.float32), None, offsets)
+
+    frames = [FrameInfo(k, t, np.eye(4), Path("none")) for k, t in enumerate(times)]
+    seq = Sequence("s", Path("."), "test", frames, sweep)
+    [given] = objects_from_tracks([tmp_path / "car"], box_time="frame", seq=seq)
+    [stamped] = objects_from_tracks([tmp_path / "car"], box_time="points", seq=seq)
+    np.testing.assert_array_equal(given.trajectory.times_ns, times)
+    np.testing.assert_array_equal(stamped.trajectory.times_ns, [times[0] - 40_000_000, times[1] - 70_000_000])
