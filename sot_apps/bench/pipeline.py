@@ -4,6 +4,8 @@ with local processes and on a Dask LocalCluster (``sot-apps bench pipeline``).
 Each configuration tracks the same objects into a fresh output directory (tracking stage only). The
 pool is started and warmed up first (every worker imports the toolkit); that start-up time is reported
 separately from the tracking time. Tracked frames = frames after each object's start frame.
+"local processes" with 1 worker runs the tasks in this process (as ``sot-apps run`` does); a Dask
+LocalCluster of 1 worker is one worker process. Speed-up is relative to 1 worker of the same executor.
 """
 
 from __future__ import annotations
@@ -15,6 +17,9 @@ import time
 from pathlib import Path
 
 __all__ = ["register", "measure", "format_table"]
+
+
+EXECUTOR_NAMES = {"inline": "in process", "local": "local processes", "dask": "Dask LocalCluster"}
 
 
 def _warm() -> int:
@@ -48,7 +53,7 @@ def measure(sequence: Path, configs: list[tuple[str, int]], objects: int | None,
                 result = run_pipeline(config, spec, progress=progress, session=session)
             seconds = result.stage_seconds["track"]
             frames = result.tracked_frames()
-            rows.append({"executor": "local processes" if kind == "local" else "Dask LocalCluster",
+            rows.append({"executor": EXECUTOR_NAMES[kind],
                          "workers": workers, "objects": len(result.by_stage("track")),
                          "failed": len(result.failed), "tracked_frames": frames, "startup_s": round(startup, 2),
                          "tracking_s": round(seconds, 2), "frames_per_s": round(frames / seconds, 2) if seconds else 0.0})

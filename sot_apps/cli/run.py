@@ -38,7 +38,8 @@ def register(subparsers) -> argparse.ArgumentParser:
         description="Run the stages of PIPELINE.json (schema: data_schema/pipeline.schema.json) over its sequences "
                     "and objects: tracking (one task per object), vehicle bank, motion export (MCAP + tables), optical "
                     "flow, and simulated scans of bank vehicles. Finished units are skipped on a rerun (resume after a "
-                    "crash or Ctrl-C); a failed unit is listed in OUT/failures.json and does not stop the run. "
+                    "crash or Ctrl-C); a failed unit is listed in OUT/failures.json and does not stop the run (exit code 1 "
+                    "when any unit failed). "
                     "See docs/pipeline.md for the output tree.",
         examples=[
             "sot-apps run examples/pipeline.json",

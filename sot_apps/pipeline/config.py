@@ -82,6 +82,9 @@ class TrackStage:
     overrides: dict = field(default_factory=dict)
     min_init_points: int = 5       # fewer points in the initial box: the object is reported as failed
     max_frames: int | None = None  # track at most this many frames after the start
+    # annotated objects: "first_with_points" starts at the first annotated frame whose box holds at least
+    # min_init_points non-ground points; "first_annotated" always starts at the first annotated frame
+    start: str = "first_with_points"
 
 
 @dataclass(frozen=True)

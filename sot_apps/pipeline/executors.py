@@ -101,12 +101,13 @@ class ExecutorSession:
     def __enter__(self) -> "ExecutorSession":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close(wait=exc_type is None)
 
-    def close(self) -> None:
+    def close(self, wait: bool = True) -> None:
+        """Shut the pool down; ``wait=False`` (after Ctrl-C) cancels queued tasks and does not wait for running ones."""
         if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool.shutdown(wait=wait, cancel_futures=True)
             self._pool = None
         if self._client is not None:
             self._client.close()
@@ -166,7 +167,7 @@ class ExecutorSession:
                             outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
                         bar.update(1)
         except BaseException:
-            self.close()   # Ctrl-C: do not leave workers running
+            self.close(wait=False)   # Ctrl-C: cancel what is queued; workers get the same SIGINT and stop
             raise
         if broken:   # a worker died (e.g. killed): the next batch gets a fresh pool
             self._pool.shutdown(wait=False, cancel_futures=True)

@@ -12,7 +12,8 @@ Object rules (docs/pipeline.md):
 - ``boxes``: each explicit box starts a track at its ``frame`` and runs to ``end_frame`` (default: the
   end of the range).
 
-``max_objects`` keeps the first N after ordering; ``stages.track.max_frames`` caps every track's length.
+``max_objects`` keeps the first N after ordering. The tracking stage may move an annotated object's start to
+its first annotated frame with enough points and caps the length (``stages.track``: ``start``, ``max_frames``).
 """
 
 from __future__ import annotations
@@ -53,6 +54,9 @@ class ObjectPlan:
     start: int
     end: int
     init_box: Box
+    # annotations only: the annotated (frame, box) pairs from ``start`` to ``end``, so the tracking stage can
+    # start at the first of them with enough LiDAR points (stages.track.start = "first_with_points")
+    annotated: tuple[tuple[int, Box], ...] = ()
 
     @property
     def key(self) -> str:
@@ -84,7 +88,7 @@ class Plan:
         return [o for s in self.sequences for o in s.objects]
 
 
-def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int) -> list[tuple[str, str | None, int, int, Box]]:
+def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int) -> list[tuple]:
     from ..summary import is_vehicle, motion_of
 
     tracks = seq.tracks()
@@ -107,7 +111,8 @@ def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int)
         frames = [k for k in t.frames if first <= k <= last]
         if len(frames) < 2:
             continue
-        out.append((tid, t.label, frames[0], frames[-1], t.box_at(frames[0])))
+        out.append((tid, t.label, frames[0], frames[-1], t.box_at(frames[0]),
+                    tuple((k, t.box_at(k)) for k in frames)))
     return out
 
 
@@ -131,7 +136,7 @@ def _detection_objects(seq: Sequence, src: ObjectSource, first: int, last: int) 
         if float(b.get("score", 1.0)) < src.min_score:
             continue
         box = Box(*(float(b[f]) for f in ("x", "y", "z", "heading", "length", "width", "height")))
-        out.append((b.get("id") or f"det{k:04d}_{i:02d}", b.get("label"), k, last, box))
+        out.append((b.get("id") or f"det{k:04d}_{i:02d}", b.get("label"), k, last, box, ()))
     return out
 
 
@@ -143,11 +148,11 @@ def _box_objects(src: ObjectSource, first: int, last: int, root) -> list[tuple[s
         if not first <= k < end:
             raise InputError(root, f"object {b['id']!r}: frame {k} must lie in {first}..{last - 1} and before end_frame")
         box = Box(*(float(b["box"][f]) for f in ("x", "y", "z", "heading", "length", "width", "height")))
-        out.append((str(b["id"]), b.get("label"), k, end, box))
+        out.append((str(b["id"]), b.get("label"), k, end, box, ()))
     return out
 
 
-def plan_sequence(cfg: SequenceConfig, max_frames: int | None = None) -> SequencePlan:
+def plan_sequence(cfg: SequenceConfig) -> SequencePlan:
     seq = open_cached(cfg.path, cfg.format)
     n = len(seq.frames)
     first, last = cfg.frames if cfg.frames is not None else (0, n - 1)
@@ -164,19 +169,17 @@ def plan_sequence(cfg: SequenceConfig, max_frames: int | None = None) -> Sequenc
     if src.max_objects is not None:
         found = found[: src.max_objects]
     objects, seen = [], set()
-    for object_id, label, start, end, box in found:
-        if max_frames is not None:
-            end = min(end, start + max_frames)
+    for object_id, label, start, end, box, annotated in found:
         oid = safe_name(object_id)
         if oid in seen:
             raise InputError(cfg.path, f"object id {object_id!r} appears twice")
         seen.add(oid)
-        objects.append(ObjectPlan(name, cfg.path, cfg.format, oid, label, start, end, box))
+        objects.append(ObjectPlan(name, cfg.path, cfg.format, oid, label, start, end, box, annotated))
     return SequencePlan(name, cfg.path, cfg.format, seq.id, (first, last), tuple(sorted(seq.cameras)), tuple(objects))
 
 
 def make_plan(config: PipelineConfig) -> Plan:
-    plans = [plan_sequence(s, config.stages.track.max_frames) for s in config.sequences]
+    plans = [plan_sequence(s) for s in config.sequences]
     names = [p.name for p in plans]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:

@@ -45,13 +45,17 @@ def track_object(out: str, plan: ObjectPlan, stage: dict, digest: str) -> dict:
 
     seq = open_cached(plan.sequence_path, plan.format)
     config = get_preset(stage.get("preset", "full"), **dict(stage.get("overrides") or {}))
+    min_points = int(stage.get("min_init_points", 5))
+    start_frame, init_box = plan.start, plan.init_box
+    if plan.annotated and stage.get("start", "first_with_points") == "first_with_points":
+        start_frame, init_box = _first_box_with_points(seq, plan, config, min_points)
+    end_frame = plan.end if stage.get("max_frames") is None else min(plan.end, start_frame + int(stage["max_frames"]))
     start = time.perf_counter()
-    result = track(seq, plan.init_box, plan.start, plan.end, config)
+    result = track(seq, init_box, start_frame, end_frame, config)
     seconds = time.perf_counter() - start
     first = result.estimates[0]
-    min_points = int(stage.get("min_init_points", 5))
     if first.num_points < min_points:
-        raise TrackingFailed(f"{plan.key}: {first.num_points} LiDAR points in the initial box at frame {plan.start} "
+        raise TrackingFailed(f"{plan.key}: {first.num_points} LiDAR points in the initial box at frame {start_frame} "
                              f"(need at least {min_points}); nothing to track")
     later = result.estimates[1:]
     if later and all("no_points" in e.flags for e in later):
@@ -61,7 +65,7 @@ def track_object(out: str, plan: ObjectPlan, stage: dict, digest: str) -> dict:
                            flags=list(e.flags)) for e in result.estimates]
     size = result.size
     doc = TrackFile(sequence=seq.id, object_id=plan.object_id, size=Size(*(float(v) for v in size)),
-                    start_frame=plan.start, end_frame=plan.end, init_box=plan.init_box, config=config.to_dict(),
+                    start_frame=start_frame, end_frame=end_frame, init_box=init_box, config=config.to_dict(),
                     frames=records, label=plan.label)
     directory = track_dir(out, plan.sequence, plan.object_id)
     # Per-frame time_ms is left out (it differs run to run): pipeline outputs are reproducible byte for byte;
@@ -73,6 +77,22 @@ def track_object(out: str, plan: ObjectPlan, stage: dict, digest: str) -> dict:
             "tracked_frames": len(records) - 1, "seconds": round(seconds, 3),
             "mean_quality": round(float(np.mean([r.quality for r in records])), 4),
             "shape_points": int(len(result.shape))}
+
+
+def _first_box_with_points(seq, plan: ObjectPlan, config, min_points: int):
+    """The first annotated (frame, box) whose box holds ``min_points`` non-ground points, as the tracker
+    counts them at its start; the last annotated frame cannot start a track."""
+    from tracker.sotracker import Tracker
+
+    best = (0, plan.start, plan.init_box)
+    for k, box in plan.annotated[:-1]:
+        n = Tracker(config).start(seq.lidar_frame(k), box).num_points
+        if n >= min_points:
+            return k, box
+        best = max(best, (n, k, box), key=lambda b: b[0])
+    raise TrackingFailed(f"{plan.key}: fewer than {min_points} LiDAR points in every annotated box "
+                         f"(frames {plan.annotated[0][0]}..{plan.annotated[-2][0]}; at most {best[0]} at frame {best[1]}); "
+                         "nothing to track")
 
 
 # ----------------------------------------------------------------------------------------------- bank

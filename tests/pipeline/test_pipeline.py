@@ -179,3 +179,47 @@ def test_object_without_points_fails_while_the_others_finish(tiny_worlds, tmp_pa
     assert sorted(set(pq.read_table(out / "synth_s4" / "motion.parquet").to_pydict()["track_id"])) == ["veh_000", "veh_001"]
     bank = json.loads((out / "bank" / "index.json").read_text())
     assert sorted(e["source"]["object_id"] for e in bank["entries"]) == ["veh_000", "veh_001"]
+
+
+def test_bench_counts_the_tracked_frames(tiny_worlds):
+    """`sot-apps bench pipeline` measures what it says: frames tracked after each start, per configuration."""
+    from sot_apps.bench.pipeline import format_table, measure
+
+    rows = measure(tiny_worlds[0], [("inline", 1)], objects=2, max_frames=3)
+    assert [(r["objects"], r["failed"], r["tracked_frames"]) for r in rows] == [(2, 0, 6)]
+    assert rows[0]["executor"] == "in process" and rows[0]["frames_per_s"] > 0 and rows[0]["speedup"] == 1.0
+    assert "| 2 | 6 |" in format_table(rows)
+
+
+def test_annotated_object_starts_at_its_first_box_with_enough_points(tiny_worlds, tmp_path):
+    """stages.track.start = first_with_points: the track starts at the first annotated frame whose box the
+    tracker finds min_init_points points in; first_annotated keeps frame 0 (and then fails)."""
+    from tracker.config import get_preset
+    from tracker.sotracker import Tracker
+
+    from sot_apps.io import open_sequence
+    from sot_apps.io.tracks import read_track
+
+    seq = open_sequence(tiny_worlds[0])
+    counts = {}
+    for obj in ("veh_000", "veh_001", "veh_002"):
+        gt = seq.tracks()[obj]
+        counts[obj] = [Tracker(get_preset("full")).start(seq.lidar_frame(k), gt.box_at(k)).num_points for k in range(5)]
+    # an object and a threshold that frame 0 misses but a later frame (not the last) reaches
+    choices = [(obj, k, c[k]) for obj, c in counts.items() for k in range(1, 5) if c[k] > max(c[:k])]
+    assert choices, counts
+    obj, expected, threshold = choices[0]
+    doc = {"out": str(tmp_path / "out"), "sequences": [{"path": str(tiny_worlds[0]),
+                                                         "objects": {"from": "annotations", "track_ids": [obj]}}],
+           "stages": {"track": {"min_init_points": threshold}, "bank": {"enabled": False},
+                      "motion": {"enabled": False}, "flow": {"enabled": False}, "scans": {"enabled": False}}}
+    result = run_pipeline(PipelineConfig.from_json(doc), ExecutorSpec("inline"), progress=False)
+    assert result.failed == []
+    track, _ = read_track(tmp_path / "out" / "synth_s4" / "tracks" / obj)
+    assert track.start_frame == expected and track.frames[0].frame == expected
+    assert track.frames[0].num_points == threshold
+
+    doc["out"] = str(tmp_path / "strict")
+    doc["stages"]["track"]["start"] = "first_annotated"
+    strict = run_pipeline(PipelineConfig.from_json(doc), ExecutorSpec("inline"), progress=False)
+    assert [u.key for u in strict.failed] == [f"track/synth_s4/{obj}"]
