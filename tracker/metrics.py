@@ -300,7 +300,16 @@ def voxel_downsample_centres(points: np.ndarray, voxel: float = 0.05) -> np.ndar
     points = points[np.all(np.isfinite(points), axis=1)]
     if points.shape[0] == 0:
         return np.zeros((0, 3))
-    keys = np.unique(np.floor(points / voxel).astype(np.int64), axis=0)
+    keys = np.floor(points / voxel).astype(np.int64)
+    low = keys.min(axis=0)
+    span = keys.max(axis=0) - low + 1
+    if np.prod(span.astype(np.float64)) < 2.0**62:
+        # one int64 code per voxel (x-major, like a lexicographic sort of the rows): a 1D unique is fast
+        rel = keys - low
+        codes = np.unique((rel[:, 0] * span[1] + rel[:, 1]) * span[2] + rel[:, 2])
+        keys = np.stack([codes // (span[1] * span[2]), (codes // span[2]) % span[1], codes % span[2]], axis=1) + low
+    else:
+        keys = np.unique(keys, axis=0)
     return (keys.astype(np.float64) + 0.5) * voxel
 
 

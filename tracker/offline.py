@@ -3,28 +3,34 @@
 Data-generation users have the whole sequence, so nothing forces the estimate of frame k to ignore
 frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
 
-1. every frame's points near its online box (ground removed, cropped with the box scaled
-   ``region_scale``) are gathered once (world frame);
-2. the shape M is rebuilt from all frames: points in the current boxes (scale 1.0), in the object frame,
-   voxelised; normals n_m come from a PCA of each shape point's neighbours;
-3. all states S_1..S_{K-1} (S_0 is the given start box and stays fixed: it anchors the object frame)
-   minimise, jointly,
+1. every frame's points near its online box (ground removed with the tracker's GPF parameters, cropped
+   with the box scaled ``region_scale``) are gathered once (world frame);
+2. frames are split into ``folds`` interleaved folds (k mod folds). For each fold a shape is rebuilt from
+   the frames NOT in it: points in the current boxes (scale 1.0), moved to the object frame, voxelised
+   (5 cm centres), with normals n from a PCA of each shape point's neighbours. A frame is registered
+   only to the shape of the other folds: registering a frame to an aggregate that contains its own
+   points pins it where it already is (the residuals are ~0 whatever its error);
+3. all states S_0..S_{K-1} minimise, jointly,
 
-       Σ_k c_k Σ_p ρ_Huber(‖A_m (R(−θ_k)(p − t_k) − m)‖) / σ_p²           (data: frame k's points vs M)
-     + Σ_k Σ_c (S_{k+1,c} − 2 S_{k,c} + S_{k−1,c})² / σ_c²               (smoothness: 2nd differences)
-     + Σ_k Σ_c (S_{k,c} − S^online_{k,c})² / σ_anchor,c²                  (weak anchor, fixes gauge)
+       Σ_k c_k Σ_p ρ_Huber(‖A (R(−θ_k)(p − t_k) − m)‖) / σ_p²              (data: frame k's points vs shape)
+     + Σ_k Σ_c (S_{k+1,c} − 2 S_{k,c} + S_{k−1,c})² / σ_c²                (smoothness: 2nd differences
+                                                                          of x, y, z, heading)
+     + Σ_k Σ_c (S_{k,c} − S^online_{k,c})² / σ_anchor,c²                   (weak pull to the online states)
 
    with m the nearest shape point of the moved p (pairs farther than ``max_pair_distance`` dropped),
-   A_m = n nᵀ + β (I − n nᵀ) (β = 0: point-to-plane, β = 1: point-to-point), and
-   c_k = min(1, ``effective_points`` / N_k) so a dense frame counts as at most that many independent
-   points (LiDAR residuals are strongly correlated). The problem is solved by Gauss–Newton with
-   iteratively re-weighted Huber weights on one sparse (block-tridiagonal) normal-equation system over
-   all 4(K−1) unknowns (scipy.sparse), with a cost check and step halving; correspondences are
-   recomputed at every step;
-4. steps 2–3 repeat ``outer_iterations`` times, and the shape is rebuilt from the final states.
+   A = (1 − β) n nᵀ + β I (β = 0: point-to-plane, β = 1: point-to-point; default 0.3), and
+   c_k = min(1, ``effective_points`` / N_k), so a dense frame counts as at most that many independent
+   points (LiDAR residuals are strongly correlated). It is solved by Gauss–Newton with iteratively
+   re-weighted Huber weights on one sparse (block-tridiagonal) 4K × 4K normal-equation system
+   (scipy.sparse), with a cost check and step halving; correspondences are recomputed at every step;
+4. gauge: the joint problem fixes the trajectory only up to where the shape sits in the object frame.
+   With ``gauge="regauge"`` (default) all states are free and afterwards every pose is composed with the
+   one object-frame correction that maps the refined S_0 onto the given start box (so S_0 is exact and
+   all frames keep their relative registration); ``gauge="fix_first"`` holds S_0 fixed instead;
+5. steps 2–4 repeat ``outer_iterations`` times; the shape is rebuilt from the final states (all frames).
 
 The result is a new TrackResult (same frames, sizes and per-frame online ``time_ms``; ``points`` and
-``num_points`` recomputed; flag ``"offline"`` added).
+``num_points`` recomputed; flag ``"offline"`` added). Deterministic for a given ``config.seed``.
 """
 
 from __future__ import annotations
@@ -51,17 +57,17 @@ __all__ = ["OfflineParams", "OfflineProblem", "gather_frame_points", "refine_sta
 class OfflineParams:
     """Parameters of the offline refinement (metres, radians)."""
 
-    outer_iterations: int = 4           # shape rebuilds
+    outer_iterations: int = 8           # shape rebuilds
     gn_iterations: int = 3              # Gauss-Newton steps per shape
     region_scale: float = 1.6           # points gathered around the online box (l, w and h)
     crop_scale: float = 1.15            # data-term points: inside the current box scaled by this
     ground_margin: float = 3.0          # ground planes are fitted on the region grown by this (BEV)
-    max_points: int = 400               # per frame, random subset (seeded)
+    max_points: int = 250               # per frame, random subset (seeded)
     point_sigma: float = 0.05
     effective_points: float = 40.0
     huber_delta: float = 0.1
     tangent_weight: float = 0.3         # beta: 0 = point-to-plane, 1 = point-to-point
-    max_pair_distance: float = 0.4
+    max_pair_distance: float = 0.8
     normal_neighbours: int = 10
     smooth_sigma_xy: float = 0.03       # per frame^2 (10 Hz: 3 m/s^2 -> 0.03 m)
     smooth_sigma_z: float = 0.02
@@ -71,6 +77,7 @@ class OfflineParams:
     voxel: float = 0.05
     min_shape_points: int = 10
     folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
+    gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
 
 
 @dataclass
@@ -283,7 +290,9 @@ class _Solver:
         h = (sp.block_diag(list(blocks), format="csr") + self.h_prior).tocsc()
         g = (grads + grad_p).reshape(-1)
         h = h + sp.diags(1e-9 * (1.0 + h.diagonal()))
-        delta = -spsolve(h.tocsc(), g)
+        delta = np.zeros(4 * self.k)
+        free = np.arange(4 if self.params.gauge == "fix_first" else 0, 4 * self.k)
+        delta[free] = -spsolve(h[free][:, free].tocsc(), g[free])
         if not np.all(np.isfinite(delta)):
             return states
         before = cost_d + cost_p
@@ -335,7 +344,8 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
             break
         for _ in range(params.gn_iterations):
             states = solver.step(states)
-        states = _regauge(states, online[0])
+        if params.gauge == "regauge":
+            states = _regauge(states, online[0])
     out = states.copy()
     out[:, 3] = wrap_angle(out[:, 3])
     return out, _rebuild_shape(points, states, size, params.voxel)
