@@ -2,7 +2,8 @@
 with local processes and on a Dask LocalCluster (``sot-apps bench pipeline``).
 
 Each configuration tracks the same objects into a fresh output directory (tracking stage only). The
-pool is started and warmed up first (every worker imports the toolkit); that start-up time is reported
+pool is started and warmed up first (every worker imports the toolkit and opens the sequence, as the
+planner does in the main process); that start-up time is reported
 separately from the tracking time. Tracked frames = frames after each object's start frame.
 "local processes" with 1 worker runs the tasks in this process (as ``sot-apps run`` does); a Dask
 LocalCluster of 1 worker is one worker process. Speed-up is relative to 1 worker of the same executor.
@@ -22,10 +23,12 @@ __all__ = ["register", "measure", "format_table"]
 EXECUTOR_NAMES = {"inline": "in process", "local": "local processes", "dask": "Dask LocalCluster"}
 
 
-def _warm() -> int:
+def _warm(sequence: str) -> int:
     import sot_apps.pipeline.stages  # noqa: F401 - the import is the warm-up
     import tracker.sotracker  # noqa: F401
+    from sot_apps.pipeline.plan import open_cached
 
+    open_cached(sequence, None)   # as the planner already did in this process
     time.sleep(0.2)   # keep this worker busy so the others get warm-up tasks too
     return os.getpid()
 
@@ -48,7 +51,8 @@ def measure(sequence: Path, configs: list[tuple[str, int]], objects: int | None,
             start = time.perf_counter()
             with ExecutorSession(spec) as session:
                 if kind != "inline" and not (kind == "local" and workers <= 1):
-                    session.run([Task(f"warm/{i}", _warm) for i in range(2 * workers)], "warm-up", False)
+                    session.run([Task(f"warm/{i}", _warm, (str(sequence),)) for i in range(2 * workers)], "warm-up",
+                                False)
                 startup = time.perf_counter() - start
                 result = run_pipeline(config, spec, progress=progress, session=session)
             seconds = result.stage_seconds["track"]

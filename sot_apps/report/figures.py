@@ -80,7 +80,7 @@ def tracks_bev_figure(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]],
         for r in records[::box_every]:
             canvas.box(t.box_at_record(r), color, 2 if r is records[0] else 1)
         c = canvas.px([records[-1].state.x, records[-1].state.y])[0]
-        text(canvas.image, t.object_id[:10], (c[0] + 8, c[1] - 8), 0.45, color)
+        text(canvas.image, t.object_id[:8], (c[0] + 8, c[1] - 8), 0.45, color)
     canvas.scale_bar(10.0)
     img = canvas.image
     legend = np.full((28, img.shape[1], 3), 255, np.uint8)
