@@ -12,8 +12,9 @@ timestamp in integer ns) and a header timestamp equal to it. Topics (docs/motion
   in the object frame, covariances from the smoother;
 - ``/objects/<id>/kinematics`` (JSON, schema data_schema/kinematics.schema.json) per frame of the
   track, invalid frames included (valid=false, null values);
-- ``/objects/<id>/shape`` (foxglove.PointCloud, frame object/<id>) once, at the first valid frame,
-  when the object has a shape;
+- ``/objects/<id>/shape`` (foxglove.PointCloud, frame object/<id>) per valid frame when the object
+  has a shape (Foxglove places a point cloud with the transform at its own timestamp, so a shape
+  logged once would stay behind where the object was);
 - ``/lidar/points`` (foxglove.PointCloud, frame ego) per frame, only with ``with_points``;
 - a metadata record ``sot_apps.motion_export`` (source, sequence, config, objects).
 """
@@ -118,7 +119,6 @@ class _Writer:
         self.checked: set[tuple[str, bool]] = set()  # (object, valid) pairs whose message was schema-checked
         # frame index -> sample index per object
         self.index = [{int(f): i for i, f in enumerate(k.frames)} for k in kinematics]
-        self.first_valid = [int(k.frames[np.flatnonzero(k.valid)[0]]) if k.valid.any() else None for k in kinematics]
 
     def _log(self, channel, topic: str, msg, t_ns: int) -> None:
         channel.log(msg, log_time=int(t_ns))
@@ -168,7 +168,7 @@ class _Writer:
                               pose_covariance=pose_cov, velocity_covariance=vel_cov)
             self._log(self.pose[oid], f"/objects/{oid}/pose", odom, t_ns)
             entities.append(self._entity(k, i, ts, pose))
-            if oid in self.shape and frame == self.first_valid[j]:
+            if oid in self.shape:
                 self._log(self.shape[oid], f"/objects/{oid}/shape",
                           _point_cloud(m, t_ns, object_frame(oid), k.shape_points), t_ns)
         self._log(self.tf, "/tf", m.FrameTransforms(transforms=transforms), t_ns)

@@ -83,7 +83,7 @@ def test_motion_export_from_track_files_marks_flagged_frames(tmp_path, pandaset_
         summary = make_reader(handle).get_summary()
     counts = {c.topic: summary.statistics.channel_message_counts[cid] for cid, c in summary.channels.items()}
     assert counts[f"/objects/{tid}/pose"] == 19 and counts[f"/objects/{tid}/kinematics"] == 21
-    assert counts["/objects/" + tid + "/shape"] == 1
+    assert counts["/objects/" + tid + "/shape"] == 19
 
 
 def test_track_of_another_sequence_is_refused(tmp_path, pandaset_root, pandaset, capsys):

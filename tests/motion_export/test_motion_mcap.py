@@ -79,7 +79,7 @@ def test_message_counts(exported):
     assert counts["/objects/car-b/kinematics"] == 8
     assert counts["/objects/car-a/pose"] == N_FRAMES
     assert counts["/objects/car-b/pose"] == 7
-    assert counts["/objects/car-a/shape"] == 1
+    assert counts["/objects/car-a/shape"] == N_FRAMES  # with its object, at every valid frame
     assert exported["summary"].message_counts == counts
     # one cube per valid object per frame
     cubes = sum(len(e.cubes) for _, _, update in exported["messages"]["/markers/objects"] for e in update.entities)
