@@ -45,6 +45,21 @@ def make_world(out: Path, size: DemoSize = DEFAULT_SIZE, progress: bool = True) 
                        cameras=True, camera_size=size.camera_size, progress=progress)
 
 
+def _world_once(out: Path, size: DemoSize, progress: bool) -> Path:
+    """``out/world``, generated unless a previous run finished it (completion marker with checksums)."""
+    import dataclasses
+
+    from .pipeline.manifest import DoneMarker, config_digest
+
+    world = out / "world"
+    marker = DoneMarker(out, "demo/world")
+    digest = config_digest(dataclasses.asdict(size))
+    if not marker.is_done(digest):
+        make_world(world, size, progress)
+        marker.mark(digest, sorted(p for p in world.rglob("*") if p.is_file()))
+    return world
+
+
 def demo_config(out: Path, sequence: Path, synthetic: bool, scan_sensor: str = "pandar64",
                 flow_pairs: int | None = None, cameras: tuple[str, ...] | None = None) -> PipelineConfig:
     """Every stage over the moving vehicles of ``sequence``; real sequences get the front camera only and
@@ -71,7 +86,7 @@ def run_demo(out: str | Path, sequence: str | Path | None = None, size: DemoSize
     t = time.perf_counter()
     synthetic = sequence is None
     if synthetic:
-        sequence = make_world(out / "world", size, progress)
+        sequence = _world_once(out, size, progress)
         seconds["world"] = time.perf_counter() - t
     sequence = Path(sequence).resolve()
     config = demo_config(out, sequence, synthetic, size.scan_sensor, flow_pairs)
