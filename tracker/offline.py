@@ -45,7 +45,7 @@ from scipy.spatial import cKDTree
 
 from .config import TrackerConfig
 from .frames import FrameSource
-from .geometry import Box, State, points_in_box, transform_points, wrap_angle
+from .geometry import Box, State, points_in_box, wrap_angle
 from .ground import GroundParams, ground_mask
 from .metrics import voxel_downsample_centres
 from .sotracker import FrameEstimate, TrackResult, deskew_points
