@@ -45,6 +45,8 @@ class TrackerConfig:
     ransac_min_inliers: int = 10
     max_points: int = 1000               # random subsample of each point set
     min_points: int = 10                 # a term with fewer pairs contributes 0
+    data_norm_min: int = 0               # > 0: data terms are sums / max(pairs, this) when the crop is sparse
+    min_target_points: int = 5           # a search region with fewer points: the frame runs on the prior
     icp_metric: str = "point"            # "point" (paper) or "plane": point-to-plane + plane_point_weight * point
     plane_point_weight: float = 0.1
     normal_neighbors: int = 8
@@ -52,6 +54,11 @@ class TrackerConfig:
     max_pair_distance: float = 0.0       # > 0: ICP pairs farther than this are dropped (0 = keep all, upstream)
     # --- motion prior
     alpha: float = 0.5                   # prior <- alpha * prior + (1 - alpha) * delta
+    prior_frame: str = "world"           # "world" (paper) or "object": average the motion in the box frame
+    z_mode: str = "icp"                  # "icp": dz from the loss like dx, dy; "ground": the box keeps its start
+                                         # height above the local road plane; "fixed": dz = 0
+    max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
+    coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
     mp_reference: str = "prior"          # "prior" (paper) or "iteration" (upstream: previous outer iteration)
     symmetric_mc: bool = True            # MC on both components; False = upstream's x-only form
     # --- ground removal (GPF, Zermas et al. 2017)
@@ -66,6 +73,7 @@ class TrackerConfig:
     # --- solver
     outer_iterations: int = 20           # max outer iterations (correspondences recomputed each)
     solver_iterations: int = 10          # max Gauss-Newton/LM steps per outer iteration
+    anderson_depth: int = 0              # > 0: Anderson acceleration of the outer loop with this history
     convergence_tolerance: float = 1e-4  # stop the outer loop when the update is smaller (m / rad)
     # --- misc
     seed: int = 0
@@ -103,6 +111,10 @@ class TrackerConfig:
     def __post_init__(self) -> None:
         if self.icp_metric not in ("point", "plane"):
             raise ValueError(f"icp_metric must be 'point' or 'plane', not {self.icp_metric!r}")
+        if self.z_mode not in ("icp", "ground", "fixed"):
+            raise ValueError(f"z_mode must be 'icp', 'ground' or 'fixed', not {self.z_mode!r}")
+        if self.prior_frame not in ("world", "object"):
+            raise ValueError(f"prior_frame must be 'world' or 'object', not {self.prior_frame!r}")
         if self.mp_reference not in ("prior", "iteration"):
             raise ValueError(f"mp_reference must be 'prior' or 'iteration', not {self.mp_reference!r}")
         for name in ("search_scale", "first_search_scale", "crop_scale", "voxel_size", "keyframe_interval",
@@ -111,7 +123,9 @@ class TrackerConfig:
                 raise ValueError(f"{name} must be positive")
 
 
-_FULL = TrackerConfig(outer_iterations=8, first_icp_iterations=20, solver_iterations=6, preset="full")
+_FULL = TrackerConfig(outer_iterations=5, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
+                      anderson_depth=3, symmetric_mc=False, prior_frame="object", max_yaw_change=0.05,
+                      gpf_seed_threshold=0.3, gpf_distance_threshold=0.2, z_mode="ground", preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           preset="faithful")

@@ -117,6 +117,59 @@ class _Target:
         self.has_normal = np.zeros(len(points), dtype=bool)
 
 
+class _Anderson:
+    """Anderson acceleration of the outer (ICP-style) fixed-point iteration x <- F(x) (AA-ICP).
+
+    ``step(x, F(x) - x)`` returns the next iterate: the plain step while the history is short or the
+    extrapolation jumps implausibly far from the plain step (0.5 m, 0.15 rad), else the Anderson mix.
+    """
+
+    def __init__(self, depth: int) -> None:
+        self.depth = depth
+        self.xs: list[np.ndarray] = []
+        self.fs: list[np.ndarray] = []
+
+    def step(self, x: np.ndarray, f: np.ndarray) -> np.ndarray:
+        self.xs.append(x.copy())
+        self.fs.append(f.copy())
+        self.xs, self.fs = self.xs[-(self.depth + 1):], self.fs[-(self.depth + 1):]
+        plain = x + f
+        if len(self.xs) < 2:
+            return plain
+        dx = np.diff(np.array(self.xs), axis=0).T   # (4, m)
+        df = np.diff(np.array(self.fs), axis=0).T
+        gamma, *_ = np.linalg.lstsq(df, f, rcond=None)
+        mixed = plain - (dx + df) @ gamma
+        jump = np.abs(mixed - plain)
+        if not np.isfinite(mixed).all() or np.any(jump > np.array([0.5, 0.5, 0.3, 0.15])):
+            return plain
+        return mixed
+
+
+def _ground_height(ground: np.ndarray, centre_xy: np.ndarray, box: Box, min_points: int = 20) -> float | None:
+    """Height of the road under ``centre_xy``: a plane z = a x + b y + c through the ground points around the
+    box (outside its footprint, within 3 m), refitted without outliers; None with too few points."""
+    if len(ground) < min_points:
+        return None
+    d = ground[:, :2] - centre_xy
+    ca, sa = np.cos(box.heading), np.sin(box.heading)
+    u = np.abs(d @ np.array([ca, sa])) - 0.5 * box.length
+    v = np.abs(d @ np.array([-sa, ca])) - 0.5 * box.width
+    near = ground[(u <= 3.0) & (v <= 3.0)]
+    if len(near) < min_points:
+        return None
+    keep = np.abs(near[:, 2] - np.median(near[:, 2])) < 0.5  # sub-ground noise is classified ground too
+    for _ in range(2):
+        if keep.sum() < min_points:
+            return None
+        a = np.column_stack([near[keep, 0] - centre_xy[0], near[keep, 1] - centre_xy[1], np.ones(keep.sum())])
+        coef, *_ = np.linalg.lstsq(a, near[keep, 2], rcond=None)
+        residual = near[:, 0:2] - centre_xy
+        pred = residual @ coef[:2] + coef[2]
+        keep = np.abs(near[:, 2] - pred) < 0.15
+    return float(coef[2])
+
+
 def _box_moved(box: Box, x: np.ndarray) -> Box:
     return Box(box.x + x[0], box.y + x[1], box.z + x[2], float(wrap_angle(box.heading + x[3])),
                box.length, box.width, box.height)
@@ -168,8 +221,11 @@ class Tracker:
         u = np.abs(d @ np.array([ca, sa]))
         v = np.abs(d @ np.array([-sa, ca]))
         world = world[(u <= 0.5 * box.length * scale + c.gpf_margin) & (v <= 0.5 * box.width * scale + c.gpf_margin)]
+        self._ground_points = np.zeros((0, 3))
         if c.ground_removal and len(world) >= 3:
-            world = world[~ground_mask(world, self.ground_params)]
+            is_ground = ground_mask(world, self.ground_params)
+            self._ground_points = world[is_ground]
+            world = world[~is_ground]
         # keep only what a search box can contain
         d = world[:, :2] - box.center[:2]
         keep_radius = 0.5 * float(np.hypot(box.length, box.width)) * scale
@@ -190,14 +246,17 @@ class Tracker:
         self.rng = np.random.default_rng(c.seed)
         self.first_box = box
         self.box = box
-        self.prior = MotionPrior(c.alpha)
+        self.prior = MotionPrior(c.alpha, c.prior_frame)
         self.shape = ShapeModel(c.voxel_size)
         self.subshape = SubShape(c.subshape_frames if c.use_subshape else 0, c.voxel_size)
         self.steps = 0
+        self._coasting = 0
         self._shape_nn: NearestNeighbors | None = None
         self._shape_nn_size = -1
         self._previous_pose = previous_pose
         local, flags = self._local_points(frame, box, max(c.first_search_scale, c.search_scale))
+        height = _ground_height(self._ground_points, box.center[:2], box)
+        self._ground_offset = None if height is None else box.z - height
         self._finish_frame(frame, box, local, keyframe=True)
         self._started = True
         obj = local[points_in_box(local, box, 1.0)]
@@ -276,13 +335,16 @@ class Tracker:
         info = {"crop": 0, "icp_pairs": 0, "shape_inliers": 0, "iterations": 0}
         plane = c.icp_metric == "plane"
         ransac_seed = int(self.rng.integers(2**62))
+        accel = _Anderson(c.anderson_depth)
         for it in range(outer):
             info["iterations"] = it + 1
             mask = points_in_box(local, _box_moved(prev, x), scale)
             info["crop"] = int(mask.sum())
-            if info["crop"] == 0:
+            if info["crop"] < c.min_target_points:  # too few points to register against: no data terms
+                info["icp_pairs"] = info["shape_inliers"] = 0
                 break
-            fixed: list = []  # (name, source, target, normals, weight)
+            fixed: list = []  # (name, source, target, normals, weight, normaliser floor)
+            data_norm = c.data_norm_min  # few pairs: the data terms weigh less against the motion terms
             info["icp_pairs"] = info["shape_inliers"] = 0
             if c.weight_icp > 0 and len(source) >= c.min_points:
                 src, idx, dist, _ = self._pairs(x, source, target, mask)
@@ -291,7 +353,7 @@ class Tracker:
                     src, idx = src[keep], idx[keep]
                 if len(src) >= c.min_points:
                     normals = self._normals(target, idx) if plane else None
-                    fixed.append(("icp", src, local[idx], normals, c.weight_icp))
+                    fixed.append(("icp", src, local[idx], normals, c.weight_icp, data_norm))
                     info["icp_pairs"] = len(src)
             if len(shape_src) >= c.min_points:
                 src, idx, _, moved = self._pairs(x, shape_src, target, mask)
@@ -306,15 +368,15 @@ class Tracker:
                     src, idx = (src[keep], idx[keep]) if keep.sum() >= c.ransac_min_inliers else (src[:0], idx[:0])
                 if len(src) >= c.min_points:
                     normals = self._normals(target, idx) if plane else None
-                    fixed.append(("shape", src, local[idx], normals, c.weight_shape))
+                    fixed.append(("shape", src, local[idx], normals, c.weight_shape, data_norm))
                     info["shape_inliers"] = len(src)
             if not fixed:
                 break
             use_priors = not icp_only
 
             def blocks_at(xx: np.ndarray) -> list[ResidualBlock]:
-                blocks = [point_pair_block(name, xx, s, t, pivot, w, n, c.plane_point_weight)
-                          for name, s, t, n, w in fixed]
+                blocks = [point_pair_block(name, xx, s, t, pivot, w, n, c.plane_point_weight, norm)
+                          for name, s, t, n, w, norm in fixed]
                 if use_priors and c.weight_mc > 0:
                     blocks.append(motion_consistency_block(xx, prev.heading, c.weight_mc, c.symmetric_mc))
                 if use_priors and c.weight_mp > 0 and reference is not None:
@@ -322,8 +384,12 @@ class Tracker:
                 return blocks
 
             result = solve(blocks_at, x, max_iterations=c.solver_iterations)
-            change = float(np.max(np.abs(result.x - x)))
-            x = result.x
+            residual = result.x - x
+            change = float(np.max(np.abs(residual)))
+            x_next = result.x
+            if c.anderson_depth > 0 and not icp_only:
+                x_next = accel.step(x, residual)
+            x = x_next
             if c.mp_reference == "iteration" and reference is not None:
                 reference = x.copy()
             if change < c.convergence_tolerance:
@@ -344,7 +410,9 @@ class Tracker:
         first = self.steps == 1
         if first:
             self._first_shape = self.shape.points.copy()
-        prior = self.prior.delta.copy()
+        prior = self.prior.predict(prev.heading)
+        # coasting (no data) keeps the velocity but lets the turn rate die out
+        prior[3] *= c.coast_yaw_decay ** self._coasting
         search_scale = c.first_search_scale if first else c.search_scale
         reach_box = _box_moved(prev, prior)
         local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale) + 0.5)
@@ -362,21 +430,32 @@ class Tracker:
                 reference = prior
             x, info = self._estimate(target, x, c.search_scale, c.outer_iterations, False, reference, flags)
             if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
-                flags.append("prior_only")
-                if first:
-                    x = np.zeros(4)
-                else:
-                    x = prior.copy()
+                flags += ["low_points", "prior_only"]
+                x = np.zeros(4) if first else prior.copy()
         if not np.isfinite(x).all():
             flags.append("prior_only")
             x = prior.copy()
+        if c.z_mode == "fixed":
+            x[2] = 0.0
+        elif c.z_mode == "ground" and self._ground_offset is not None:
+            height = _ground_height(self._ground_points, prev.center[:2] + x[:2], prev)
+            if height is not None:
+                x[2] = height + self._ground_offset - prev.z
+        if c.max_yaw_change > 0 and not first and abs(x[3] - prior[3]) > c.max_yaw_change:
+            flags.append("yaw_clamped")  # a vehicle cannot turn that suddenly: keep the prior's turn rate +- the cap
+            x[3] = prior[3] + np.sign(x[3] - prior[3]) * c.max_yaw_change
+        coasting = "prior_only" in flags
         x[3] = wrap_angle(x[3])
         box = _box_moved(prev, x)
         quality = self._quality(local, box)
         obj_world = self._finish_frame(frame, box, local, keyframe=c.shape_update and self.steps % c.keyframe_interval == 0)
         if 0 < len(obj_world) < c.min_points:
             flags.append("low_points")
-        self.prior.update(x)
+        if coasting:
+            self._coasting += 1  # the prior is not updated with its own prediction
+        else:
+            self._coasting = 0
+            self.prior.update(x, prev.heading)
         self.box = box
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)

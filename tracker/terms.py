@@ -40,8 +40,12 @@ def apply_motion(x: np.ndarray, points: np.ndarray, pivot: np.ndarray) -> np.nda
 
 
 def point_pair_block(name: str, x: np.ndarray, source: np.ndarray, target: np.ndarray, pivot: np.ndarray,
-                     weight: float, normals: np.ndarray | None = None, point_weight: float = 0.1) -> ResidualBlock:
+                     weight: float, normals: np.ndarray | None = None, point_weight: float = 0.1,
+                     min_norm: int = 0) -> ResidualBlock:
     """Mean squared distance between moved ``source`` points and their paired ``target`` points.
+
+    The mean divides by max(|pairs|, ``min_norm``): with ``min_norm`` > 0 a term resting on few pairs
+    weighs less against the motion terms.
 
     With ``normals`` (unit target normals; zero rows = undefined), each pair contributes its
     point-to-plane distance squared plus ``point_weight`` times its point-to-point distance squared
@@ -59,14 +63,14 @@ def point_pair_block(name: str, x: np.ndarray, source: np.ndarray, target: np.nd
     jac[:, 0, 3] = -s * a[:, 0] - c * a[:, 1]
     jac[:, 1, 3] = c * a[:, 0] - s * a[:, 1]
     if normals is None:
-        return ResidualBlock(name, e.reshape(-1), jac.reshape(-1, 4), weight / max(n, 1))
+        return ResidualBlock(name, e.reshape(-1), jac.reshape(-1, 4), weight / max(n, min_norm, 1))
     has = np.any(normals != 0.0, axis=1)
     scale = np.where(has, np.sqrt(point_weight), 1.0)
     r_plane = (normals * e).sum(axis=1)
     j_plane = np.einsum("ni,nij->nj", normals, jac)
     r = np.concatenate([r_plane, (e * scale[:, None]).reshape(-1)])
     j = np.concatenate([j_plane, (jac * scale[:, None, None]).reshape(-1, 4)])
-    return ResidualBlock(name, r, j, weight / max(n, 1))
+    return ResidualBlock(name, r, j, weight / max(n, min_norm, 1))
 
 
 def motion_consistency_block(x: np.ndarray, previous_heading: float, weight: float,

@@ -1,0 +1,68 @@
+"""``sot-apps track`` through main([...]): outputs, negative --init-box values, one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sot_apps.cli.main import main
+from sot_apps.io.tracks import read_track
+
+
+@pytest.mark.slow
+def test_track_by_id_prefix_writes_track_and_shape(pandaset_root, tmp_path, capsys):
+    out = tmp_path / "t"
+    code = main(["track", str(pandaset_root), "--track-id", "8ac00bad", "--end-frame", "4", "--quiet",
+                 "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    track, shape = read_track(out)
+    assert track.object_id.startswith("8ac00bad") and track.label == "Car"
+    assert [r.frame for r in track.frames] == [0, 1, 2, 3, 4]
+    assert track.config["preset"] == "full" and track.config["seed"] == 0
+    assert "init" in track.frames[0].flags and len(shape) > 100
+    # world states near the annotations (an independent reader: the csv file)
+    from sot_apps.io import open_sequence
+    truth = open_sequence(pandaset_root).tracks()[track.object_id]
+    for rec in track.frames:
+        box = truth.box_at(rec.frame)
+        assert np.hypot(rec.state.x - box.x, rec.state.y - box.y) < 0.5
+
+
+@pytest.mark.slow
+def test_init_box_with_negative_first_value(pandaset_root, tmp_path, capsys):
+    out = tmp_path / "neg"
+    code = main(["track", str(pandaset_root), "--init-box", "-5.485,-6.114,0.427,0.7736,4.726,1.969,1.548",
+                 "--end-frame", "2", "--preset", "icp_mp", "--seed", "3", "--no-deskew", "--quiet", "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    doc = json.loads((out / "track.json").read_text())
+    assert doc["init_box"]["x"] == -5.485 and doc["object_id"] == "custom"
+    assert doc["config"]["preset"] == "icp_mp" and doc["config"]["seed"] == 3 and doc["config"]["deskew"] is False
+    assert (out / "shape.ply").is_file()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--track-id", "zzzz"], "no annotated track id"),
+    (["--track-id", "8ac00bad", "--start-frame", "99"], "out of range"),
+    (["--init-box", "1,2,nan,0,4,2,1.5"], "finite"),
+    (["--init-box", "1,2,3"], "7 comma-separated"),
+    (["--init-box", "1,2,0,0,4,2,1.5", "--end-frame", "70"], "out of range"),
+])
+def test_bad_input_is_one_line_error(pandaset_root, tmp_path, capsys, args, message):
+    code = main(["track", str(pandaset_root), *args, "--quiet", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "x" / "track.json").exists()
+
+
+def test_empty_init_box_is_flagged_not_fatal(pandaset_root, tmp_path, capsys):
+    out = tmp_path / "empty"
+    code = main(["track", str(pandaset_root), "--init-box", "500,500,0,0,4,2,1.5", "--end-frame", "2", "--quiet",
+                 "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0
+    assert "no points" in captured.err
+    track, shape = read_track(out)
+    assert all("no_points" in r.flags for r in track.frames) and len(shape) == 0
