@@ -77,6 +77,7 @@ class OfflineParams:
     voxel: float = 0.05
     min_shape_points: int = 10
     folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
+    first_frame_weight: float = 1.0     # data weight of frame 0 (its registration sets the gauge)
     gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
 
 
@@ -232,6 +233,7 @@ class _Solver:
         self.frame_idx = np.concatenate(frame_idx) if frame_idx else np.zeros(0, dtype=np.int64)
         counts = np.bincount(self.frame_idx, minlength=self.k).astype(np.float64)
         scale = np.where(counts > 0, np.minimum(1.0, p.effective_points / np.maximum(counts, 1.0)), 0.0)
+        scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
 
     def _data(self, states: np.ndarray, with_jacobian: bool):
