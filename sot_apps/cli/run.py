@@ -44,12 +44,14 @@ def register(subparsers) -> argparse.ArgumentParser:
         examples=[
             "sot-apps run examples/pipeline.json",
             "sot-apps run examples/pipeline.json --workers 2 --out /tmp/pipeline_out",
-            "sot-apps run examples/pipeline.json --dask-local 2",
+            "sot-apps run examples/pipeline.json --dask-local 2 --report",
             "sot-apps run examples/pipeline.json --dask tcp://10.0.0.5:8786",
         ])
     parser.add_argument("pipeline", metavar="PIPELINE.json", help="pipeline file")
     parser.add_argument("--out", metavar="DIR", help="output directory (overrides the file's 'out')")
     add_executor_arguments(parser)
+    parser.add_argument("--report", action="store_true",
+                        help="also write OUT/report/index.html (figures of the first sequences, as `sot-apps demo`)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
     return parser
@@ -68,6 +70,10 @@ def run(args: argparse.Namespace) -> int:
     for failure in result.failed:
         print(f"FAILED {failure.key}: {failure.error}")
     print(f"manifest: {result.manifest}")
+    if args.report:
+        from ..report import build_report
+
+        print(f"report: {build_report(result, config.description or 'sot-apps pipeline report')}")
     if result.failed:
         print(f"failures: {result.failures}")
     return 1 if result.failed else 0
