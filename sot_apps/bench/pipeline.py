@@ -7,6 +7,9 @@ planner does in the main process); that start-up time is reported
 separately from the tracking time. Tracked frames = frames after each object's start frame.
 "local processes" with 1 worker runs the tasks in this process (as ``sot-apps run`` does); a Dask
 LocalCluster of 1 worker is one worker process. Speed-up is relative to 1 worker of the same executor.
+"task s" sums the tasks' own durations; concurrency = task s / wall s (how many ran at once on average).
+On a shared machine the tasks slow down when other processes compete for the cores: compare the task
+seconds of 1 and 2 workers to see it.
 """
 
 from __future__ import annotations
@@ -57,10 +60,13 @@ def measure(sequence: Path, configs: list[tuple[str, int]], objects: int | None,
                 result = run_pipeline(config, spec, progress=progress, session=session)
             seconds = result.stage_seconds["track"]
             frames = result.tracked_frames()
+            busy = sum(u.seconds for u in result.by_stage("track"))
             rows.append({"executor": EXECUTOR_NAMES[kind],
                          "workers": workers, "objects": len(result.by_stage("track")),
                          "failed": len(result.failed), "tracked_frames": frames, "startup_s": round(startup, 2),
-                         "tracking_s": round(seconds, 2), "frames_per_s": round(frames / seconds, 2) if seconds else 0.0})
+                         "tracking_s": round(seconds, 2), "task_s": round(busy, 2),
+                         "concurrency": round(busy / seconds, 2) if seconds else 0.0,
+                         "frames_per_s": round(frames / seconds, 2) if seconds else 0.0})
     base = {r["executor"]: r["frames_per_s"] for r in rows if r["workers"] == 1}
     for r in rows:
         b = base.get(r["executor"])
@@ -69,12 +75,14 @@ def measure(sequence: Path, configs: list[tuple[str, int]], objects: int | None,
 
 
 def format_table(rows: list[dict]) -> str:
-    lines = ["| executor | workers | objects | tracked frames | start-up s | tracking s | frames/s | speed-up |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| executor | workers | objects | tracked frames | start-up s | tracking s (wall) | task s (sum) "
+             "| concurrency | frames/s | speed-up |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         speedup = "–" if r["speedup"] is None else f"{r['speedup']:.2f}x"
         lines.append(f"| {r['executor']} | {r['workers']} | {r['objects']} | {r['tracked_frames']} | "
-                     f"{r['startup_s']:.1f} | {r['tracking_s']:.1f} | {r['frames_per_s']:.1f} | {speedup} |")
+                     f"{r['startup_s']:.1f} | {r['tracking_s']:.1f} | {r['task_s']:.1f} | {r['concurrency']:.2f} | "
+                     f"{r['frames_per_s']:.1f} | {speedup} |")
     return "\n".join(lines)
 
 
