@@ -57,6 +57,8 @@ class TrackerConfig:
     prior_frame: str = "world"           # "world" (paper) or "object": average the motion in the box frame
     z_mode: str = "icp"                  # "icp": dz from the loss like dx, dy; "ground": the box keeps its start
                                          # height above the local road plane; "fixed": dz = 0
+    max_speed_change: float = 0.0        # > 0: |dx, dy - predicted| capped at this along / half across (m/frame)
+    min_quality: float = 0.0             # > 0: a frame whose fit quality is below this continues on the prior
     max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
     coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
     mp_reference: str = "prior"          # "prior" (paper) or "iteration" (upstream: previous outer iteration)
@@ -123,7 +125,7 @@ class TrackerConfig:
                 raise ValueError(f"{name} must be positive")
 
 
-_FULL = TrackerConfig(outer_iterations=5, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
+_FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
                       anderson_depth=3, symmetric_mc=False, prior_frame="object", max_yaw_change=0.05,
                       gpf_seed_threshold=0.3, gpf_distance_threshold=0.2, z_mode="ground", preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,

@@ -56,6 +56,8 @@ def _low_plane(points: np.ndarray, params: GroundParams) -> tuple[np.ndarray, fl
     do not move it); bins whose low point is far from the plane (a vehicle's underside, a cluster of
     multipath returns, a wall) are dropped and the plane is refitted.
     """
+    step = max(1, len(points) // (4 * params.max_fit_points))
+    points = points[::step]  # quantiles per bin do not need every point
     cell = np.floor(points[:, :2] / params.bin_size).astype(np.int64)
     key = (cell[:, 0] - cell[:, 0].min()) * (int(cell[:, 1].max() - cell[:, 1].min()) + 1) + (cell[:, 1] - cell[:, 1].min())
     order = np.lexsort((points[:, 2], key))
@@ -96,8 +98,10 @@ def _gpf(points: np.ndarray, params: GroundParams,
     Sub-ground outliers (deeper than ``outlier_depth`` below the reference) are ignored while fitting and
     always classified as ground. Returns the ground mask and the fitted plane (None if none fitted).
     """
+    reference_from_low = reference is None
     if reference is None:
         reference = _low_plane(points, params)
+    reference_from_low = reference_from_low and reference is not None
     if reference is None:  # too few points for bins: plain z with the lowest points as the floor
         z = points[:, 2]
         n_low = min(len(z), max(params.lpr_count, int(0.05 * len(z))))
@@ -129,7 +133,9 @@ def _gpf(points: np.ndarray, params: GroundParams,
         if np.array_equal(new_ground, ground):
             break
         ground = new_ground
-    if plane is None:
+    if plane is None:  # GPF's seeds gave no road-like plane (a vehicle filled them): use the first plane
+        if reference_from_low:
+            return ~valid | (z < params.distance_threshold), reference
         return ~valid | (z < lpr + params.distance_threshold), None
     return ~valid | (points @ plane[0] + plane[1] < params.distance_threshold), plane
 

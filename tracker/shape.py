@@ -20,7 +20,13 @@ def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
     if len(points) == 0:
         return points
     idx = np.floor(points / voxel_size).astype(np.int64)
-    unique = np.unique(idx, axis=0)
+    lo = idx.min(axis=0)
+    span = idx.max(axis=0) - lo + 1
+    key = ((idx[:, 0] - lo[0]) * span[1] + (idx[:, 1] - lo[1])) * span[2] + (idx[:, 2] - lo[2])
+    ukey = np.unique(key)  # 1-D unique is much faster than unique rows
+    iz = ukey % span[2]
+    rest = ukey // span[2]
+    unique = np.column_stack([rest // span[1] + lo[0], rest % span[1] + lo[1], iz + lo[2]])
     return (unique + 0.5) * voxel_size
 
 

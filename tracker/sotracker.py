@@ -196,7 +196,7 @@ class Tracker:
             return np.zeros((0, 3)), flags
         ego_from_world = invert_transform(np.asarray(frame.world_from_ego, dtype=np.float64))
         centre_ego = transform_points(ego_from_world, box.center[None])[0]
-        radius = 0.5 * float(np.hypot(box.length, box.width)) * scale + c.gpf_margin
+        radius = 0.5 * float(np.hypot(box.length, box.width)) * (scale + 0.5) + c.gpf_margin
         deskew = (c.deskew and frame.point_time_offset_ns is not None and self._previous_pose is not None
                   and len(frame.point_time_offset_ns) == len(pts))
         if deskew:
@@ -220,16 +220,19 @@ class Tracker:
         d = world[:, :2] - box.center[:2]
         u = np.abs(d @ np.array([ca, sa]))
         v = np.abs(d @ np.array([-sa, ca]))
-        world = world[(u <= 0.5 * box.length * scale + c.gpf_margin) & (v <= 0.5 * box.width * scale + c.gpf_margin)]
+        gscale = scale + 0.5
+        world = world[(u <= 0.5 * box.length * gscale + c.gpf_margin) & (v <= 0.5 * box.width * gscale + c.gpf_margin)]
         self._ground_points = np.zeros((0, 3))
         if c.ground_removal and len(world) >= 3:
             is_ground = ground_mask(world, self.ground_params)
             self._ground_points = world[is_ground]
             world = world[~is_ground]
-        # keep only what a search box can contain
+        # keep only what a search box can contain (the box moves a little during the outer loop)
         d = world[:, :2] - box.center[:2]
-        keep_radius = 0.5 * float(np.hypot(box.length, box.width)) * scale
-        world = world[(d * d).sum(axis=1) <= keep_radius * keep_radius]
+        u = np.abs(d @ np.array([ca, sa]))
+        v = np.abs(d @ np.array([-sa, ca]))
+        slack = 1.0
+        world = world[(u <= 0.5 * box.length * scale + slack) & (v <= 0.5 * box.width * scale + slack)]
         return world, flags
 
     # ------------------------------------------------------------------ API
@@ -415,7 +418,7 @@ class Tracker:
         prior[3] *= c.coast_yaw_decay ** self._coasting
         search_scale = c.first_search_scale if first else c.search_scale
         reach_box = _box_moved(prev, prior)
-        local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale) + 0.5)
+        local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale))
         flags += point_flags
         x = prior.copy()
         info: dict = {"crop": 0}
@@ -435,16 +438,27 @@ class Tracker:
         if not np.isfinite(x).all():
             flags.append("prior_only")
             x = prior.copy()
-        if c.z_mode == "fixed":
-            x[2] = 0.0
-        elif c.z_mode == "ground" and self._ground_offset is not None:
-            height = _ground_height(self._ground_points, prev.center[:2] + x[:2], prev)
-            if height is not None:
-                x[2] = height + self._ground_offset - prev.z
         if c.max_yaw_change > 0 and not first and abs(x[3] - prior[3]) > c.max_yaw_change:
             flags.append("yaw_clamped")  # a vehicle cannot turn that suddenly: keep the prior's turn rate +- the cap
             x[3] = prior[3] + np.sign(x[3] - prior[3]) * c.max_yaw_change
+        if c.max_speed_change > 0 and not first and self.steps > 2:
+            # a vehicle's velocity changes little in 0.1 s: cap the deviation from the prediction in the box frame
+            ch, sh = np.cos(prev.heading), np.sin(prev.heading)
+            dev = x[:2] - prior[:2]
+            along, across = ch * dev[0] + sh * dev[1], -sh * dev[0] + ch * dev[1]
+            cap_along, cap_across = c.max_speed_change, 0.5 * c.max_speed_change
+            if abs(along) > cap_along or abs(across) > cap_across:
+                flags.append("motion_clamped")
+                along, across = np.clip(along, -cap_along, cap_along), np.clip(across, -cap_across, cap_across)
+                x[:2] = prior[:2] + np.array([ch * along - sh * across, sh * along + ch * across])
         coasting = "prior_only" in flags
+        if c.min_quality > 0 and not coasting and not first:
+            explained, _ = self._explained(local, _box_moved(prev, self._with_z(x, prev)))
+            if explained < c.min_quality:  # a poor fit (clutter, a few stray points): trust the prior instead
+                flags += ["low_quality", "prior_only"]
+                coasting = True
+                x = prior.copy()
+        x = self._with_z(x, prev)
         x[3] = wrap_angle(x[3])
         box = _box_moved(prev, x)
         quality = self._quality(local, box)
@@ -460,17 +474,33 @@ class Tracker:
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)
 
-    def _quality(self, local: np.ndarray, box: Box) -> float:
-        """Share of the frame's object points within 0.2 m of the shape placed at ``box``, damped when sparse."""
+    def _with_z(self, x: np.ndarray, prev: Box) -> np.ndarray:
+        """The motion with dz set by ``z_mode`` ("ground": keep the start height above the local road)."""
+        x = x.copy()
+        c = self.config
+        if c.z_mode == "fixed":
+            x[2] = 0.0
+        elif c.z_mode == "ground" and self._ground_offset is not None:
+            height = _ground_height(self._ground_points, prev.center[:2] + x[:2], prev)
+            if height is not None:
+                x[2] = height + self._ground_offset - prev.z
+        return x
+
+    def _explained(self, local: np.ndarray, box: Box) -> tuple[float, int]:
+        """Share of the object points in ``box`` within 0.2 m of the shape placed there, and their number."""
         obj = to_object_frame(local[points_in_box(local, box, 1.0)], box)
         if len(obj) == 0 or len(self.shape) == 0:
-            return 0.0
+            return 0.0, len(obj)
         if self._shape_nn is None or self._shape_nn_size != len(self.shape):
             self._shape_nn = NearestNeighbors(self.shape.points)
             self._shape_nn_size = len(self.shape)
         dist, _ = self._shape_nn.query(obj)
-        explained = float((dist <= 0.2).mean())
-        return float(np.clip(explained * min(1.0, len(obj) / 20.0), 0.0, 1.0))
+        return float((dist <= 0.2).mean()), len(obj)
+
+    def _quality(self, local: np.ndarray, box: Box) -> float:
+        """Share of the frame's object points within 0.2 m of the shape placed at ``box``, damped when sparse."""
+        explained, count = self._explained(local, box)
+        return float(np.clip(explained * min(1.0, count / 20.0), 0.0, 1.0))
 
 
 def track(source: FrameSource, init_box: Box, start: int = 0, end: int | None = None,
