@@ -228,3 +228,34 @@ def test_annotated_object_starts_at_its_first_box_with_enough_points(tiny_worlds
     doc["stages"]["track"]["start"] = "first_annotated"
     strict = run_pipeline(PipelineConfig.from_json(doc), ExecutorSpec("inline"), progress=False)
     assert [u.key for u in strict.failed] == [f"track/synth_s4/{obj}"]
+
+
+def test_objects_from_a_detections_file_follow_the_documented_rule(tiny_worlds, tmp_path):
+    """Seed frame = the file's first frame; score >= min_score; highest score first; ids det<frame>_<index>
+    unless given; every track runs to the end of the range."""
+    from sot_apps.io import open_sequence
+    from sot_apps.pipeline.plan import make_plan
+
+    seq = open_sequence(tiny_worlds[0])
+    gt = seq.tracks()
+
+    def det(obj, k, score, **extra):
+        b = gt[obj].box_at(k)
+        return {"x": b.x, "y": b.y, "z": b.z, "heading": b.heading, "length": b.length, "width": b.width,
+                "height": b.height, "score": score, **extra}
+
+    dets = {"frames": [{"frame": 2, "boxes": [det("veh_000", 2, 0.9)]},     # later frame: not a seed
+                       {"frame": 1, "boxes": [det("veh_000", 1, 0.4), det("veh_001", 1, 0.95, id="car_a"),
+                                              det("veh_002", 1, 0.7)]}]}
+    (tmp_path / "dets.json").write_text(json.dumps(dets))
+    doc = {"out": "out", "sequences": [{"path": str(tiny_worlds[0]), "frames": [0, 4],
+                                        "objects": {"from": "detections", "path": "dets.json", "min_score": 0.5}}]}
+    (tmp_path / "p.json").write_text(json.dumps(doc))
+    from sot_apps.pipeline.config import load_config
+
+    plan = make_plan(load_config(tmp_path / "p.json"))
+    objects = plan.objects
+    assert [o.object_id for o in objects] == ["car_a", "det0001_02"]
+    assert [(o.start, o.end) for o in objects] == [(1, 4), (1, 4)]
+    b = gt["veh_002"].box_at(1)
+    assert objects[1].init_box == b and objects[1].annotated == ()
