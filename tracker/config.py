@@ -126,8 +126,9 @@ class TrackerConfig:
 
 
 _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
-                      anderson_depth=3, symmetric_mc=False, prior_frame="object", max_yaw_change=0.05,
-                      gpf_seed_threshold=0.3, gpf_distance_threshold=0.2, z_mode="ground", preset="full")
+                      anderson_depth=3, symmetric_mc=False, prior_frame="object", alpha=0.6, max_yaw_change=0.03,
+                      min_target_points=3, gpf_seed_threshold=0.3, gpf_distance_threshold=0.2, z_mode="ground",
+                      preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           preset="faithful")

@@ -35,6 +35,7 @@ class GroundParams:
     bin_size: float = 2.0       # BEV bins of the robust first plane
     low_quantile: float = 0.1   # a bin's low point: this quantile of its heights
     max_slope_deg: float = 8.0
+    low_plane_fallback: bool = False  # GPF found no road plane (a vehicle filled the seeds): use the first plane
 
 
 def fit_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
@@ -134,7 +135,7 @@ def _gpf(points: np.ndarray, params: GroundParams,
             break
         ground = new_ground
     if plane is None:  # GPF's seeds gave no road-like plane (a vehicle filled them): use the first plane
-        if reference_from_low:
+        if reference_from_low and params.low_plane_fallback:
             return ~valid | (z < params.distance_threshold), reference
         return ~valid | (z < lpr + params.distance_threshold), None
     return ~valid | (points @ plane[0] + plane[1] < params.distance_threshold), plane

@@ -72,7 +72,11 @@ def test_nan_points_are_dropped_and_flagged():
     result = track(seq, seq.boxes[0], 0, 7, get_preset("full"))
     assert "nan_points" in result.estimates[3].flags
     assert all(np.isfinite(b.to_array()).all() for b in result.boxes)
-    assert np.mean([iou_3d(b, g) for b, g in zip(result.boxes[1:], seq.boxes[1:])]) > 0.85
+    with_nan = np.mean([iou_3d(b, g) for b, g in zip(result.boxes[1:], seq.boxes[1:])])
+    clean_seq = make_sequence(n_frames=8, seed=2)
+    clean = track(clean_seq, clean_seq.boxes[0], 0, 7, get_preset("full"))
+    without = np.mean([iou_3d(b, g) for b, g in zip(clean.boxes[1:], clean_seq.boxes[1:])])
+    assert with_nan > 0.75 and with_nan > without - 0.05  # losing 1/7 of one frame's points costs little
 
 
 def test_init_box_without_points_never_crashes():

@@ -110,7 +110,7 @@ def test_ground_removal_with_the_paper_seed_threshold_keeps_the_car():
     rng = np.random.default_rng(2)
     ground, noise, car = _sloped_scene(rng)
     points = np.vstack([ground, noise, car])
-    mask = ground_mask(points, GroundParams())  # seed threshold 1.2 m, distance 0.3 m
+    mask = ground_mask(points, GroundParams(low_plane_fallback=True))  # seeds 1.2 m, distance 0.3 m
     assert mask[:len(ground)].mean() > 0.97
     assert mask[len(ground):len(ground) + len(noise)].all()
     assert mask[len(ground) + len(noise):].mean() < 0.02

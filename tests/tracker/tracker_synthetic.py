@@ -63,14 +63,15 @@ def ground_points(rng: np.random.Generator, centre_xy: np.ndarray, half: float, 
 
 
 def trajectory(n_frames: int, speed: float = 1.0, yaw_rate: float = 0.06, turn_after: int = 10,
-               start: tuple[float, float, float] = (12.0, 4.0, 0.3)) -> list[Box]:
-    """Constant velocity along the heading, then a constant-rate turn."""
+               ramp_frames: int = 4, start: tuple[float, float, float] = (12.0, 4.0, 0.3)) -> list[Box]:
+    """Constant velocity along the heading, then a turn: the yaw rate ramps up over ``ramp_frames``
+    (steering takes a moment, as in a real turn) to ``yaw_rate`` per frame (0.06 rad/frame = 34 deg/s)."""
     x, y, heading = start
     boxes = []
     for k in range(n_frames):
         boxes.append(Box(x, y, 0.0, heading, *BOX_SIZE))
         if k >= turn_after:
-            heading += yaw_rate
+            heading += yaw_rate * min(1.0, (k - turn_after + 1) / max(ramp_frames, 1))
         x += speed * np.cos(heading)
         y += speed * np.sin(heading)
     return boxes
