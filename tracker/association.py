@@ -68,7 +68,7 @@ class RansacResult:
 
 def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, *, max_iterations: int = 200,
                     confidence: float = 0.99, sample_size: int = 3, threshold: float = 0.2,
-                    batch_size: int = 50, max_score_pairs: int = 300) -> RansacResult:
+                    batch_size: int = 50, max_score_pairs: int = 150) -> RansacResult:
     """RANSAC for a 2D rigid transform between paired (N, 2) points ``src`` -> ``dst``.
 
     Inlier: BEV residual <= ``threshold``. Hypotheses are scored on at most ``max_score_pairs`` random

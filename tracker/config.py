@@ -43,6 +43,7 @@ class TrackerConfig:
     ransac_sample_size: int = 3
     ransac_inlier_threshold: float = 0.2
     ransac_min_inliers: int = 10
+    ransac_score_pairs: int = 300        # hypotheses are scored on at most this many random pairs
     max_points: int = 1000               # random subsample of each point set
     min_points: int = 10                 # a term with fewer pairs contributes 0
     data_norm_min: int = 0               # > 0: data terms are sums / max(pairs, this) when the crop is sparse
@@ -127,7 +128,8 @@ class TrackerConfig:
 
 _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
                       anderson_depth=3, symmetric_mc=False, prior_frame="object", alpha=0.6, max_yaw_change=0.03,
-                      min_target_points=3, gpf_seed_threshold=0.3, gpf_distance_threshold=0.2, z_mode="ground",
+                      min_target_points=3, max_points=600, gpf_seed_threshold=0.3, gpf_distance_threshold=0.2,
+                      z_mode="ground",
                       preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,

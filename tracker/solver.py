@@ -29,8 +29,12 @@ def _normal_equations(blocks: list[ResidualBlock]) -> tuple[np.ndarray, np.ndarr
     hessian = np.zeros((4, 4))
     gradient = np.zeros(4)
     for b in blocks:
-        hessian += b.weight * (b.jacobian.T @ b.jacobian)
-        gradient += b.weight * (b.jacobian.T @ b.residuals)
+        if b.normal_equations is not None:
+            hessian += b.weight * b.normal_equations[0]
+            gradient += b.weight * b.normal_equations[1]
+        else:
+            hessian += b.weight * (b.jacobian.T @ b.jacobian)
+            gradient += b.weight * (b.jacobian.T @ b.residuals)
     return hessian, gradient
 
 

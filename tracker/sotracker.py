@@ -367,7 +367,8 @@ class Tracker:
                         keep = ransac_rigid_2d(moved[:, :2], local[idx, :2], np.random.default_rng(ransac_seed),
                                                max_iterations=c.ransac_max_iterations, confidence=c.ransac_confidence,
                                                sample_size=c.ransac_sample_size,
-                                               threshold=c.ransac_inlier_threshold).inliers
+                                               threshold=c.ransac_inlier_threshold,
+                                               max_score_pairs=c.ransac_score_pairs).inliers
                     src, idx = (src[keep], idx[keep]) if keep.sum() >= c.ransac_min_inliers else (src[:0], idx[:0])
                 if len(src) >= c.min_points:
                     normals = self._normals(target, idx) if plane else None
@@ -386,7 +387,7 @@ class Tracker:
                     blocks.append(motion_prior_block(xx, reference, c.weight_mp))
                 return blocks
 
-            result = solve(blocks_at, x, max_iterations=c.solver_iterations)
+            result = solve(blocks_at, x, max_iterations=c.solver_iterations, tolerance=0.1 * c.convergence_tolerance)
             residual = result.x - x
             change = float(np.max(np.abs(residual)))
             x_next = result.x

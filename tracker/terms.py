@@ -8,6 +8,7 @@ squares ``weight * sum(r**2)``; point terms are means over their pairs (weight /
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -16,12 +17,25 @@ __all__ = ["ResidualBlock", "apply_motion", "point_pair_block", "motion_consiste
 
 @dataclass(frozen=True)
 class ResidualBlock:
-    """residuals (m,), jacobian (m, 4), weight: the block contributes weight * sum(residuals**2)."""
+    """residuals (m,), jacobian (m, 4), weight: the block contributes weight * sum(residuals**2).
+
+    ``normal_equations`` optionally carries (J^T J, J^T r) computed in closed form (point terms), so the
+    solver never forms the (m, 4) Jacobian; ``jacobian`` is then built on first access.
+    """
 
     name: str
     residuals: np.ndarray
-    jacobian: np.ndarray
+    jacobian_data: np.ndarray | None
     weight: float
+    normal_equations: tuple[np.ndarray, np.ndarray] | None = None
+    jacobian_fn: Callable[[], np.ndarray] | None = None
+
+    @property
+    def jacobian(self) -> np.ndarray:
+        if self.jacobian_data is not None:
+            return self.jacobian_data
+        assert self.jacobian_fn is not None
+        return self.jacobian_fn()
 
     @property
     def loss(self) -> float:
@@ -56,21 +70,39 @@ def point_pair_block(name: str, x: np.ndarray, source: np.ndarray, target: np.nd
     a = source - pivot
     moved = apply_motion(x, source, pivot)
     e = moved - target
+    w = weight / max(n, min_norm, 1)
+    if normals is None:
+        # closed-form normal equations: J_i = [I_3 | t_i], t_i = d(moved_i)/d(theta)
+        tx = -s * a[:, 0] - c * a[:, 1]
+        ty = c * a[:, 0] - s * a[:, 1]
+        hessian = np.zeros((4, 4))
+        hessian[0, 0] = hessian[1, 1] = hessian[2, 2] = n
+        hessian[0, 3] = hessian[3, 0] = tx.sum()
+        hessian[1, 3] = hessian[3, 1] = ty.sum()
+        hessian[3, 3] = tx @ tx + ty @ ty
+        esum = e.sum(axis=0)
+        gradient = np.array([esum[0], esum[1], esum[2], tx @ e[:, 0] + ty @ e[:, 1]])
+
+        def full_jacobian() -> np.ndarray:
+            jac = np.zeros((n, 3, 4))
+            jac[:, 0, 0] = jac[:, 1, 1] = jac[:, 2, 2] = 1.0
+            jac[:, 0, 3], jac[:, 1, 3] = tx, ty
+            return jac.reshape(-1, 4)
+
+        return ResidualBlock(name, e.reshape(-1), None, w, (hessian, gradient), full_jacobian)
     jac = np.zeros((n, 3, 4))
     jac[:, 0, 0] = 1.0
     jac[:, 1, 1] = 1.0
     jac[:, 2, 2] = 1.0
     jac[:, 0, 3] = -s * a[:, 0] - c * a[:, 1]
     jac[:, 1, 3] = c * a[:, 0] - s * a[:, 1]
-    if normals is None:
-        return ResidualBlock(name, e.reshape(-1), jac.reshape(-1, 4), weight / max(n, min_norm, 1))
     has = np.any(normals != 0.0, axis=1)
     scale = np.where(has, np.sqrt(point_weight), 1.0)
     r_plane = (normals * e).sum(axis=1)
     j_plane = np.einsum("ni,nij->nj", normals, jac)
     r = np.concatenate([r_plane, (e * scale[:, None]).reshape(-1)])
     j = np.concatenate([j_plane, (jac * scale[:, None, None]).reshape(-1, 4)])
-    return ResidualBlock(name, r, j, weight / max(n, min_norm, 1))
+    return ResidualBlock(name, r, j, w)
 
 
 def motion_consistency_block(x: np.ndarray, previous_heading: float, weight: float,

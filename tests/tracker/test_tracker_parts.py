@@ -43,6 +43,10 @@ def test_point_pair_jacobian_matches_finite_differences(with_normals):
         lambda xx: point_pair_block("icp", xx, src, dst, pivot, 1.0, normals, 0.1).residuals, x)
     np.testing.assert_allclose(block.residuals, residuals)
     np.testing.assert_allclose(block.jacobian, numeric, atol=1e-6)
+    if block.normal_equations is not None:  # the closed-form normal equations the solver uses
+        hessian, gradient = block.normal_equations
+        np.testing.assert_allclose(hessian, block.jacobian.T @ block.jacobian, atol=1e-9)
+        np.testing.assert_allclose(gradient, block.jacobian.T @ block.residuals, atol=1e-9)
 
 
 def test_apply_motion_rotates_about_the_pivot_then_translates():
