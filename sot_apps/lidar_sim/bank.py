@@ -167,9 +167,10 @@ def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: I
                           ) -> dict[str, dict[int, np.ndarray]]:
     """Per track and frame, the object-frame points of the track's box (each sweep read once).
 
-    Each point is put into the object frame of the box AT ITS CAPTURE TIME (boxes interpolated between
-    annotated frames with the sweep's per-point time offsets), which undoes the rolling-scan smear of
-    moving vehicles. Points below ``ground_clearance`` above the box bottom are dropped.
+    Annotated boxes describe an object when the LiDAR saw it (PandaSet's do, and so do the synthetic
+    world's), so each box is stamped with the median capture time of the points near it. Each point is
+    then put into the object frame of the box interpolated to ITS OWN capture time, which undoes the
+    rolling-scan smear of moving vehicles. Points below ``ground_clearance`` above the box bottom are dropped.
     """
     from tqdm import tqdm
 
@@ -182,21 +183,30 @@ def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: I
     by_frame: dict[int, list[str]] = {}
     for tid in track_ids:
         for k in tracks[tid].frames:
-            if k not in excluded:
-                by_frame.setdefault(k, []).append(tid)
-    out: dict[str, dict[int, np.ndarray]] = {tid: {} for tid in track_ids}
+            by_frame.setdefault(k, []).append(tid)
+    # Pass 1: the points near each box, their capture times, and the box's observation time.
+    near_points: dict[str, dict[int, tuple[np.ndarray, np.ndarray]]] = {tid: {} for tid in track_ids}
+    seen_ns: dict[str, dict[int, float]] = {tid: {} for tid in track_ids}
     for k in tqdm(sorted(by_frame), desc="aggregating", unit="frame", disable=not progress, leave=False):
         pts_world = seq.points_world(k)
         offsets = seq.sweep(k).time_offset_ns
         for tid in by_frame[k]:
-            track = tracks[tid]
-            box = track.box_at(k)
+            box = tracks[tid].box_at(k)
             near = np.flatnonzero(points_in_box(pts_world, box, scale=(1.3, 1.3, 1.05)))
-            if near.size == 0:
-                continue
-            t = stamps[k] + (offsets[near] if offsets is not None else 0)
-            st = _states_at(stamps[track.frames], track.boxes, np.broadcast_to(t, near.shape))
-            d = pts_world[near] - st[:, :3]
+            t = stamps[k] + (offsets[near] if offsets is not None else np.zeros(near.size, dtype=np.int64))
+            inside = points_in_box(pts_world[near], box)
+            seen_ns[tid][k] = float(np.median(t[inside])) if inside.any() else float(stamps[k])
+            if near.size and k not in excluded:
+                near_points[tid][k] = (pts_world[near], t)
+    # Pass 2: object-frame points with the box interpolated to each point's capture time.
+    out: dict[str, dict[int, np.ndarray]] = {tid: {} for tid in track_ids}
+    for tid in track_ids:
+        track = tracks[tid]
+        box_times = np.array([seen_ns[tid][k] for k in track.frames])
+        for k, (pts, t) in near_points[tid].items():
+            box = track.box_at(k)
+            st = _states_at(box_times, track.boxes, t)
+            d = pts - st[:, :3]
             c, s = np.cos(st[:, 3]), np.sin(st[:, 3])
             local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
             half = box.size / 2.0 * 1.02

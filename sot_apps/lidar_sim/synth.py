@@ -11,7 +11,9 @@ The world (everything in metres, world frame z up, ground plane z = 0):
 
 Frame ``k``'s timestamp marks the end of its sweep. Points are simulated with a rolling scan (see
 :mod:`sot_apps.lidar_sim.scan`): the ego and every vehicle are at their exact pose at each column's time.
-Ground-truth boxes in ``sequence.json`` are the states at the frame timestamp.
+Ground-truth boxes in ``sequence.json`` describe each object when the LiDAR saw it (the median capture
+time of its returns; see :func:`observation_times_ns`), as PandaSet's annotations do; ``gt/objects.json``
+has the states at the frame timestamps and ``gt/trajectories.npz`` every millisecond.
 
 Ground truth beyond the sequence (``DIR/gt/``, see docs/synth.md):
 
@@ -40,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import Box
+from tracker.geometry import Box, invert_transform, transform_points
 
 from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
@@ -129,6 +131,33 @@ class World:
         from .scan import build_static_scene
 
         return build_static_scene(self.sim_objects())
+
+
+def observation_times_ns(world: World, scan: Scan, frame_time_ns: int) -> np.ndarray:
+    """(len(world.objects),) absolute time at which the LiDAR saw each object in this sweep.
+
+    The median capture time of the object's returns; for an object without returns, the firing time of
+    the column that points at its box centre. Annotations are boxes at these times, as PandaSet's are:
+    an annotator draws the box around the points, which a rolling scan records at its own times.
+    """
+    num = len(world.objects)
+    out = np.full(num, frame_time_ns, dtype=np.int64)
+    inst = scan.instance
+    order = np.argsort(inst, kind="stable")
+    starts = np.searchsorted(inst[order], np.arange(num))
+    ends = np.searchsorted(inst[order], np.arange(num), side="right")
+    ego_from_world = invert_transform(world.world_from_ego(frame_time_ns))
+    col_t = world.sensor.column_time_offsets_ns()
+    col_az = np.asarray(world.sensor.column_azimuths(), dtype=np.float64)
+    for i, o in enumerate(world.objects):
+        if ends[i] > starts[i]:
+            out[i] = frame_time_ns + int(np.median(scan.time_offset_ns[order[starts[i]:ends[i]]]))
+            continue
+        centre = transform_points(ego_from_world, o.box_at(frame_time_ns).center[None])[0]
+        azimuth = math.atan2(centre[1], centre[0])
+        diff = np.abs((col_az - azimuth + math.pi) % (2.0 * math.pi) - math.pi)
+        out[i] = frame_time_ns + int(col_t[int(np.argmin(diff))])
+    return out
 
 
 # ------------------------------------------------------------------------------------------ motion
@@ -330,7 +359,9 @@ def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: st
         write_npz(out / "gt" / "labels" / f"{k:06d}.npz", instance=scan.instance.astype(np.int32),
                   beam=scan.beam.astype(np.int16), column=scan.column.astype(np.int16))
         infos.append(FrameInfo(k, t, world.world_from_ego(t), Path(f"points/{k:06d}.npz")))
-        annotations.append([BoxAnnotation(o.id, o.label, o.box_at(t), stationary=not o.moving) for o in world.objects])
+        seen_ns = observation_times_ns(world, scan, t)
+        annotations.append([BoxAnnotation(o.id, o.label, o.box_at(int(ts)), stationary=not o.moving)
+                            for o, ts in zip(world.objects, seen_ns)])
 
     camera_models: dict[str, Camera] = {}
     camera_times: list[np.ndarray] = []
