@@ -16,7 +16,8 @@ from .errors import InputError
 from .io.sequence import Sequence
 from .io.tracks import FrameRecord, Size, TrackFile, write_track
 
-__all__ = ["parse_init_box", "resolve_span", "track_sequence", "track_result_to_trackfile", "write_track_result"]
+__all__ = ["parse_init_box", "resolve_span", "track_sequence", "refine_track_offline", "track_result_to_trackfile",
+           "write_track_result"]
 
 
 def parse_init_box(text: str, where: str = "--init-box") -> Box:
@@ -77,10 +78,21 @@ def track_result_to_trackfile(seq: Sequence, result: TrackResult, object_id: str
                      frames=records, label=label)
 
 
+def refine_track_offline(seq: Sequence, result: TrackResult) -> TrackResult:
+    """Offline refinement of an online result: all states jointly against the final shape (tracker.offline)."""
+    from tracker.offline import refine_offline
+
+    return refine_offline(seq, result, result.config)
+
+
 def write_track_result(directory: str | Path, seq: Sequence, result: TrackResult, object_id: str, init_box: Box,
-                       label: str | None = None) -> Path:
-    """Write ``directory/track.json`` and ``directory/shape.ply``; returns the json path."""
-    trackfile = track_result_to_trackfile(seq, result, object_id, init_box, label)
+                       label: str | None = None, offline: bool = False) -> Path:
+    """Write ``directory/track.json`` and ``directory/shape.ply``; returns the json path.
+
+    ``offline`` records in the config block that ``result`` was refined offline (``mode: offline``).
+    """
+    extra = {"mode": "offline", "refined": True} if offline else None
+    trackfile = track_result_to_trackfile(seq, result, object_id, init_box, label, config_extra=extra)
     return write_track(directory, trackfile, result.shape)
 
 

@@ -19,7 +19,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "DIR/shape.ply (the aggregated shape in the object frame).",
         examples=["sot-apps track ../shared/data/pandaset_002 --track-id 8ac00bad --out out/8ac00bad",
                   "sot-apps track ../shared/data/pandaset_002 --init-box -5.49,-6.11,0.43,0.77,4.73,1.97,1.55 "
-                  "--start-frame 0 --end-frame 20 --preset full --out out/car"])
+                  "--start-frame 0 --end-frame 20 --preset full --out out/car",
+                  "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --offline --out out/91aa5b5c"])
     add_sequence_argument(parser)
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--track-id", metavar="ID", help="annotated track id (a unique prefix is enough); the start "
@@ -35,13 +36,16 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--deskew", action=argparse.BooleanOptionalAction, default=None,
                         help="de-skew the ego motion with per-point times (default: the preset's setting)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    parser.add_argument("--offline", action="store_true",
+                        help="after the online pass, refine all states jointly against the final shape with a "
+                             "smoothness prior, and rebuild the shape (docs/evaluation.md)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..tracking import init_points, parse_init_box, track_sequence, write_track_result
+    from ..tracking import init_points, parse_init_box, refine_track_offline, track_sequence, write_track_result
 
     overrides = {"seed": args.seed}
     if args.deskew is not None:
@@ -70,7 +74,9 @@ def run(args: argparse.Namespace) -> int:
     if init_points(seq, result.frames[0], init_box) == 0:
         sys.stderr.write(f"warning: the init box holds no points at frame {result.frames[0]}; "
                          "frames continue on the motion prior and are flagged\n")
-    path = write_track_result(args.out, seq, result, object_id, init_box, label)
+    if args.offline:
+        result = refine_track_offline(seq, result)
+    path = write_track_result(args.out, seq, result, object_id, init_box, label, offline=args.offline)
     flagged = sum(1 for e in result.estimates[1:] if "no_points" in e.flags or "prior_only" in e.flags)
     times = sorted(e.time_ms for e in result.estimates[1:]) or [0.0]
     print(f"tracked {object_id} frames {result.frames[0]}..{result.frames[-1]} ({len(result.frames)} frames, "

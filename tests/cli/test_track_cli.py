@@ -31,6 +31,28 @@ def test_track_by_id_prefix_writes_track_and_shape(pandaset_root, tmp_path, caps
 
 
 @pytest.mark.slow
+def test_offline_refinement_is_recorded_and_stays_on_the_vehicle(pandaset_root, tmp_path, capsys):
+    online, offline = tmp_path / "on", tmp_path / "off"
+    base = ["track", str(pandaset_root), "--track-id", "91aa5b5c", "--end-frame", "12", "--quiet"]
+    assert main(base + ["--out", str(online)]) == 0, capsys.readouterr().err
+    assert main(base + ["--offline", "--out", str(offline)]) == 0, capsys.readouterr().err
+    on, _ = read_track(online)
+    off, shape = read_track(offline)
+    assert off.config["mode"] == "offline" and off.config["refined"] is True and "mode" not in on.config
+    assert all("offline" in r.flags for r in off.frames) and len(shape) > 50
+    from sot_apps.io import open_sequence
+    truth = open_sequence(pandaset_root).tracks()[off.object_id]
+
+    def mean_error(track):
+        return np.mean([np.hypot(r.state.x - truth.box_at(r.frame).x, r.state.y - truth.box_at(r.frame).y)
+                        for r in track.frames])
+
+    # the refined states differ from the online ones, and stay on the annotated vehicle
+    assert max(abs(a.state.x - b.state.x) for a, b in zip(on.frames, off.frames)) > 1e-4
+    assert mean_error(off) < 0.3
+
+
+@pytest.mark.slow
 def test_init_box_with_negative_first_value(pandaset_root, tmp_path, capsys):
     out = tmp_path / "neg"
     code = main(["track", str(pandaset_root), "--init-box", "-5.485,-6.114,0.427,0.7736,4.726,1.969,1.548",
