@@ -139,8 +139,7 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
             hidden = lookup_depth(dm, roi, pix.astype(np.float64)) < z - params.margin(z)
         pix, points_k = pix[~hidden], points_k[~hidden]
         out.instance[pix[:, 1], pix[:, 0]] = obj.index + 1
-        stats = dict(index=obj.index, object_id=obj.object_id, pixels=len(pix), pixels_noc=0,
-                     hidden_k=int(hidden.sum()), mean_flow=0.0, mean_flow_noc=0.0, has_flow=False)
+        stats = ObjectPairStats.fields_before_flow(obj, len(pix), hidden.sum())
         if obj.world_from_object_k1 is not None and len(pix):
             motion = setup.motion(obj)
             points_k1 = apply_transform(motion, points_k)

@@ -90,6 +90,12 @@ class ObjectPairStats:
     mean_flow_noc: float
     has_flow: bool
 
+    @staticmethod
+    def fields_before_flow(obj: "FlowObject", pixels: int = 0, hidden_k: int = 0) -> dict:
+        """The record's fields for an object seen on ``pixels`` pixels in image k, before its flow is known."""
+        return dict(index=obj.index, object_id=obj.object_id, pixels=int(pixels), pixels_noc=0,
+                    hidden_k=int(hidden_k), mean_flow=0.0, mean_flow_noc=0.0, has_flow=False)
+
     @property
     def occluded_share(self) -> float:
         return 0.0 if self.pixels == 0 else 1.0 - self.pixels_noc / self.pixels

@@ -59,7 +59,7 @@ def sparse_flow(setup: PairSetup, objects: list[FlowObject]) -> PairFlow:
     out = PairFlow.empty(model.width, model.height)
     usable = [o for o in objects if o.points is not None and len(o.points)]
     if not usable:
-        out.objects = [ObjectPairStats(o.index, o.object_id, 0, 0, 0, 0.0, 0.0, False) for o in objects]
+        out.objects = [ObjectPairStats(**ObjectPairStats.fields_before_flow(o)) for o in objects]
         return out
 
     def place(camera_from_world: np.ndarray, attr: str):
@@ -95,8 +95,7 @@ def sparse_flow(setup: PairSetup, objects: list[FlowObject]) -> PairFlow:
         keep = order[first]
         uv0, z0, p0, pix = uv0[keep], z0[keep], p0[keep], pix[keep]
         out.instance[pix[:, 1], pix[:, 0]] = obj.index + 1
-        stats = dict(index=obj.index, object_id=obj.object_id, pixels=len(pix), pixels_noc=0,
-                     hidden_k=int(hidden.sum()), mean_flow=0.0, mean_flow_noc=0.0, has_flow=False)
+        stats = ObjectPairStats.fields_before_flow(obj, len(pix), hidden.sum())
         if obj.world_from_object_k1 is not None and len(pix):
             motion = setup.motion(obj)
             p1 = apply_transform(motion, p0)
@@ -118,6 +117,6 @@ def sparse_flow(setup: PairSetup, objects: list[FlowObject]) -> PairFlow:
                          mean_flow=float(np.linalg.norm(flow[good], axis=1).mean()) if good.any() else 0.0,
                          mean_flow_noc=float(np.linalg.norm(flow[noc], axis=1).mean()) if noc.any() else 0.0)
         stats_by_index[obj.index] = ObjectPairStats(**stats)
-    out.objects = [stats_by_index.get(o.index, ObjectPairStats(o.index, o.object_id, 0, 0, 0, 0.0, 0.0, False))
+    out.objects = [stats_by_index.get(o.index, ObjectPairStats(**ObjectPairStats.fields_before_flow(o)))
                    for o in objects]
     return out

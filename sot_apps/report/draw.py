@@ -48,24 +48,23 @@ def _pad_to(img: np.ndarray, h: int | None = None, w: int | None = None) -> np.n
     return out
 
 
-def hstack(images: list[np.ndarray], gap: int = 8) -> np.ndarray:
-    h = max(i.shape[0] for i in images)
+def _stack(images: list[np.ndarray], axis: int, gap: int) -> np.ndarray:
+    """Images side by side (axis 1) or one above the other (axis 0), padded white, ``gap`` px apart."""
+    extent = max(i.shape[1 - axis] for i in images)
     parts = []
     for i, img in enumerate(images):
-        parts.append(_pad_to(img, h=h))
+        parts.append(_pad_to(img, h=extent) if axis == 1 else _pad_to(img, w=extent))
         if i < len(images) - 1:
-            parts.append(np.full((h, gap, 3), 255, np.uint8))
-    return np.concatenate(parts, axis=1)
+            parts.append(np.full((extent, gap, 3) if axis == 1 else (gap, extent, 3), 255, np.uint8))
+    return np.concatenate(parts, axis=axis)
+
+
+def hstack(images: list[np.ndarray], gap: int = 8) -> np.ndarray:
+    return _stack(images, axis=1, gap=gap)
 
 
 def vstack(images: list[np.ndarray], gap: int = 8) -> np.ndarray:
-    w = max(i.shape[1] for i in images)
-    parts = []
-    for i, img in enumerate(images):
-        parts.append(_pad_to(img, w=w))
-        if i < len(images) - 1:
-            parts.append(np.full((gap, w, 3), 255, np.uint8))
-    return np.concatenate(parts, axis=0)
+    return _stack(images, axis=0, gap=gap)
 
 
 def title_bar(img: np.ndarray, title: str, height: int = 30, scale: float = 0.6) -> np.ndarray:
