@@ -42,7 +42,8 @@ class Realism:
 
 def incidence_cosine(directions: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """cos(theta) between the reversed unit ray and the unit normal (normals face the origin)."""
-    return np.clip(-np.einsum("ij,ij->i", directions, normals), 0.0, 1.0)
+    dot = directions[:, 0] * normals[:, 0] + directions[:, 1] * normals[:, 1] + directions[:, 2] * normals[:, 2]
+    return np.clip(-dot, 0.0, 1.0)
 
 
 def apply_range_noise(distance: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:

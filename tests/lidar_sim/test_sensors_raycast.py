@@ -8,7 +8,7 @@ import trimesh
 
 from sot_apps.errors import InputError
 from sot_apps.lidar_sim.noise import Realism
-from sot_apps.lidar_sim.raycast import RaycastScene, cast_rays
+from sot_apps.lidar_sim.raycast import RaycastScene, _horizontal_rectangle, cast_rays, compiled_backend_available
 from sot_apps.lidar_sim.scan import SimObject, Trajectory, range_image, simulate_scan
 from sot_apps.lidar_sim.sensors import PRESETS, load_sensor
 
@@ -56,8 +56,18 @@ def test_sensor_json_round_trip(tmp_path):
         load_sensor(str(path))
 
 
-def test_ray_at_box_returns_analytic_distance():
-    scene = RaycastScene()
+BACKENDS = ["compiled", "embreex"]
+
+
+def test_compiled_tracer_is_built():
+    # pip install builds sot_apps/lidar_sim/_embree_trace.c; the speed figures in README depend on it
+    assert compiled_backend_available()
+    assert RaycastScene().backend == "compiled"
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_ray_at_box_returns_analytic_distance(backend):
+    scene = RaycastScene(backend)
     box = trimesh.creation.box(extents=[2.0, 3.0, 1.5])
     gid0 = scene.add_mesh(box.vertices + [10.0, 0.0, 0.0], box.faces)
     gid1 = scene.add_mesh(box.vertices + [0.0, 20.0, 0.0], box.faces)
@@ -75,9 +85,84 @@ def test_ray_at_box_returns_analytic_distance():
     assert (hits.prim_id >= 0).all() and (hits.prim_id < len(box.faces)).all()
     miss = scene.cast(np.zeros(3), np.array([[0.0, -1.0, 0.0]]))
     assert np.isinf(miss.distance[0]) and miss.geom_id[0] == -1
-    # the process-parallel path returns the same hits
+    # the parallel path (threads for compiled, forked processes for embreex) returns the same hits
     par = cast_rays(scene, np.zeros(3), np.repeat(dirs, 50, axis=0), processes=2, min_rays_per_process=1000)
     np.testing.assert_array_equal(par.distance, np.repeat(hits.distance, 50))
+    np.testing.assert_array_equal(par.geom_id, np.repeat(hits.geom_id, 50))
+
+
+def _ground_quad(z: float, x0: float, x1: float, y0: float, y1: float, diagonal: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    v = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]]) if diagonal == 0 else np.array([[0, 1, 3], [1, 2, 3]])
+    return v, f
+
+
+def test_ground_rectangle_detection():
+    assert _horizontal_rectangle(*_ground_quad(-1.5, -10, 20, -5, 5)) == (-1.5, -10.0, 20.0, -5.0, 5.0)
+    assert _horizontal_rectangle(*_ground_quad(0.0, 0, 1, 0, 2, diagonal=1)) == (0.0, 0.0, 1.0, 0.0, 2.0)
+    v, f = _ground_quad(0.0, 0, 1, 0, 1)
+    tilted = v.copy()
+    tilted[2, 2] = 0.1
+    assert _horizontal_rectangle(tilted, f) is None                       # not horizontal
+    rotated = v @ np.array([[0.8, -0.6, 0], [0.6, 0.8, 0], [0, 0, 1.0]]).T
+    assert _horizontal_rectangle(rotated, f) is None                      # not axis-aligned
+    assert _horizontal_rectangle(v, np.array([[0, 1, 2], [0, 1, 2]])) is None   # does not tile the rectangle
+    box = trimesh.creation.box()
+    assert _horizontal_rectangle(np.asarray(box.vertices), np.asarray(box.faces)) is None
+
+
+def test_backends_agree_on_ground_and_meshes():
+    """The compiled loop (analytic ground rectangle) and embreex (both through RaycastScene) give the same hits,
+    and the analytic rectangle matches Embree tracing the same two triangles."""
+    rng = np.random.default_rng(3)
+    meshes = [_ground_quad(-1.8, -60, 60, -40, 40), _ground_quad(-1.0, 5, 9, -2, 2, diagonal=1)]
+    for _ in range(8):
+        shape = trimesh.creation.icosphere(2, rng.uniform(0.5, 1.5)) if rng.random() < 0.5 else \
+            trimesh.creation.box(extents=rng.uniform(0.5, 4.0, 3))
+        meshes.append((np.asarray(shape.vertices) + [rng.uniform(-30, 30), rng.uniform(-30, 30), rng.uniform(-1.5, 1.0)],
+                       np.asarray(shape.faces)))
+    tilted_v, tilted_f = _ground_quad(-1.2, -20, -10, 10, 20)
+    tilted_v[2, 2] = -0.2
+    meshes.append((tilted_v, tilted_f))
+    scenes = {b: RaycastScene(b) for b in BACKENDS}
+    for scene in scenes.values():
+        for v, f in meshes:
+            scene.add_mesh(v, f)
+    assert [r.geom_id for r in scenes["compiled"]._rects] == [0, 1]
+    dirs = rng.normal(size=(20_000, 3))
+    dirs[:, 2] = -np.abs(dirs[:, 2]) * rng.uniform(0.02, 1.0, len(dirs))
+    dirs[::7, 2] *= -1                                                    # some rays go up
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    origins = rng.uniform([-2, -2, 0.0], [2, 2, 2.0], size=(len(dirs), 3))
+    a = scenes["compiled"].cast(origins, dirs)
+    b = scenes["embreex"].cast(origins, dirs)
+    np.testing.assert_array_equal(a.geom_id, b.geom_id)
+    np.testing.assert_array_equal(a.prim_id, b.prim_id)
+    np.testing.assert_allclose(a.distance[a.hit], b.distance[b.hit], atol=2e-5, rtol=1e-6)
+    assert np.isinf(a.distance[~a.hit]).all()
+    np.testing.assert_allclose(a.normal, b.normal, atol=1e-5)
+    assert {0, 1, len(meshes) - 1} <= set(np.unique(a.geom_id).tolist()) and (a.geom_id == -1).any()
+    on_ground = a.geom_id == 0
+    np.testing.assert_allclose(a.normal[on_ground], np.tile([0, 0, 1.0], (on_ground.sum(), 1)))
+    points = origins[on_ground] + dirs[on_ground] * a.distance[on_ground, None]
+    np.testing.assert_allclose(points[:, 2], -1.8, atol=1e-5)
+    assert (np.abs(points[:, 0]) <= 60 + 1e-6).all() and (np.abs(points[:, 1]) <= 40 + 1e-6).all()
+    # the same ground traced by Embree as two triangles (a 10 um tilt keeps it out of the analytic path)
+    plain = RaycastScene("compiled")
+    v, f = meshes[0]
+    v = v.copy()
+    v[0, 2] -= 1e-5
+    plain.add_mesh(v, f)
+    assert not plain._rects
+    c = plain.cast(origins, dirs)
+    only_ground = RaycastScene("compiled")
+    only_ground.add_mesh(*meshes[0])
+    d = only_ground.cast(origins, dirs)
+    assert (c.hit != d.hit).mean() < 1e-3                                   # only rays grazing the far edges
+    both = c.hit & d.hit
+    assert both.sum() > 5000
+    # heights of the hit points agree to the tilt (distances differ by up to tilt / |dir_z|)
+    np.testing.assert_allclose(c.distance[both] * dirs[both, 2], d.distance[both] * dirs[both, 2], atol=2e-5)
 
 
 @pytest.mark.parametrize("name", ["vlp16", "hdl64e"])

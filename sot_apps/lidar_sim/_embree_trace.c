@@ -1,0 +1,293 @@
+/*
+ * A compiled ray-casting loop over the Embree 4 library that ships inside the embreex wheel.
+ *
+ * Why: embreex's EmbreeScene.run traces from a Cython loop that writes five of its six outputs through
+ * Python objects, and its scene cannot be reached from other compiled code. This loop fills
+ * RTCRayHit records directly and writes final outputs (distance, unit normal facing the ray origin,
+ * primitive and geometry ids), about 1.5x faster per ray. Axis-aligned horizontal rectangles (a ground
+ * plane) are intersected analytically: each ray's Embree segment is cut at its rectangle hit, so rays
+ * to the ground never descend into the vehicles' BVH beyond that point.
+ *
+ * Packaging: a plain shared library built by setup.py (optional; sot_apps.lidar_sim.raycast falls back
+ * to embreex when it is missing) and called through ctypes, one call per batch of rays, with the GIL
+ * released. It does not link against Embree: sot_rt_load() dlopens the library embreex bundles and looks
+ * up the entry points used here. The declarations below follow Embree 4's public C API (rtcore_*.h);
+ * the hit record is over-allocated so that optional trailing instance-id fields have room.
+ *
+ * Conventions (those of raycast.py): misses have distance +inf, geom = prim = -1 and a zero normal.
+ */
+#include <dlfcn.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#if defined(__GNUC__)
+#define SOT_EXPORT __attribute__((visibility("default")))
+#define SOT_ALIGN(n) __attribute__((aligned(n)))
+#else
+#define SOT_EXPORT
+#define SOT_ALIGN(n)
+#endif
+
+/* ---- the subset of Embree 4's C API used here ---------------------------------------------------- */
+typedef void *RTCDevice;
+typedef void *RTCScene;
+typedef void *RTCGeometry;
+
+enum { RTC_GEOMETRY_TYPE_TRIANGLE = 0 };
+enum { RTC_BUFFER_TYPE_INDEX = 0, RTC_BUFFER_TYPE_VERTEX = 1 };
+enum { RTC_FORMAT_UINT3 = 0x5003, RTC_FORMAT_FLOAT3 = 0x9003 };
+#define RTC_FEATURE_FLAGS_ALL 0xffffffffu
+#define RTC_INVALID_ID 0xffffffffu
+
+typedef struct SOT_ALIGN(16) {
+    float org_x, org_y, org_z, tnear;
+    float dir_x, dir_y, dir_z, time;
+    float tfar;
+    unsigned int mask, id, flags;
+} Ray1;
+
+typedef struct SOT_ALIGN(16) {
+    float Ng_x, Ng_y, Ng_z, u, v;
+    unsigned int primID, geomID;
+    unsigned int inst_room[8]; /* instID[levels] (+ instPrimID[levels]) */
+} Hit1;
+
+typedef struct {
+    Ray1 ray;
+    Hit1 hit;
+} RayHit1;
+
+/* RTCIntersectArguments: flags, feature_mask, then optional pointers that stay NULL (zeroed room). */
+typedef struct {
+    unsigned int flags;
+    unsigned int feature_mask;
+    void *room[8];
+} IntersectArgs;
+
+typedef void (*ErrorFn)(void *user, int code, const char *message);
+
+static struct {
+    void *lib;
+    RTCDevice (*newDevice)(const char *);
+    void (*releaseDevice)(RTCDevice);
+    void (*setDeviceErrorFunction)(RTCDevice, ErrorFn, void *);
+    RTCScene (*newScene)(RTCDevice);
+    void (*releaseScene)(RTCScene);
+    void (*commitScene)(RTCScene);
+    RTCGeometry (*newGeometry)(RTCDevice, int);
+    void *(*setNewGeometryBuffer)(RTCGeometry, int, unsigned int, int, size_t, size_t);
+    void (*commitGeometry)(RTCGeometry);
+    void (*attachGeometryByID)(RTCScene, RTCGeometry, unsigned int);
+    void (*releaseGeometry)(RTCGeometry);
+    void (*intersect1)(RTCScene, RayHit1 *, IntersectArgs *);
+} api;
+
+static char last_error[512];
+
+SOT_EXPORT const char *sot_rt_error(void) { return last_error; }
+
+static void on_error(void *user, int code, const char *message) {
+    int *flag = (int *)user;
+    if (flag) *flag = code ? code : 1;
+    snprintf(last_error, sizeof last_error, "embree error %d: %s", code, message ? message : "");
+}
+
+#define LOOKUP(field, name)                                                                            \
+    do {                                                                                               \
+        *(void **)(&api.field) = dlsym(lib, name);                                                     \
+        if (!api.field) {                                                                              \
+            snprintf(last_error, sizeof last_error, "%s not found in %s", name, path);               \
+            return -2;                                                                                 \
+        }                                                                                              \
+    } while (0)
+
+/* Load the Embree 4 library at `path` (the one embreex bundles). 0 on success. */
+SOT_EXPORT int sot_rt_load(const char *path) {
+    if (api.lib) return 0;
+    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (!lib) {
+        snprintf(last_error, sizeof last_error, "cannot load %s: %s", path, dlerror());
+        return -1;
+    }
+    LOOKUP(newDevice, "rtcNewDevice");
+    LOOKUP(releaseDevice, "rtcReleaseDevice");
+    LOOKUP(setDeviceErrorFunction, "rtcSetDeviceErrorFunction");
+    LOOKUP(newScene, "rtcNewScene");
+    LOOKUP(releaseScene, "rtcReleaseScene");
+    LOOKUP(commitScene, "rtcCommitScene");
+    LOOKUP(newGeometry, "rtcNewGeometry");
+    LOOKUP(setNewGeometryBuffer, "rtcSetNewGeometryBuffer");
+    LOOKUP(commitGeometry, "rtcCommitGeometry");
+    LOOKUP(attachGeometryByID, "rtcAttachGeometryByID");
+    LOOKUP(releaseGeometry, "rtcReleaseGeometry");
+    LOOKUP(intersect1, "rtcIntersect1");
+    api.lib = lib;
+    return 0;
+}
+
+/* An axis-aligned horizontal rectangle z = const, x in [x0, x1], y in [y0, y1]. */
+typedef struct {
+    unsigned int id;
+    double z, x0, x1, y0, y1;
+} Rect;
+
+typedef struct {
+    RTCDevice device;
+    RTCScene scene;
+    int error;
+    Rect *rects;
+    int num_rects;
+} Scene;
+
+/* A new, empty scene on its own device (`config` as for rtcNewDevice, may be NULL). */
+SOT_EXPORT void *sot_rt_scene_new(const char *config) {
+    if (!api.lib) {
+        snprintf(last_error, sizeof last_error, "sot_rt_load was not called");
+        return NULL;
+    }
+    Scene *s = (Scene *)calloc(1, sizeof(Scene));
+    if (!s) return NULL;
+    s->device = api.newDevice(config);
+    if (!s->device) {
+        snprintf(last_error, sizeof last_error, "rtcNewDevice failed");
+        free(s);
+        return NULL;
+    }
+    api.setDeviceErrorFunction(s->device, on_error, &s->error);
+    s->scene = api.newScene(s->device);
+    if (!s->scene || s->error) {
+        api.releaseDevice(s->device);
+        free(s);
+        return NULL;
+    }
+    return s;
+}
+
+/* Add a triangle mesh ((nv, 3) float32 vertices, (nf, 3) uint32 faces) under geometry id `id`. 0 on success. */
+SOT_EXPORT int sot_rt_scene_add_mesh(void *handle, unsigned int id, const float *vertices, long nv,
+                                     const unsigned int *faces, long nf) {
+    Scene *s = (Scene *)handle;
+    RTCGeometry g = api.newGeometry(s->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    if (!g || s->error) return -1;
+    float *vb = (float *)api.setNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                  3 * sizeof(float), (size_t)nv);
+    unsigned int *ib = (unsigned int *)api.setNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                3 * sizeof(unsigned int), (size_t)nf);
+    if (!vb || !ib || s->error) {
+        api.releaseGeometry(g);
+        return -1;
+    }
+    memcpy(vb, vertices, (size_t)nv * 3 * sizeof(float));
+    memcpy(ib, faces, (size_t)nf * 3 * sizeof(unsigned int));
+    api.commitGeometry(g);
+    api.attachGeometryByID(s->scene, g, id);
+    api.releaseGeometry(g); /* the scene keeps its reference */
+    return s->error ? -1 : 0;
+}
+
+/* Add an analytic axis-aligned horizontal rectangle under geometry id `id`. 0 on success. */
+SOT_EXPORT int sot_rt_scene_add_rect(void *handle, unsigned int id, double z, double x0, double x1, double y0,
+                                     double y1) {
+    Scene *s = (Scene *)handle;
+    Rect *grown = (Rect *)realloc(s->rects, (size_t)(s->num_rects + 1) * sizeof(Rect));
+    if (!grown) return -1;
+    s->rects = grown;
+    Rect r = {id, z, x0, x1, y0, y1};
+    s->rects[s->num_rects++] = r;
+    return 0;
+}
+
+SOT_EXPORT int sot_rt_scene_commit(void *handle) {
+    Scene *s = (Scene *)handle;
+    api.commitScene(s->scene);
+    return s->error;
+}
+
+SOT_EXPORT void sot_rt_scene_free(void *handle) {
+    Scene *s = (Scene *)handle;
+    if (!s) return;
+    if (s->scene) api.releaseScene(s->scene);
+    if (s->device) api.releaseDevice(s->device);
+    free(s->rects);
+    free(s);
+}
+
+/*
+ * Trace n rays with unit directions `dirs` (n, 3) from `origins` ((n, 3), or one origin when
+ * origin_step == 0), all float32. Writes distance (float64, +inf on a miss), normal (float32 (n, 3),
+ * the unit geometric normal turned to face the ray origin, zero on a miss), prim and geom (int32, -1 on
+ * a miss). Returns the scene's Embree error code (0 when fine).
+ */
+SOT_EXPORT int sot_rt_cast(void *handle, const float *origins, int origin_step, const float *dirs, long n,
+                           double *distance, float *normal, int *prim, int *geom) {
+    Scene *s = (Scene *)handle;
+    IntersectArgs args;
+    memset(&args, 0, sizeof args);
+    args.feature_mask = RTC_FEATURE_FLAGS_ALL;
+    RayHit1 rh;
+    for (long i = 0; i < n; i++) {
+        const float *o = origins + (origin_step ? 3 * i : 0);
+        const float *d = dirs + 3 * i;
+        /* the nearest analytic rectangle along the ray */
+        double t_rect = INFINITY;
+        int rect = -1;
+        for (int k = 0; k < s->num_rects; k++) {
+            const Rect *r = &s->rects[k];
+            if (d[2] == 0.0f) continue;
+            double t = (r->z - (double)o[2]) / (double)d[2];
+            if (!(t > 0.0) || t >= t_rect) continue;
+            double x = (double)o[0] + t * (double)d[0], y = (double)o[1] + t * (double)d[1];
+            if (x < r->x0 || x > r->x1 || y < r->y0 || y > r->y1) continue;
+            t_rect = t;
+            rect = k;
+        }
+        rh.ray.org_x = o[0];
+        rh.ray.org_y = o[1];
+        rh.ray.org_z = o[2];
+        rh.ray.tnear = 0.0f;
+        rh.ray.dir_x = d[0];
+        rh.ray.dir_y = d[1];
+        rh.ray.dir_z = d[2];
+        rh.ray.time = 0.0f;
+        rh.ray.tfar = rect >= 0 ? (float)t_rect : INFINITY;
+        rh.ray.mask = 0xffffffffu;
+        rh.ray.id = 0;
+        rh.ray.flags = 0;
+        rh.hit.geomID = RTC_INVALID_ID;
+        rh.hit.primID = RTC_INVALID_ID;
+        api.intersect1(s->scene, &rh, &args);
+        float *nrm = normal + 3 * i;
+        if (rh.hit.geomID != RTC_INVALID_ID) {
+            distance[i] = (double)rh.ray.tfar;
+            geom[i] = (int)rh.hit.geomID;
+            prim[i] = (int)rh.hit.primID;
+            float nx = rh.hit.Ng_x, ny = rh.hit.Ng_y, nz = rh.hit.Ng_z;
+            float len = sqrtf(nx * nx + ny * ny + nz * nz);
+            if (len > 0.0f) {
+                if (nx * d[0] + ny * d[1] + nz * d[2] > 0.0f) len = -len;
+                nx /= len;
+                ny /= len;
+                nz /= len;
+            }
+            nrm[0] = nx;
+            nrm[1] = ny;
+            nrm[2] = nz;
+        } else if (rect >= 0) {
+            distance[i] = t_rect;
+            geom[i] = (int)s->rects[rect].id;
+            prim[i] = 0;
+            nrm[0] = 0.0f;
+            nrm[1] = 0.0f;
+            nrm[2] = d[2] > 0.0f ? -1.0f : 1.0f;
+        } else {
+            distance[i] = INFINITY;
+            geom[i] = -1;
+            prim[i] = -1;
+            nrm[0] = nrm[1] = nrm[2] = 0.0f;
+        }
+    }
+    return s->error;
+}
