@@ -20,12 +20,19 @@ __all__ = ["SurfelParams", "voxel_downsample", "mirror_complete", "estimate_norm
 
 @dataclass(frozen=True)
 class SurfelParams:
+    """Surfel meshing settings.
+
+    The default disk is a square (2 triangles, ``segments=4``) whose radius is scaled by 1.03, so that it
+    covers the area of the 0.9x hexagon used before. On 7 cm voxels this is a quarter of the triangles of
+    hexagons on 5 cm voxels, with the same realism on PandaSet (docs/lidar_sim.md), and 1.13x faster to trace.
+    """
+
     k: int = 10
-    segments: int = 6
-    radius_scale: float = 0.9
+    segments: int = 4
+    radius_scale: float = 1.03
     min_radius: float = 0.03
     max_radius: float = 0.25
-    voxel: float = 0.05
+    voxel: float = 0.07
 
 
 def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
@@ -90,6 +97,6 @@ def surfel_mesh(points: np.ndarray, params: SurfelParams = SurfelParams(), mirro
     vertices = rim.reshape(-1, 3)                                  # (N*s, 3): the disk's rim polygon
     base = (np.arange(len(pts)) * s)[:, None]
     j = np.arange(1, s - 1)
-    # fan from the first rim vertex: s - 2 triangles per disk (4 for a hexagon)
+    # fan from the first rim vertex: s - 2 triangles per disk (2 for the default square)
     faces = np.stack([np.broadcast_to(base, (len(pts), s - 2)), base + j, base + j + 1], axis=-1)
     return vertices, faces.reshape(-1, 3).astype(np.int64), pts
