@@ -1,17 +1,16 @@
-"""All objects' meshes in one embree scene; geometry id i = object i.
+"""All objects' meshes in one Embree scene; geometry id i = object i.
 
 A single first-hit query per ray gives the instance (which object is nearest) and its depth, so
-inter-object occlusion comes for free. embreex is called directly (as the LiDAR simulator's
-``sot_apps.lidar_sim.raycast`` does) because the flow needs only geometry id and ray parameter for
-non-unit camera rays ``(x, y, 1)`` -- skipping normals and re-normalisation halves the cost per pixel.
+inter-object occlusion comes for free. It uses the LiDAR simulator's ``RaycastScene`` (the compiled
+Embree loop, or embreex when that is not built). Camera rays are ``(x, y, 1)``, not unit vectors, so the
+returned ray parameter is the depth z.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from embreex import rtcore_scene
-from embreex.mesh_construction import TriangleMesh
 
+from ..lidar_sim.raycast import RaycastScene
 from .meshing import Mesh
 
 __all__ = ["MultiMeshScene"]
@@ -21,9 +20,9 @@ class MultiMeshScene:
     """Meshes already placed in the ray frame (e.g. camera k); ``meshes[i]`` gets geometry id i."""
 
     def __init__(self, meshes: list[Mesh]) -> None:
-        self._scene = rtcore_scene.EmbreeScene()
-        self._geometries = [TriangleMesh(self._scene, np.ascontiguousarray(m.vertices, dtype=np.float32),
-                                         np.ascontiguousarray(m.faces, dtype=np.int32)) for m in meshes]
+        self._scene = RaycastScene()
+        for m in meshes:
+            self._scene.add_mesh(m.vertices, m.faces)
         self.count = len(meshes)
 
     def first_hit(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -33,8 +32,5 @@ class MultiMeshScene:
         n = len(directions)
         if n == 0 or self.count == 0:
             return np.full(n, -1, dtype=np.int32), np.full(n, np.inf)
-        origins = np.ascontiguousarray(np.broadcast_to(np.asarray(origins, dtype=np.float32), (n, 3)))
-        out = self._scene.run(origins, directions, output=1)
-        geom = np.asarray(out["geomID"], dtype=np.int32)
-        t = np.where(geom >= 0, np.asarray(out["tfar"], dtype=np.float64), np.inf)
-        return geom, t
+        hits = self._scene.cast(origins, directions)
+        return hits.geom_id, hits.distance

@@ -42,7 +42,8 @@ _EMBREE_MISS_T = 1e30  # embree reports tfar ~1e37 for a miss
 class RayHits:
     """Per-ray results. Misses have ``distance = inf`` and ``geom_id = prim_id = -1``.
 
-    ``distance``: (N,) float64 metres along the unit direction; ``normal``: (N, 3) float32 unit geometric
+    ``distance``: (N,) float64 ray parameter (metres for unit directions; the depth z for camera rays
+    ``(x, y, 1)``); ``normal``: (N, 3) float32 unit geometric
     normal facing the ray origin (zero for misses); ``prim_id``: triangle index within its mesh;
     ``geom_id``: object index (order of :meth:`RaycastScene.add_mesh`).
     """
@@ -249,7 +250,8 @@ class RaycastScene:
         self._dirty = False
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
-        """Trace rays (unit ``directions``, (N, 3)) from ``origins`` ((3,) or (N, 3)); the first hit of each."""
+        """Trace rays ``directions`` (N, 3) (unit for metric distances) from ``origins`` ((3,) or (N, 3));
+        the first hit of each."""
         directions = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 3)
         n = directions.shape[0]
         origins = np.asarray(origins, dtype=np.float32)

@@ -185,3 +185,22 @@ def test_flat_ground_rings_have_analytic_radii(name):
     image = range_image(scan)
     assert image.shape == (sensor.beams, sensor.columns)
     assert np.count_nonzero(image) == len(scan)
+
+
+def test_raycast_benchmark_runs_and_reports_both_backends():
+    import os
+
+    from sot_apps.bench.raycast import format_table, run_benchmark
+
+    affinity = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+    try:
+        result = run_benchmark(None, vehicles=2, repeats=1)
+    finally:  # the benchmark pins the process to one core
+        if affinity is not None:
+            os.sched_setaffinity(0, affinity)
+    assert result["backend"] == "compiled" and result["rays"] == 169_600
+    assert result["vehicle_hits"] > 100 and 0.5 < result["hit_fraction"] < 1.0
+    for key in ("cast_rays_per_s", "embreex_cast_rays_per_s", "raw_rays_per_s", "boxes_rays_per_s", "sweep_rays_per_s"):
+        assert result[key] > 0
+    table = format_table(result)
+    assert "compiled backend (default)" in table and "embreex backend" in table
