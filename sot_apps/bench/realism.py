@@ -63,7 +63,8 @@ def _cuboid(size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_per_track: int = 3,
-                     min_points: int = 20, origin_z: float = 0.0, seed: int = 0, progress: bool = True) -> list[Row]:
+                     min_points: int = 20, origin_z: float = 0.0, seed: int = 0, progress: bool = True,
+                     origin: tuple[float, float, float] | None = None) -> list[Row]:
     from tqdm import tqdm
 
     from tracker.geometry import Box, invert_transform, points_in_box, transform_points
@@ -99,6 +100,8 @@ def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_
             v, f, _ = self._meshes[entry_id]
             return v, f
 
+    # the simulated optical centre in the LiDAR frame (``origin`` wins over ``origin_z``)
+    centre = np.asarray(origin if origin is not None else (0.0, 0.0, origin_z), dtype=np.float64)
     lidar_from_ego = invert_transform(seq.ego_from_lidar)
     for tid, k in tqdm(jobs, desc="realism", unit="job", disable=not progress, leave=False):
         box_world = tracks[tid].box_at(k)
@@ -114,16 +117,17 @@ def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_
         sweep = seq.sweep(k)
         bg = transform_points(lidar_from_ego, sweep.xyz)
         bg = bg[~points_in_box(bg, box_sensor, scale=(1.1, 1.1, 1.05))]
-        bg[:, 2] -= origin_z
+        bg -= centre
         rng_m = float(np.hypot(box_sensor.x, box_sensor.y))
         for variant in ("box", "surfel", "surfel+mirror"):
-            spec = SceneSpec(sensor, None, [SceneObject(variant, box_sensor.x, box_sensor.y, box_sensor.z - origin_z,
+            spec = SceneSpec(sensor, None, [SceneObject(variant, box_sensor.x - centre[0], box_sensor.y - centre[1],
+                                                        box_sensor.z - centre[2],
                                                         box_sensor.heading)],
                              Realism(range_noise=True, drop_grazing=True, intensity=False, motion_distortion=False,
                                      seed=seed + k))
             result = insert_into_background(spec, _MemBank(meshes), bg)
             sim = result.scan.xyz[result.scan.instance == 0].astype(np.float64)
-            sim[:, 2] += origin_z
+            sim += centre
             local = transform_points(box_sensor.object_from_world(), sim)
             local = local[local[:, 2] > -box_sensor.height / 2 + GROUND_CLEARANCE]
             rows.append(Row(tid[:8], k, rng_m, len(real), variant, len(local), chamfer(local, real)))
@@ -164,6 +168,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-points", type=int, default=20, help="minimum real points in the box (default 20)")
     parser.add_argument("--origin-z", type=float, default=0.0,
                         help="height of the simulated optical centre above the ego origin (m, default 0)")
+    parser.add_argument("--origin", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                        help="the simulated optical centre in the LiDAR frame (m), e.g. from `sensor fit --align`; "
+                             "overrides --origin-z")
     parser.add_argument("--json", metavar="FILE", help="also write the rows as JSON")
 
 
@@ -176,9 +183,11 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     seq = open_sequence(args.sequence)
     rows = evaluate_realism(seq, args.ids, args.sensor, args.frames_per_track, args.min_points, args.origin_z,
-                            progress=sys.stderr.isatty())
+                            progress=sys.stderr.isatty(), origin=tuple(args.origin) if args.origin else None)
     print(format_tables(rows, args.sensor, time.perf_counter() - start))
-    if args.origin_z:
+    if args.origin:
+        print("simulated optical centre at ({:g}, {:g}, {:g}) m in the LiDAR frame".format(*args.origin))
+    elif args.origin_z:
         print(f"simulated optical centre {args.origin_z:g} m above the LiDAR frame origin")
     if args.json:
         write_json(args.json, [dict(r.__dict__, ratio=r.ratio) for r in rows])

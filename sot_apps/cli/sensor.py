@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import InputError
 from .common import add_sequence_argument, add_subcommand, load_sequence
 
@@ -31,10 +33,13 @@ def register(subparsers) -> argparse.ArgumentParser:
                      help="minimum angle between two beams in degrees (default 0.09)")
     fit.add_argument("--origin-z", type=float, default=0.0,
                      help="height of the optical centre above the LiDAR frame origin (m); PandaSet's pose origin "
-                          "sits about 1.6 m below it (docs/lidar_sim.md)")
+                          "sits about 1.6-1.9 m below it; --align searches the full offset (docs/lidar_sim.md)")
     fit.add_argument("--align", action="store_true",
-                     help="first search roll, pitch and a vertical origin offset that sharpen the beams (for sweeps "
-                          "not given in the optical-centre frame, e.g. PandaSet)")
+                     help="first search the optical centre (offset from the LiDAR frame origin) and roll, pitch that "
+                          "sharpen the beams (for sweeps not given in the optical-centre frame, e.g. PandaSet)")
+    fit.add_argument("--no-capture-poses", dest="capture_poses", action="store_false",
+                     help="measure elevations from the frame's pose, not from the sensor pose at each point's capture "
+                          "time (interpolated between frames; needs per-point times)")
     fit.add_argument("--compare", default=None, metavar="PRESET", help="print a comparison with a preset")
     fit.set_defaults(func=run_fit)
     parser.set_defaults(func=lambda args: (parser.print_help(), 2)[1])
@@ -45,7 +50,7 @@ def run_fit(args: argparse.Namespace) -> int:
     from tracker.geometry import invert_transform, transform_points
 
     from ..io.atomic import write_json
-    from ..lidar_sim.fit import compare_to_preset, fit_sensor
+    from ..lidar_sim.fit import compare_to_preset, fit_sensor, points_at_capture_pose
     from ..lidar_sim.sensors import preset
 
     seq = load_sequence(args)
@@ -54,11 +59,20 @@ def run_fit(args: argparse.Namespace) -> int:
     except ValueError:
         raise InputError(None, f"--frames must be comma-separated integers, got {args.frames!r}") from None
     lidar_from_ego = invert_transform(seq.ego_from_lidar)
+
+    def world_from_lidar(k: int) -> np.ndarray:
+        return seq.frames[k].world_from_ego @ seq.ego_from_lidar
+
     sweeps, times = [], []
     for k in frames:
         seq.check_index(k)
         sweep = seq.sweep(k)
-        sweeps.append(transform_points(lidar_from_ego, sweep.xyz) - [0.0, 0.0, args.origin_z])
+        xyz = transform_points(lidar_from_ego, sweep.xyz)
+        if args.capture_poses and sweep.time_offset_ns is not None and len(seq) > 1:
+            other = k - 1 if k > 0 else k + 1
+            xyz = points_at_capture_pose(xyz, sweep.time_offset_ns, seq.frames[k].timestamp_ns, world_from_lidar(k),
+                                         seq.frames[other].timestamp_ns, world_from_lidar(other))
+        sweeps.append(xyz - [0.0, 0.0, args.origin_z])
         times.append(sweep.time_offset_ns)
     alignment = None
     if args.align:

@@ -23,7 +23,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from .sensors import Sensor
 
-__all__ = ["FitResult", "fit_sensor", "elevation_peaks"]
+__all__ = ["FitResult", "fit_sensor", "elevation_peaks", "align_sensor_frame", "points_at_capture_pose"]
 
 
 @dataclass
@@ -133,22 +133,68 @@ def compare_to_preset(fitted: Sensor, preset: Sensor) -> dict:
             "preset_columns": preset.columns, "fitted_columns": fitted.columns}
 
 
-def _sharpness(points: np.ndarray, params: np.ndarray) -> float:
+def points_at_capture_pose(points_frame: np.ndarray, offsets_ns: np.ndarray, timestamp_ns: int,
+                           world_from_frame: np.ndarray, other_timestamp_ns: int, other_world_from_frame: np.ndarray
+                           ) -> np.ndarray:
+    """Points given in the sensor pose at ``timestamp_ns``, re-expressed in the sensor pose at each point's own
+    capture time (``timestamp_ns + offsets_ns``).
+
+    A spinning sensor on a moving car sees every point from a different place. Beams are cones about the
+    sensor at the time it fired, so elevations must be measured from there. The pose at time t is interpolated
+    between this frame's pose and another frame's (usually the previous one): the rotation turns about one
+    axis and the translation is linear. Times outside the interval extrapolate.
+    """
     from scipy.spatial.transform import Rotation
 
-    q = (points - np.array([0.0, 0.0, params[2]])) @ Rotation.from_euler("xy", params[:2], degrees=True).as_matrix().T
-    elev = np.degrees(np.arctan2(q[:, 2], np.hypot(q[:, 0], q[:, 1])))
-    hist, _ = np.histogram(elev, bins=np.arange(-40.0, 40.0, 0.02))
-    hist = gaussian_filter1d(hist.astype(np.float64), 1.0)
-    return float((hist ** 2).sum() / max(hist.sum(), 1.0) ** 2 * 1e4)
+    dt = float(timestamp_ns - other_timestamp_ns)
+    if dt == 0:
+        return np.asarray(points_frame, dtype=np.float64)
+    # s = (t - t_other) / (t_this - t_other): 0 at the other frame, 1 at this one (either order)
+    s = 1.0 + np.asarray(offsets_ns, dtype=np.float64) / dt
+    r0, t0 = other_world_from_frame[:3, :3], other_world_from_frame[:3, 3]
+    r1, t1 = world_from_frame[:3, :3], world_from_frame[:3, 3]
+    world = np.asarray(points_frame, dtype=np.float64) @ r1.T + t1
+    rotvec = Rotation.from_matrix(r0.T @ r1).as_rotvec()
+    translation = t0 + s[:, None] * (t1 - t0)
+    in_other = (world - translation) @ r0                                   # r0^T (world - t(s))
+    return Rotation.from_rotvec(s[:, None] * rotvec).inv().apply(in_other)
 
 
-def align_sensor_frame(sweeps: list[np.ndarray], min_range: float = 4.0, max_points: int = 60_000
+def _elevations(points: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """Elevations (degrees) seen from origin (dx, dy, dz) after roll, pitch: params = roll, pitch, dx, dy, dz."""
+    from scipy.spatial.transform import Rotation
+
+    q = points - params[2:5]
+    if params[0] or params[1]:
+        q = q @ Rotation.from_euler("xy", params[:2], degrees=True).as_matrix().T
+    return np.degrees(np.arctan2(q[:, 2], np.hypot(q[:, 0], q[:, 1])))
+
+
+def _sharpness(points: np.ndarray, params: np.ndarray) -> float:
+    """How much the elevations concentrate on fine peaks (beams), relative to their coarse spread.
+
+    The ratio of the concentration (sum of squared bin fractions) in 0.02-degree bins to that in 0.5-degree
+    bins, times 25. Dividing by the coarse concentration makes it scale-free: moving the origin far away
+    squeezes every elevation together, which raises the fine concentration but not this ratio. 1 means
+    no structure finer than 0.5 degrees.
+    """
+    elev = _elevations(points, params)
+    fine, _ = np.histogram(elev, bins=np.arange(-45.0, 45.0, 0.02))
+    coarse, _ = np.histogram(elev, bins=np.arange(-45.0, 45.0, 0.5))
+    total = max(float(fine.sum()), 1.0)
+    return float((fine.astype(np.float64) ** 2).sum() / max((coarse.astype(np.float64) ** 2).sum(), 1.0) * 25.0) \
+        if total > 0 else 0.0
+
+
+def align_sensor_frame(sweeps: list[np.ndarray], min_range: float = 3.0, max_points: int = 40_000,
+                       horizontal_search_m: float = 3.0, vertical_search_m: tuple[float, float] = (-1.0, 3.0)
                        ) -> tuple[np.ndarray, dict]:
-    """Find roll, pitch (degrees) and a vertical offset (m) that make the beams sharpest in elevation.
+    """Find the optical centre and tilt that make the beams sharpest in elevation.
 
-    For sweeps whose frame origin is not the optical centre (e.g. PandaSet's pose frame). Returns
-    ``sensor_from_frame`` (4x4) and the parameters. Nelder-Mead from a few vertical offsets.
+    For sweeps whose frame origin is not the optical centre (e.g. PandaSet's pose frame). The search covers
+    the centre's offset (dx, dy within ``horizontal_search_m``, dz within ``vertical_search_m``) on a 0.4 x
+    0.4 x 0.25 m grid with no tilt, then refines roll, pitch (degrees) and the offset with Nelder-Mead.
+    Returns ``sensor_from_frame`` (4x4) and the parameters.
     """
     from scipy.optimize import minimize
     from scipy.spatial.transform import Rotation
@@ -157,19 +203,21 @@ def align_sensor_frame(sweeps: list[np.ndarray], min_range: float = 4.0, max_poi
     pts = pts[np.linalg.norm(pts, axis=1) > min_range]
     if len(pts) > max_points:
         pts = pts[np.linspace(0, len(pts) - 1, max_points).astype(int)]
-    best = None
-    for dz in (0.0, 0.5, 1.0, 1.5):
-        x0 = np.array([0.0, 0.0, dz])
-        simplex = np.vstack([x0, x0 + [1.0, 0, 0], x0 + [0, 1.0, 0], x0 + [0, 0, 0.3]])
-        res = minimize(lambda x: -_sharpness(pts, x), x0, method="Nelder-Mead",
-                       options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400, "initial_simplex": simplex})
-        if best is None or res.fun < best.fun:
-            best = res
-    roll, pitch, dz = (float(v) for v in best.x)
+    horizontal = np.arange(-horizontal_search_m, horizontal_search_m + 1e-9, 0.4)
+    vertical = np.arange(vertical_search_m[0], vertical_search_m[1] + 1e-9, 0.25)
+    grid = [(s_, dx, dy, dz) for dx in horizontal for dy in horizontal for dz in vertical
+            for s_ in [_sharpness(pts, np.array([0.0, 0.0, dx, dy, dz]))]]
+    _, dx0, dy0, dz0 = max(grid)
+    x0 = np.array([0.0, 0.0, dx0, dy0, dz0])
+    simplex = np.vstack([x0, x0 + np.diag([0.5, 0.5, 0.2, 0.2, 0.1])])
+    best = minimize(lambda x: -_sharpness(pts, x), x0, method="Nelder-Mead",
+                    options={"xatol": 1e-3, "fatol": 1e-6, "maxiter": 1500, "initial_simplex": simplex})
+    roll, pitch, dx, dy, dz = (float(v) for v in best.x)
     rot = Rotation.from_euler("xy", [roll, pitch], degrees=True).as_matrix()
     sensor_from_frame = np.eye(4)
     sensor_from_frame[:3, :3] = rot
-    sensor_from_frame[:3, 3] = -rot @ np.array([0.0, 0.0, dz])
-    return sensor_from_frame, {"roll_deg": round(roll, 4), "pitch_deg": round(pitch, 4), "origin_z_m": round(dz, 4),
-                               "sharpness_before": round(_sharpness(pts, np.zeros(3)), 4),
+    sensor_from_frame[:3, 3] = -rot @ np.array([dx, dy, dz])
+    return sensor_from_frame, {"roll_deg": round(roll, 4), "pitch_deg": round(pitch, 4),
+                               "origin_m": [round(dx, 4), round(dy, 4), round(dz, 4)],
+                               "sharpness_before": round(_sharpness(pts, np.zeros(5)), 4),
                                "sharpness_after": round(-float(best.fun), 4)}
