@@ -49,11 +49,11 @@ def _world_once(out: Path, size: DemoSize, progress: bool) -> Path:
     """``out/world``, generated unless a previous run finished it (completion marker with checksums)."""
     import dataclasses
 
-    from .pipeline.manifest import DoneMarker, config_digest
+    from .pipeline.manifest import DoneMarker, code_digest, config_digest
 
     world = out / "world"
     marker = DoneMarker(out, "demo/world")
-    digest = config_digest(dataclasses.asdict(size))
+    digest = config_digest({"size": dataclasses.asdict(size), "code": code_digest()})
     if not marker.is_done(digest):
         make_world(world, size, progress)
         marker.mark(digest, sorted(p for p in world.rglob("*") if p.is_file()))

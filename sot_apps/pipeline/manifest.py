@@ -1,8 +1,9 @@
 """Completion markers (for resuming) and the run manifest (what ran, config, versions, checksums).
 
 A unit of work is finished when its marker ``<dir>/.done/<name>.json`` exists, was written for the
-same configuration, and every output it lists still has the recorded checksum. Markers are written
-atomically after the outputs, so an interrupted unit has no marker and simply runs again.
+same configuration by the same code (:func:`code_digest`), and every output it lists still has the
+recorded checksum. Markers are written atomically after the outputs, so an interrupted unit has no marker
+and simply runs again; a unit finished by an older version of the toolkit runs again too.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from typing import Any, Iterable
 
 from ..io.atomic import write_json
 
-__all__ = ["sha256_file", "config_digest", "DoneMarker", "versions", "write_manifest"]
+__all__ = ["sha256_file", "config_digest", "code_digest", "DoneMarker", "versions", "write_manifest"]
 
 
 def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
@@ -33,6 +34,28 @@ def config_digest(config: Any) -> str:
     """A stable digest of a JSON-serialisable configuration."""
     text = json.dumps(config, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+_CODE_DIGEST: str | None = None
+
+
+def code_digest() -> str:
+    """A digest of the toolkit's own source: every ``.py`` and ``.c`` file of the ``tracker`` and ``sot_apps``
+    packages (path and content). Computed once per process."""
+    global _CODE_DIGEST
+    if _CODE_DIGEST is None:
+        import sot_apps
+        import tracker
+
+        digest = hashlib.sha256()
+        for package in (tracker, sot_apps):
+            root = Path(package.__file__).resolve().parent
+            files = sorted(p for p in root.rglob("*") if p.suffix in (".py", ".c") and p.is_file())
+            for path in files:
+                digest.update(f"{package.__name__}/{path.relative_to(root).as_posix()}\n".encode())
+                digest.update(path.read_bytes())
+        _CODE_DIGEST = digest.hexdigest()[:16]
+    return _CODE_DIGEST
 
 
 @dataclass(frozen=True)
@@ -89,7 +112,7 @@ def versions() -> dict[str, str]:
     """Versions of the toolkit and the libraries whose results it depends on."""
     from importlib import metadata
 
-    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    out = {"python": sys.version.split()[0], "platform": platform.platform(), "sot-apps source": code_digest()}
     for dist in ("sot-apps", "numpy", "scipy", "opencv-python-headless", "trimesh", "embreex", "pyrender",
                  "mcap", "foxglove-sdk", "dask", "distributed"):
         try:

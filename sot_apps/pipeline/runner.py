@@ -22,7 +22,7 @@ from typing import Callable
 from ..io.atomic import write_json
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
-from .manifest import DoneMarker, config_digest, write_manifest
+from .manifest import DoneMarker, code_digest, config_digest, write_manifest
 from .plan import Plan, make_plan, safe_name
 from . import stages as st
 
@@ -98,7 +98,8 @@ def _marker(out: Path, key: str) -> DoneMarker:
 
 def _make_unit(out: Path, stage: str, key: str, sequence: str | None, obj: str | None, digest_doc: dict,
                fn: Callable, kwargs: dict) -> _Unit:
-    digest = config_digest(digest_doc)
+    # the code is part of the configuration: a unit finished by other code is not reused
+    digest = config_digest({"unit": digest_doc, "code": code_digest()})
     if _marker(out, key).is_done(digest):
         return _Unit(stage, key, sequence, obj, digest, None)
     return _Unit(stage, key, sequence, obj, digest, Task(key, fn, kwargs={**kwargs, "digest": digest}))

@@ -133,6 +133,14 @@ def test_interrupted_run_resumes_without_redoing_finished_objects(reference_run,
     assert {u.status for u in again.units} == {"cached"}
     assert output_checksums(out) == reference_sums
 
+    # other code (e.g. an upgraded tracker) does not reuse the markers: every unit runs again
+    from sot_apps.pipeline import runner as runner_module
+
+    monkeypatch.setattr(runner_module, "code_digest", lambda: "0123456789abcdef")
+    upgraded = run_pipeline(config, ExecutorSpec("inline"), progress=False)
+    assert {u.status for u in upgraded.units} == {"done"}
+    assert output_checksums(out) == reference_sums
+
 
 def test_local_processes_give_the_same_outputs(reference_run, tiny_worlds, tmp_path):
     _, reference_sums = reference_run
