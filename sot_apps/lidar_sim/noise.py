@@ -50,18 +50,27 @@ def apply_range_noise(distance: np.ndarray, sigma: float, rng: np.random.Generat
     return distance + rng.normal(0.0, sigma, size=distance.shape)
 
 
-def drop_mask(cos_incidence: np.ndarray, realism: Realism, rng: np.random.Generator) -> np.ndarray:
-    """Boolean mask of returns that are dropped."""
-    n = cos_incidence.shape[0]
+def drop_mask(cos_incidence: np.ndarray, realism: Realism, rng: np.random.Generator, num_rays: int | None = None,
+              index: np.ndarray | None = None) -> np.ndarray:
+    """Boolean mask of returns that are dropped.
+
+    ``cos_incidence`` may cover a subset of the sweep: ``index`` (into ``num_rays`` rays) says which. The
+    random draws always cover all ``num_rays``, so the same seed drops the same rays whatever the subset.
+    """
+    n = cos_incidence.shape[0] if num_rays is None else int(num_rays)
+    pick = (lambda a: a) if index is None else (lambda a: a[index])
     u = rng.random(n)
-    dropped = np.zeros(n, dtype=bool)
+    dropped = np.zeros(len(cos_incidence), dtype=bool)
     if realism.drop_random > 0:
-        dropped |= u < realism.drop_random
+        dropped |= pick(u) < realism.drop_random
     if realism.drop_grazing:
-        theta = np.degrees(np.arccos(cos_incidence))
         start = realism.grazing_start_deg
-        p = np.clip((theta - start) / max(90.0 - start, 1e-6), 0.0, 1.0) ** 2
-        dropped |= rng.random(n) < p
+        # only grazing returns (incidence beyond the start angle) can drop: arccos just for those
+        grazing = np.flatnonzero(cos_incidence < np.cos(np.radians(start)))
+        p = np.zeros(len(cos_incidence))
+        theta = np.degrees(np.arccos(cos_incidence[grazing]))
+        p[grazing] = np.clip((theta - start) / max(90.0 - start, 1e-6), 0.0, 1.0) ** 2
+        dropped |= pick(rng.random(n)) < p
     return dropped
 
 

@@ -164,9 +164,10 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
     if isinstance(world_from_sensor, Trajectory):
         origins = sensor_T_col[column, :3, 3]
         dirs = np.einsum("nij,nj->ni", sensor_T_col[column, :3, :3], dirs_s)
-    else:  # a fixed sensor: one rotation for every ray
+    else:  # a fixed sensor: one rotation for every ray (none when the sensor frame is the world frame)
         origins = np.broadcast_to(world_from_sensor_frame[:3, 3], dirs_s.shape)
-        dirs = rotate(world_from_sensor_frame[:3, :3], dirs_s)
+        rotation = world_from_sensor_frame[:3, :3]
+        dirs = dirs_s if np.array_equal(rotation, np.eye(3)) else rotate(rotation, dirs_s)
 
     static_idx = [i for i, o in enumerate(objects) if o.trajectory.is_static]
     moving_idx = [i for i, o in enumerate(objects) if not o.trajectory.is_static]
@@ -199,23 +200,33 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
         object_index[sel] = i
 
     valid = np.isfinite(dist) & (dist >= sensor.min_range) & (dist <= sensor.max_range)
-    cos_inc = incidence_cosine(dirs, normal)
+    # the per-return models run on the candidate returns only; the random draws still cover every ray, so a
+    # seed gives the same scan whatever the scene
+    cand = np.flatnonzero(valid)
+    cos_cand = incidence_cosine(np.take(dirs, cand, axis=0), np.take(normal, cand, axis=0))  # take: 3x faster
     measured = dist.copy()
     if realism.range_noise and sensor.range_noise_sigma > 0:
         measured = apply_range_noise(measured, sensor.range_noise_sigma, rng)
     if realism.drop_random > 0 or realism.drop_grazing:
-        valid &= ~drop_mask(cos_inc, realism, rng)
-    reflect = np.array([o.reflectivity for o in objects] + [0.0], dtype=np.float64)
+        valid[cand] &= ~drop_mask(cos_cand, realism, rng, num_rays=len(dist), index=cand)
+    keep_in_cand = valid[cand]
+    keep = cand[keep_in_cand]
     if realism.intensity:
-        intensity = lambertian_intensity(cos_inc, reflect[object_index], measured, realism.attenuation_per_m)
+        reflect = np.array([o.reflectivity for o in objects] + [0.0], dtype=np.float64)
+        intensity = lambertian_intensity(cos_cand[keep_in_cand], reflect[object_index[keep]], measured[keep],
+                                         realism.attenuation_per_m)
     else:
-        intensity = np.zeros_like(measured)
-    keep = np.flatnonzero(valid)
-    pts_world = origins[keep] + dirs[keep] * measured[keep, None]
+        intensity = np.zeros(len(keep))
+    single_origin = origins.ndim == 2 and origins.strides[0] == 0
+    pts_world = (origins[0] if single_origin else np.take(origins, keep, axis=0)) + \
+        np.take(dirs, keep, axis=0) * measured[keep, None]
     sensor_from_world = invert_transform(world_from_sensor_frame)
-    xyz = (rotate(sensor_from_world[:3, :3], pts_world) + sensor_from_world[:3, 3]).astype(np.float32)
+    if np.array_equal(sensor_from_world, np.eye(4)):
+        xyz = pts_world.astype(np.float32)
+    else:
+        xyz = (rotate(sensor_from_world[:3, :3], pts_world) + sensor_from_world[:3, 3]).astype(np.float32)
     inst_of_obj = np.array([o.instance for o in objects] + [-1], dtype=np.int32)
-    return Scan(xyz=xyz, instance=inst_of_obj[object_index[keep]], intensity=intensity[keep].astype(np.float32),
+    return Scan(xyz=xyz, instance=inst_of_obj[object_index[keep]], intensity=intensity.astype(np.float32),
                 time_offset_ns=col_t[column[keep]].astype(np.int64), beam=beam[keep], column=column[keep],
                 distance=measured[keep].astype(np.float32), object_index=object_index[keep],
                 num_beams=sensor.beams, num_columns=sensor.columns)
