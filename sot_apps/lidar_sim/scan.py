@@ -4,8 +4,8 @@ Rolling scan: column ``j`` of the sweep fires at its own time (``Sensor.column_t
 sensor pose and every moving object's pose are taken at that time, exactly (per ray), when
 ``Realism.motion_distortion`` is on, else everything is frozen at the frame time.
 
-Static meshes (ground, walls, parked cars) live in one Embree scene in the world frame, one TriangleMesh
-each. Each moving object has its own Embree scene in its object frame; rays that pass near it are
+Static meshes (ground, walls, parked cars) live in one ``RaycastScene`` in the world frame, one mesh each
+(a flat ground rectangle is intersected analytically). Each moving object has its own Embree scene in its object frame; rays that pass near it are
 transformed into its frame at their firing time and traced there; the nearest hit wins.
 
 Output points are in the sensor frame AT THE FRAME TIME (ego motion compensated, as PandaSet stores them
