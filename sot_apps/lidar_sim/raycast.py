@@ -254,7 +254,10 @@ class RaycastScene:
         the first hit of each."""
         directions = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 3)
         n = directions.shape[0]
-        origins = np.asarray(origins, dtype=np.float32)
+        origins = np.asarray(origins)
+        if origins.ndim == 2 and len(origins) > 1 and origins.strides[0] == 0:
+            origins = origins[0]                     # one origin broadcast to every ray: keep it single
+        origins = origins.astype(np.float32, copy=False)
         if n == 0 or not self.faces:
             return RayHits(np.full(n, np.inf), np.zeros((n, 3), np.float32), np.full(n, MISS, np.int32),
                            np.full(n, MISS, np.int32))
