@@ -179,11 +179,10 @@ def _sharpness(points: np.ndarray, params: np.ndarray) -> float:
     no structure finer than 0.5 degrees.
     """
     elev = _elevations(points, params)
-    fine, _ = np.histogram(elev, bins=np.arange(-45.0, 45.0, 0.02))
-    coarse, _ = np.histogram(elev, bins=np.arange(-45.0, 45.0, 0.5))
-    total = max(float(fine.sum()), 1.0)
-    return float((fine.astype(np.float64) ** 2).sum() / max((coarse.astype(np.float64) ** 2).sum(), 1.0) * 25.0) \
-        if total > 0 else 0.0
+    bins = np.floor((elev + 45.0) / 0.02).astype(np.int64)          # 0.02-degree bins over [-45, 45)
+    fine = np.bincount(bins[(bins >= 0) & (bins < 4500)], minlength=4500).astype(np.float64)
+    coarse = fine.reshape(180, 25).sum(axis=1)                         # 0.5-degree bins
+    return float((fine ** 2).sum() / max((coarse ** 2).sum(), 1.0) * 25.0)
 
 
 def align_sensor_frame(sweeps: list[np.ndarray], min_range: float = 3.0, max_points: int = 40_000,
@@ -205,10 +204,8 @@ def align_sensor_frame(sweeps: list[np.ndarray], min_range: float = 3.0, max_poi
         pts = pts[np.linspace(0, len(pts) - 1, max_points).astype(int)]
     horizontal = np.arange(-horizontal_search_m, horizontal_search_m + 1e-9, 0.4)
     vertical = np.arange(vertical_search_m[0], vertical_search_m[1] + 1e-9, 0.25)
-    grid = [(s_, dx, dy, dz) for dx in horizontal for dy in horizontal for dz in vertical
-            for s_ in [_sharpness(pts, np.array([0.0, 0.0, dx, dy, dz]))]]
-    _, dx0, dy0, dz0 = max(grid)
-    x0 = np.array([0.0, 0.0, dx0, dy0, dz0])
+    offsets = [np.array([0.0, 0.0, dx, dy, dz]) for dx in horizontal for dy in horizontal for dz in vertical]
+    x0 = max(offsets, key=lambda x: _sharpness(pts, x))
     simplex = np.vstack([x0, x0 + np.diag([0.5, 0.5, 0.2, 0.2, 0.1])])
     best = minimize(lambda x: -_sharpness(pts, x), x0, method="Nelder-Mead",
                     options={"xatol": 1e-3, "fatol": 1e-6, "maxiter": 1500, "initial_simplex": simplex})

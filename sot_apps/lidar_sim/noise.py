@@ -58,11 +58,15 @@ def drop_mask(cos_incidence: np.ndarray, realism: Realism, rng: np.random.Genera
     random draws always cover all ``num_rays``, so the same seed drops the same rays whatever the subset.
     """
     n = cos_incidence.shape[0] if num_rays is None else int(num_rays)
-    pick = (lambda a: a) if index is None else (lambda a: a[index])
-    u = rng.random(n)
+
+    def draw() -> np.ndarray:  # one uniform per ray of the sweep, then the subset's
+        u = rng.random(n)
+        return u if index is None else u[index]
+
+    u = draw()
     dropped = np.zeros(len(cos_incidence), dtype=bool)
     if realism.drop_random > 0:
-        dropped |= pick(u) < realism.drop_random
+        dropped |= u < realism.drop_random
     if realism.drop_grazing:
         start = realism.grazing_start_deg
         # only grazing returns (incidence beyond the start angle) can drop: arccos just for those
@@ -70,7 +74,7 @@ def drop_mask(cos_incidence: np.ndarray, realism: Realism, rng: np.random.Genera
         p = np.zeros(len(cos_incidence))
         theta = np.degrees(np.arccos(cos_incidence[grazing]))
         p[grazing] = np.clip((theta - start) / max(90.0 - start, 1e-6), 0.0, 1.0) ** 2
-        dropped |= pick(rng.random(n)) < p
+        dropped |= draw() < p
     return dropped
 
 

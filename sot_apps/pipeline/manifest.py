@@ -8,6 +8,7 @@ and simply runs again; a unit finished by an older version of the toolkit runs a
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import platform
@@ -36,26 +37,20 @@ def config_digest(config: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-_CODE_DIGEST: str | None = None
-
-
+@functools.lru_cache(maxsize=1)
 def code_digest() -> str:
     """A digest of the toolkit's own source: every ``.py`` and ``.c`` file of the ``tracker`` and ``sot_apps``
     packages (path and content). Computed once per process."""
-    global _CODE_DIGEST
-    if _CODE_DIGEST is None:
-        import sot_apps
-        import tracker
+    import sot_apps
+    import tracker
 
-        digest = hashlib.sha256()
-        for package in (tracker, sot_apps):
-            root = Path(package.__file__).resolve().parent
-            files = sorted(p for p in root.rglob("*") if p.suffix in (".py", ".c") and p.is_file())
-            for path in files:
-                digest.update(f"{package.__name__}/{path.relative_to(root).as_posix()}\n".encode())
-                digest.update(path.read_bytes())
-        _CODE_DIGEST = digest.hexdigest()[:16]
-    return _CODE_DIGEST
+    digest = hashlib.sha256()
+    for package in (tracker, sot_apps):
+        root = Path(package.__file__).resolve().parent
+        for path in sorted(p for p in root.rglob("*") if p.suffix in (".py", ".c") and p.is_file()):
+            digest.update(f"{package.__name__}/{path.relative_to(root).as_posix()}\n".encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
 
 
 @dataclass(frozen=True)
