@@ -4,7 +4,7 @@
  * Why: embreex's EmbreeScene.run traces from a Cython loop that writes five of its six outputs through
  * Python objects, and its scene cannot be reached from other compiled code. This loop fills
  * RTCRayHit records directly and writes final outputs (distance, unit normal facing the ray origin,
- * primitive and geometry ids), about 1.5x faster per ray. Axis-aligned horizontal rectangles (a ground
+ * primitive and geometry ids), about 1.3x faster per ray on the same triangles. Axis-aligned horizontal rectangles (a ground
  * plane) are intersected analytically: each ray's Embree segment is cut at its rectangle hit, so rays
  * to the ground never descend into the vehicles' BVH beyond that point.
  *
