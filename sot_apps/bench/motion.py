@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from ..motion_export.kinematics import (ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, Kinematics, ObjectTrack,
+from ..objects.smoother import (ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, Kinematics, ObjectTrack,
                                         SmootherConfig, central_difference_kinematics, smooth_track)
 
 __all__ = ["TrackMotionErrors", "MotionAccuracy", "evaluate_motion", "format_table", "plot_accuracy",

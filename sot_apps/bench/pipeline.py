@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="sot_bench_world_") as tmp:
         sequence = Path(args.sequence) if args.sequence else None
         if sequence is None:
-            from ..lidar_sim.synth import write_world
+            from ..synth import write_world
 
             sequence = write_world(Path(tmp) / "world", frames=12, vehicles=4, sensor="pandar64", seed=3)
         rows = measure(sequence, configs, args.objects, args.max_frames)

@@ -75,7 +75,7 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
     from tracker.config import get_preset
     from tracker.metrics import pool_metrics, score_tracklet
 
-    from ..eval import CachedSource, prepare_tracks, resolve_presets, select_moving_vehicle_tracks
+    from ..evaluation.tracker import CachedSource, prepare_tracks, resolve_presets, select_moving_vehicle_tracks
     from ..io import open_sequence
 
     pinned = pin_one_core()

@@ -31,7 +31,7 @@ from .objects import TrackedObject
 from .occlusion import ProjectedPoints, project_lidar
 from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup
 from .sparse import sparse_flow
-from .states import interpolate_pose
+from ..objects.trajectory import interpolate_pose
 from .visualize import flow_to_color, overlay
 
 __all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "STATS_VERSION"]

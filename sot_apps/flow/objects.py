@@ -21,8 +21,8 @@ from tracker.geometry import Box, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from .meshing import Mesh, box_mesh, mesh_from_points, voxel_downsample
-from .states import ObjectTrajectory
+from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample
+from ..objects.trajectory import ObjectTrajectory
 
 __all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]
 
@@ -181,7 +181,7 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
     """
     from dataclasses import replace
 
-    from ..motion_export.kinematics import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, ObjectTrack, smooth_track
+    from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, ObjectTrack, smooth_track
 
     config = ANNOTATION_SMOOTHER if source == "annotations" else TRACKER_SMOOTHER
     out = []

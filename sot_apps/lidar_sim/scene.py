@@ -29,7 +29,7 @@ from ..errors import InputError
 from ..schemas import validate
 from .bank import Bank
 from .noise import Realism
-from .raycast import RaycastScene
+from ..raycast import RaycastScene
 from .scan import Scan, SimObject, Trajectory, simulate_scan
 from .sensors import Sensor, load_sensor
 

@@ -35,7 +35,7 @@ from scipy.spatial.transform import Rotation
 from ..io.atomic import atomic_path
 from ..io.sequence import Sequence
 from ..schemas import load_schema, validate
-from .kinematics import Kinematics
+from ..objects.smoother import Kinematics
 
 __all__ = ["write_motion_mcap", "McapSummary", "object_color", "METADATA_NAME", "WORLD_FRAME", "EGO_FRAME",
            "object_frame", "KINEMATICS_SCHEMA_NAME"]

@@ -1,6 +1,6 @@
 """Inputs of the motion export: tracker outputs (track directories) or ground-truth annotations.
 
-Both become :class:`~sot_apps.motion_export.kinematics.ObjectTrack` (per-frame WORLD states with a
+Both become :class:`~sot_apps.objects.smoother.ObjectTrack` (per-frame WORLD states with a
 validity mask). A tracker frame whose ``flags`` contain one of ``invalid_flags`` (default
 "no_points", "prior_only", "lost": the state was predicted, not measured) is invalid: it is not used
 as a measurement and is exported with ``valid = False``. Advisory flags ("init", "low_points",
@@ -19,7 +19,7 @@ from tracker.geometry import Box, invert_transform, points_in_box, transform_poi
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from .kinematics import ObjectTrack
+from ..objects.smoother import ObjectTrack
 
 __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
            "aggregate_shape", "voxel_downsample"]

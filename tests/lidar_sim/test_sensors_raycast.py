@@ -8,7 +8,8 @@ import trimesh
 
 from sot_apps.errors import InputError
 from sot_apps.lidar_sim.noise import Realism
-from sot_apps.lidar_sim.raycast import RaycastScene, _horizontal_rectangle, cast_rays, compiled_backend_available
+from sot_apps.raycast import RaycastScene, cast_rays, compiled_backend_available
+from sot_apps.raycast.scene import _horizontal_rectangle
 from sot_apps.lidar_sim.scan import SimObject, Trajectory, range_image, simulate_scan
 from sot_apps.lidar_sim.sensors import PRESETS, load_sensor
 
@@ -60,7 +61,7 @@ BACKENDS = ["compiled", "embreex"]
 
 
 def test_compiled_tracer_is_built():
-    # pip install builds sot_apps/lidar_sim/_embree_trace.c; the speed figures in README depend on it
+    # pip install builds sot_apps/raycast/_embree_trace.c; the speed figures in README depend on it
     assert compiled_backend_available()
     assert RaycastScene().backend == "compiled"
 

@@ -48,10 +48,10 @@ from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
 from ..io.ply import write_ply_mesh
 from ..io.sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
-from .noise import Realism
-from .raycast import RaycastScene
-from .scan import Scan, SimObject, Trajectory, simulate_scan, state_to_matrix
-from .sensors import Sensor, load_sensor
+from ..lidar_sim.noise import Realism
+from ..raycast import RaycastScene
+from ..lidar_sim.scan import Scan, SimObject, Trajectory, simulate_scan, state_to_matrix
+from ..lidar_sim.sensors import Sensor, load_sensor
 from .vehicles import random_vehicle
 
 __all__ = ["WorldObject", "World", "SynthCamera", "make_world", "write_world", "SENSOR_HEIGHT", "BASE_TIME_NS"]
@@ -128,7 +128,7 @@ class World:
                              static_scene=static_scene)
 
     def static_scene(self) -> RaycastScene:
-        from .scan import build_static_scene
+        from ..lidar_sim.scan import build_static_scene
 
         return build_static_scene(self.sim_objects())
 
@@ -330,7 +330,7 @@ def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
                                 timestamp_ns=int(t)) for t in times]
                 for cam, times in zip(world.cameras, camera_times)}
         objects.append(entry)
-    return {"version": 1, "generator": "sot_apps.lidar_sim.synth", "seed": world.seed,
+    return {"version": 1, "generator": "sot_apps.synth", "seed": world.seed,
             "sensor": world.sensor.to_dict(), "sensor_height": SENSOR_HEIGHT, "ground_z": 0.0,
             "frame_timestamps_ns": [int(t) for t in world.frame_times_ns],
             "trajectories": "gt/trajectories.npz", "labels": "gt/labels/{frame:06d}.npz",
@@ -394,7 +394,7 @@ def _write_preview(path: Path, world: World, scan: Scan, info: FrameInfo) -> Non
     """Bird's-eye view of the last frame (ego frame) with its ground-truth boxes."""
     from tracker.geometry import invert_transform
 
-    from .preview import write_bev_png
+    from ..lidar_sim.preview import write_bev_png
 
     ego_from_world = invert_transform(info.world_from_ego)
     boxes = [o.box_at(info.timestamp_ns).transformed(ego_from_world) for o in world.objects]

@@ -46,8 +46,8 @@ from tracker.metrics import (
 from tracker.pseudo_gt import mean_points_in_boxes, pseudo_gt_shape
 from tracker.sotracker import TrackResult, track
 
-from .errors import InputError
-from .io.sequence import Sequence as LidarSequence
+from ..errors import InputError
+from ..io.sequence import Sequence as LidarSequence
 
 __all__ = [
     "EvalConfig",
