@@ -36,7 +36,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     source.add_argument("--from-annotations", action="store_true",
                         help="use ground-truth boxes; shapes from the ground-removed points inside them")
     parser.add_argument("--track-id", nargs="+", metavar="ID", help="with --from-annotations: only these track ids (prefixes)")
-    parser.add_argument("--moving-only", action="store_true", help="with --from-annotations: skip objects that never move 0.5 m")
+    parser.add_argument("--moving-only", action="store_true", help="with --from-annotations: skip objects that do not move (sot_apps.objects.selection)")
     parser.add_argument("--box-time", choices=("points", "frame"), default="points",
                         help="time of a box/track state = median capture time of the LiDAR points inside it (default; "
                              "PandaSet boxes and tracker states fit unmotion-compensated sweeps) or the frame "

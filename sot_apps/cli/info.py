@@ -8,7 +8,8 @@ import sys
 
 from ..errors import InputError
 from ..io import FORMATS, open_sequence
-from ..summary import MOVING_MIN_DISPLACEMENT_M, SequenceSummary, summarize_sequence
+from ..objects.selection import DEFAULT_SELECTION
+from ..summary import SequenceSummary, summarize_sequence
 from .common import add_subcommand
 
 
@@ -17,7 +18,7 @@ def register(subparsers) -> argparse.ArgumentParser:
         subparsers, "info", help="summarise a sequence: frames, points, cameras, annotated tracks",
         description="Summarise a sequence: frames, time span, points per frame, cameras (timing offset to the "
                     "lidar), and annotated tracks with mean points in the box over their first 10 frames, "
-                    f"displacement and motion (moving = the box centre gets >= {MOVING_MIN_DISPLACEMENT_M:g} m from "
+                    f"displacement and motion (moving = the box centre gets >= {DEFAULT_SELECTION.min_displacement_m:g} m from "
                     "its first position, or a short track moves >= 0.3 m at >= 1 m/s; see docs/data-formats.md).",
         examples=["sot-apps info --tiny", "sot-apps info ../shared/data/pandaset_002 --vehicles-only",
                   "sot-apps info out/pandaset_002_canonical --json > info.json"])

@@ -21,6 +21,7 @@ from tracker.geometry import Box, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence
+from ..objects.selection import DEFAULT_SELECTION
 from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample
 from ..objects.trajectory import ObjectTrajectory
 
@@ -150,8 +151,7 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
         ks = [k for k in track.frames if k in frame_list]
         if not ks:
             continue
-        if moving_only and all(
-                np.linalg.norm(track.box_at(k).center - track.box_at(ks[0]).center) < 0.5 for k in ks):
+        if moving_only and not DEFAULT_SELECTION.track_motion(track, seq.timestamps_ns).moving:
             continue
         stamps = [times[tid].get(k, seq.frames[k].timestamp_ns) for k in ks]
         boxes: list[Box] = [track.box_at(k) for k in ks]

@@ -3,7 +3,7 @@
 Object rules (docs/pipeline.md):
 
 - ``annotations``: the listed ``track_ids`` (unique prefixes), or every annotated VEHICLE whose box moves
-  (``sot_apps.summary.motion_of``; ``moving_only: false`` takes parked ones too), in id order. Each is
+  (``sot_apps.objects.selection``; ``moving_only: false`` takes parked ones too), in id order. Each is
   tracked from its first to its last annotated frame inside the sequence's ``frames`` range, starting
   from its annotated box.
 - ``detections``: every box of the seed frame (``frame``, default the file's first frame) with
@@ -89,7 +89,7 @@ class Plan:
 
 
 def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int) -> list[tuple]:
-    from ..summary import is_vehicle, motion_of
+    from ..objects.selection import DEFAULT_SELECTION
 
     tracks = seq.tracks()
     if not tracks:
@@ -97,14 +97,7 @@ def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int)
     if src.track_ids is not None:
         ids = [seq.resolve_track_id(t) for t in src.track_ids]
     else:
-        ids = []
-        for tid in sorted(tracks):
-            t = tracks[tid]
-            if not is_vehicle(t.label):
-                continue
-            if src.moving_only and not motion_of(t, seq.timestamps_ns)[0]:
-                continue
-            ids.append(tid)
+        ids = DEFAULT_SELECTION.moving_vehicles(seq) if src.moving_only else DEFAULT_SELECTION.vehicles(seq)
     out = []
     for tid in ids:
         t = tracks[tid]
