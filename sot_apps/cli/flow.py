@@ -63,7 +63,7 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from ..flow.annotate import FlowOptions, annotate_camera
-    from ..flow.objects import objects_from_annotations, objects_from_tracks
+    from ..flow.objects import objects_for_pairs, objects_from_annotations
     from ..flow.scene import OcclusionParams
 
     if args.track_id and not args.from_annotations:
@@ -81,9 +81,7 @@ def run(args: argparse.Namespace) -> int:
                                            mesh_method=args.mesh, box_time=args.box_time, progress=not args.quiet)
         source = "annotations"
     else:
-        a, b = args.pairs or (0, len(seq.frames) - 1)
-        objects = objects_from_tracks(args.tracks, mesh_method=args.mesh, seq=seq, box_time=args.box_time,
-                                      frames=range(max(a - 2, 0), b + 3))
+        objects = objects_for_pairs(seq, args.tracks, args.pairs, mesh_method=args.mesh, box_time=args.box_time)
         source = "tracks"
     if not objects:
         raise InputError(seq.root, "no objects to annotate")

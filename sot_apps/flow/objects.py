@@ -104,6 +104,16 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
     return out
 
 
+def objects_for_pairs(seq: Sequence, track_dirs: Iterable[str | Path], pairs: tuple[int, int] | None,
+                      mesh_method: str = "hull", box_time: str = "points") -> list[TrackedObject]:
+    """Objects from track directories for the flow of image ``pairs`` (inclusive; None = every frame): the
+    states of the sweeps around the pairs (2 frames of margin) re-stamped as ``box_time`` says. ``sot-apps
+    flow --tracks`` and the pipeline's flow stage both call this, so they give the same flow."""
+    a, b = pairs if pairs is not None else (0, len(seq.frames) - 1)
+    return objects_from_tracks(track_dirs, mesh_method=mesh_method, seq=seq, box_time=box_time,
+                               frames=range(max(a - 2, 0), b + 3))
+
+
 def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, frames: Iterable[int] | None = None,
                              moving_only: bool = False, mesh_method: str = "hull", ground_clearance: float = 0.2,
                              voxel: float = 0.05, box_time: str = "points", extend_to_ground: bool = False,

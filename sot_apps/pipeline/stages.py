@@ -155,12 +155,15 @@ def flow_camera(out: str, sequence: str, path: str, format: str | None, camera: 
                 stage: dict, digest: str) -> dict:
     """Optical flow of one camera's image pairs: ``OUT/<seq>/flow/<camera>/...`` (see docs/flow.md)."""
     from ..flow.annotate import FlowOptions, annotate_camera
-    from ..flow.objects import objects_from_tracks
+    from ..flow.objects import objects_for_pairs
 
     seq = open_cached(path, format)
     flow_root = Path(out) / sequence / "flow"
     cam_root = flow_root / camera
-    objects = objects_from_tracks([track_dir(out, sequence, o) for o in object_ids])
+    last = len(seq.cameras[camera].frames) - 1
+    max_pairs = stage.get("max_pairs")
+    pairs = (0, last if max_pairs is None else min(last, int(max_pairs)))
+    objects = objects_for_pairs(seq, [track_dir(out, sequence, o) for o in object_ids], pairs)
     objects = [dataclasses.replace(o, source=f"track:{sequence}/tracks/{o.object_id}") for o in objects]
     stats_path = cam_root / "stats.json"
     if stats_path.is_file():   # a previous run with another set of objects: its pairs are stale
@@ -170,9 +173,6 @@ def flow_camera(out: str, sequence: str, path: str, format: str | None, camera: 
             previous = None
         if previous != [o.object_id for o in objects]:
             shutil.rmtree(cam_root)
-    last = len(seq.cameras[camera].frames) - 1
-    max_pairs = stage.get("max_pairs")
-    pairs = (0, last if max_pairs is None else min(last, int(max_pairs)))
     options = FlowOptions(mode=stage.get("mode", "dense"), use_lidar=bool(stage.get("use_lidar", True)))
     doc = annotate_camera(seq, camera, objects, flow_root, pairs=pairs, options=options, progress=False,
                           source="pipeline tracks")
