@@ -35,7 +35,7 @@ def _pin_one_core() -> str:
 
 def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[float], list[int]]:
     """(meshes, meshing seconds per vehicle, points per vehicle)."""
-    from ..lidar_sim.meshing import surfel_mesh
+    from ..objects.meshes import surfel_mesh
 
     meshes, seconds, npoints = [], [], []
     if bank_dir:

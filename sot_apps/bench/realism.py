@@ -70,7 +70,7 @@ def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_
     from tracker.geometry import Box, invert_transform, points_in_box, transform_points
 
     from ..lidar_sim.bank import GROUND_CLEARANCE, Bank, BankEntry, track_points_by_frame
-    from ..lidar_sim.meshing import SurfelParams, surfel_mesh
+    from ..objects.meshes import SurfelParams, surfel_mesh
     from ..lidar_sim.noise import Realism
     from ..lidar_sim.scene import SceneObject, SceneSpec, insert_into_background
     from ..lidar_sim.sensors import load_sensor

@@ -37,7 +37,7 @@ from ..io.atomic import write_json
 from ..io.ply import read_ply_mesh, read_ply_points, write_ply_mesh, write_ply_points
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
-from .meshing import SurfelParams, surfel_mesh
+from ..objects.meshes import SurfelParams, surfel_mesh
 
 __all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
            "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points",

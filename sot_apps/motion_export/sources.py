@@ -16,13 +16,14 @@ from typing import Iterable, Sequence as Seq
 import numpy as np
 
 from tracker.geometry import Box, invert_transform, points_in_box, transform_points
+from tracker.metrics import voxel_downsample_centres
 
 from ..errors import InputError
 from ..io.sequence import Sequence
 from ..objects.smoother import ObjectTrack
 
 __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
-           "aggregate_shape", "voxel_downsample"]
+           "aggregate_shape"]
 
 # Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points and prior_only).
 DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost"})
@@ -115,14 +116,6 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
     return out
 
 
-def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
-    """One point per occupied voxel (the voxel centre)."""
-    if len(points) == 0:
-        return points.reshape(0, 3)
-    keys = np.unique(np.floor(points / voxel).astype(np.int64), axis=0)
-    return (keys + 0.5) * voxel
-
-
 def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20, voxel: float = 0.05,
                     scale: float = 1.0) -> np.ndarray:
     """Object-frame points of ``track``: points inside its valid boxes (up to ``max_frames`` frames,
@@ -142,4 +135,4 @@ def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20
         pts = sequence.sweep(int(track.frames[i])).xyz
         inside = pts[points_in_box(pts, box_ego, scale)]
         chunks.append(transform_points(box_ego.object_from_world(), inside))
-    return voxel_downsample(np.concatenate(chunks) if chunks else np.zeros((0, 3)), voxel)
+    return voxel_downsample_centres(np.concatenate(chunks) if chunks else np.zeros((0, 3)), voxel)

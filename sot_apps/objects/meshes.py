@@ -1,8 +1,16 @@
-"""Shape points (object frame) -> triangle mesh for raycasting.
+"""Meshes of an object (object frame): the box, the convex hull of its shape points, surfels; the one voxel
+downsampler (mean of each occupied voxel) of sot_apps.
 
-Uses the LiDAR simulator's surfel meshing when it is available (``sot_apps.lidar_sim.meshing``);
-otherwise the convex hull of the points, which suits vehicles (convex-ish) and always closes the
-surface, so every pixel of the silhouette gets a hit.
+Surfel meshing (as LiDARsim does): every point becomes a small disk (a ``segments``-gon, triangulated as a fan
+of ``segments - 2`` triangles) centred on it and oriented by the normal of a plane fitted to its k nearest
+neighbours (PCA). Normals are oriented away from the object's centre. The disk radius follows the local point
+spacing: ``radius_scale`` times the mean distance to the k nearest neighbours, clipped to ``[min_radius,
+max_radius]``. Optional mirror completion reflects the points about the object's length axis (y -> -y in the
+object frame) before meshing, filling the side the sensor never saw. Points are first thinned on a voxel grid
+so entries stay small.
+
+The convex hull suits vehicles (convex-ish) and always closes the surface, so every pixel of a silhouette gets
+a hit (the flow default).
 """
 
 from __future__ import annotations
@@ -10,9 +18,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-__all__ = ["Mesh", "mesh_from_points", "box_mesh", "voxel_downsample"]
+__all__ = ["Mesh", "mesh_from_points", "box_mesh", "voxel_downsample", "SurfelParams", "mirror_complete",
+           "estimate_normals", "surfel_mesh"]
 
 
 @dataclass(frozen=True)
@@ -28,13 +37,13 @@ class Mesh:
 
 
 def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
-    """One point (the mean) per occupied voxel of size ``voxel``."""
+    """One point per occupied voxel of size ``voxel`` (the mean of the points in it), in a deterministic order."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(points) == 0 or voxel <= 0:
         return points
     keys = np.floor(points / voxel).astype(np.int64)
     _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
+    inverse = inverse.reshape(-1)
     sums = np.zeros((len(counts), 3))
     np.add.at(sums, inverse, points)
     return sums / counts[:, None]
@@ -88,17 +97,76 @@ def mesh_from_points(points: np.ndarray, method: str = "auto") -> Mesh | None:
 
 
 def _surfel_mesh(points: np.ndarray) -> Mesh | None:
-    """The LiDAR simulator's surfel meshing, when that module exists."""
-    try:
-        from ..lidar_sim import meshing as sim_meshing  # type: ignore[attr-defined]
-    except ImportError:
-        return None
-    fn = getattr(sim_meshing, "mesh_from_points", None) or getattr(sim_meshing, "surfel_mesh", None)
-    if fn is None:
-        return None
-    result = fn(points)
-    vertices = np.asarray(getattr(result, "vertices", result[0] if isinstance(result, tuple) else None), dtype=np.float64)
-    faces = np.asarray(getattr(result, "faces", result[1] if isinstance(result, tuple) else None), dtype=np.int32)
-    if vertices.ndim != 2 or len(faces) == 0:
-        return None
-    return Mesh(vertices, faces)
+    vertices, faces, _ = surfel_mesh(points)
+    return Mesh(vertices, faces.astype(np.int32)) if len(faces) else None
+
+
+@dataclass(frozen=True)
+class SurfelParams:
+    """Surfel meshing settings.
+
+    The default disk is a square (2 triangles, ``segments=4``) whose radius is scaled by 1.03, so that it
+    covers the area of the 0.9x hexagon used before. On 7 cm voxels this is a quarter of the triangles of
+    hexagons on 5 cm voxels, with the same realism on PandaSet (docs/lidar_sim.md), and 1.13x faster to trace.
+    """
+
+    k: int = 10
+    segments: int = 4
+    radius_scale: float = 1.03
+    min_radius: float = 0.03
+    max_radius: float = 0.25
+    voxel: float = 0.07
+
+
+def mirror_complete(points_object: np.ndarray) -> np.ndarray:
+    """Points plus their mirror image about the length axis (object frame: y -> -y)."""
+    mirrored = points_object * np.array([1.0, -1.0, 1.0])
+    return np.vstack([points_object, mirrored])
+
+
+def estimate_normals(points: np.ndarray, k: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) unit normals (k-NN PCA, oriented away from the centroid) and (N,) mean k-NN distance."""
+    points = np.asarray(points, dtype=np.float64)
+    k_eff = int(min(k + 1, len(points)))
+    tree = cKDTree(points)
+    dist, idx = tree.query(points, k=k_eff)
+    dist = dist.reshape(len(points), -1)
+    idx = idx.reshape(len(points), -1)
+    neigh = points[idx]                                          # (N, k, 3)
+    centred = neigh - neigh.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", centred, centred)
+    _, vecs = np.linalg.eigh(cov)
+    normals = vecs[:, :, 0]                                      # smallest eigenvalue
+    outward = points - points.mean(axis=0)
+    flip = np.einsum("ij,ij->i", normals, outward) < 0
+    normals[flip] *= -1.0
+    spacing = dist[:, 1:].mean(axis=1) if dist.shape[1] > 1 else np.full(len(points), 0.1)
+    return normals, spacing
+
+
+def surfel_mesh(points: np.ndarray, params: SurfelParams = SurfelParams(), mirror: bool = False,
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Disk mesh of object-frame points: (vertices (V, 3), faces (F, 3) int64, the points used (M, 3))."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if mirror:
+        pts = mirror_complete(pts)
+    pts = voxel_downsample(pts, params.voxel)
+    if len(pts) < 3:
+        raise ValueError(f"need at least 3 points to mesh, got {len(pts)}")
+    normals, spacing = estimate_normals(pts, params.k)
+    radius = np.clip(params.radius_scale * spacing, params.min_radius, params.max_radius)
+    # an orthonormal basis (u, v) of each disk's plane
+    helper = np.where(np.abs(normals[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
+    u = np.cross(normals, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(normals, u)
+    s = params.segments
+    ang = 2 * np.pi * np.arange(s) / s
+    rim = (pts[:, None, :] + radius[:, None, None] * (np.cos(ang)[None, :, None] * u[:, None, :]
+                                                      + np.sin(ang)[None, :, None] * v[:, None, :]))
+    vertices = rim.reshape(-1, 3)                                  # (N*s, 3): the disk's rim polygon
+    base = (np.arange(len(pts)) * s)[:, None]
+    j = np.arange(1, s - 1)
+    # fan from the first rim vertex: s - 2 triangles per disk (2 for the default square)
+    faces = np.stack([np.broadcast_to(base, (len(pts), s - 2)), base + j, base + j + 1], axis=-1)
+    return vertices, faces.reshape(-1, 3).astype(np.int64), pts
