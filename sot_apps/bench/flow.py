@@ -21,11 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..evaluation import DEV_TRACKS
 
 __all__ = ["register", "time_dense_flow", "format_speed_table", "format_quality_tables"]
-
-DEV_TRACKS = ("20d13d1d", "8ac00bad", "0d238564", "f0b32b02", "91aa5b5c", "71a404f3", "8febbea0", "1a46fa13",
-              "b09e1c68")
 
 
 def _pin_one_core() -> str:

@@ -227,8 +227,8 @@ def scans_figure(scans_root: Path, scene_dirs: list[Path], path: Path) -> Path |
 
 
 def motion_figure(seq: Sequence, track_dirs: list[Path], path: Path, horizon: int = 30) -> tuple[Path | None, dict | None]:
-    """Mean centre error of the motion export vs. k frames after the start (helper: sot_apps.bench.motion)."""
-    from ..bench.motion import evaluate_motion, plot_accuracy
+    """Mean centre error of the motion export vs. k frames after the start (helper: sot_apps.evaluation.motion)."""
+    from ..evaluation.motion import evaluate_motion, plot_accuracy
     from ..motion_export.sources import tracks_from_dirs
 
     if not seq.tracks():

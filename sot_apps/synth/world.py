@@ -48,6 +48,7 @@ from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
 from ..io.ply import write_ply_mesh
 from ..io.sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
+from ..objects.meshes import box_mesh
 from ..lidar_sim.noise import Realism
 from ..raycast import RaycastScene
 from ..lidar_sim.scan import Scan, SimObject, Trajectory, simulate_scan, state_to_matrix
@@ -205,13 +206,9 @@ def _integrate(rng: np.random.Generator, t0_ns: int, t1_ns: int, start: tuple[fl
 
 # ------------------------------------------------------------------------------------------ scene
 
-def _box_mesh(extents, centre, heading: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
-
-    m = trimesh.creation.box(extents=extents)
-    c, s = math.cos(heading), math.sin(heading)
-    v = np.asarray(m.vertices) @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + np.asarray(centre)
-    return v, np.asarray(m.faces)
+def _box_mesh(extents, centre) -> tuple[np.ndarray, np.ndarray]:
+    mesh = box_mesh(*(float(v) for v in extents))
+    return mesh.vertices + np.asarray(centre, dtype=np.float64), mesh.faces
 
 
 def _cylinder_mesh(radius: float, height: float, centre) -> tuple[np.ndarray, np.ndarray]:
