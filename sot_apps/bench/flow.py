@@ -36,7 +36,7 @@ def _pin_one_core() -> str:
 
 def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int = 3) -> dict:
     """Per object and pair: best-of-``repeats`` dense-flow time (ms) and its pixel count."""
-    from ..flow.annotate import FlowOptions, _write_outputs, build_pair, compute_pair
+    from ..flow.annotate import FlowOptions, write_pair_outputs, build_pair, compute_pair
     from ..flow.dense import RayCache
 
     camera = seq.cameras[camera_name]
@@ -60,7 +60,7 @@ def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int =
         whole = compute_pair(setup, flow_objects, "dense", cache)
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
-            _write_outputs(Path(tmp), k, whole, camera.frames[k].image_path, True)
+            write_pair_outputs(Path(tmp), k, whole, camera.frames[k].image_path, True)
             writing.append((time.perf_counter() - t0) * 1e3)
     return {"camera": camera_name, "width": camera.width, "height": camera.height, "rows": rows,
             "pair_overhead_ms": float(np.mean(overhead)) if overhead else 0.0,

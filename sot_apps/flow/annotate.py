@@ -34,7 +34,8 @@ from .sparse import sparse_flow
 from ..objects.trajectory import interpolate_pose
 from .visualize import flow_to_color, overlay
 
-__all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "STATS_VERSION"]
+__all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "write_pair_outputs",
+           "STATS_VERSION"]
 
 STATS_VERSION = 1
 SUBDIRS = ("flow_occ", "flow_noc", "flo", "instances", "vis", "pairs")
@@ -139,7 +140,8 @@ def _write_png(path: Path, image: np.ndarray) -> None:
     write_bytes(path, data.tobytes())
 
 
-def _write_outputs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> None:
+def write_pair_outputs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> None:
+    """The files of pair k under ``root``: KITTI flow_occ / flow_noc PNGs, .flo, the instance PNG, vis/."""
     name = f"{k:06d}"
     write_kitti_flow(root / "flow_occ" / f"{name}.png", result.flow, result.valid_occ)
     write_kitti_flow(root / "flow_noc" / f"{name}.png", result.flow, result.valid_noc)
@@ -204,7 +206,7 @@ def annotate_camera(seq: Sequence, camera_name: str, objects: list[TrackedObject
         setup, flow_objects = build_pair(seq, camera, k, objects, options, lidar_cache)
         result = compute_pair(setup, flow_objects, options.mode, ray_cache)
         elapsed = (time.perf_counter() - start) * 1e3
-        _write_outputs(root, k, result, camera.frames[k].image_path, options.write_vis)
+        write_pair_outputs(root, k, result, camera.frames[k].image_path, options.write_vis)
         write_json(record_path, _pair_record(k, camera, result, elapsed))
     return write_stats(root, seq.id, camera_name, options.mode, source, mapping)
 
