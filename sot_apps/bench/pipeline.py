@@ -53,7 +53,9 @@ def measure(sequence: Path, configs: list[tuple[str, int]], objects: int | None,
                 "annotations", max_objects=objects)),), stages)
             start = time.perf_counter()
             with ExecutorSession(spec) as session:
-                if kind != "inline" and not (kind == "local" and workers <= 1):
+                if kind == "dask":
+                    session.on_every_worker(_warm, str(sequence))
+                elif kind != "inline" and not (kind == "local" and workers <= 1):
                     session.run([Task(f"warm/{i}", _warm, (str(sequence),)) for i in range(2 * workers)], "warm-up",
                                 False)
                 startup = time.perf_counter() - start
