@@ -1,4 +1,8 @@
-"""Run SOTracker on a :class:`~sot_apps.io.sequence.Sequence` and write ``DIR/track.json`` + ``DIR/shape.ply``."""
+"""Run SOTracker on a :class:`~sot_apps.io.sequence.Sequence` and write ``DIR/track.json`` + ``DIR/shape.ply``.
+
+The one writer of track files: ``sot-apps track`` and the pipeline's tracking stage both call
+:func:`write_track_result`, and both start an annotated object at :func:`first_box_with_points`.
+"""
 
 from __future__ import annotations
 
@@ -17,7 +21,13 @@ from .io.sequence import Sequence
 from .io.tracks import FrameRecord, Size, TrackFile, write_track
 
 __all__ = ["parse_init_box", "resolve_span", "track_sequence", "refine_track_offline", "track_result_to_trackfile",
-           "write_track_result"]
+           "write_track_result", "first_box_with_points", "TrackingFailed", "MIN_INIT_POINTS"]
+
+MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box
+
+
+class TrackingFailed(RuntimeError):
+    """The object could not be tracked (e.g. no LiDAR points in its initial box)."""
 
 
 def parse_init_box(text: str, where: str = "--init-box") -> Box:
@@ -63,12 +73,33 @@ def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None
     return track(seq, init_box, start, end, config, progress=wrap)
 
 
+def first_box_with_points(seq: Sequence, annotated: list[tuple[int, Box]] | tuple[tuple[int, Box], ...],
+                          config: TrackerConfig, min_points: int = MIN_INIT_POINTS) -> tuple[int, Box]:
+    """The first annotated (frame, box) whose box holds ``min_points`` non-ground points, as the tracker counts
+    them at its start; the last annotated frame cannot start a track. None such: :class:`TrackingFailed`."""
+    from tracker.sotracker import Tracker
+
+    best = (0, annotated[0][0])
+    for k, box in annotated[:-1]:
+        n = Tracker(config).start(seq.lidar_frame(k), box).num_points
+        if n >= min_points:
+            return k, box
+        best = max(best, (n, k), key=lambda b: b[0])
+    last = annotated[-2][0] if len(annotated) > 1 else annotated[0][0]
+    raise TrackingFailed(f"fewer than {min_points} LiDAR points in every annotated box (frames {annotated[0][0]}..{last}; "
+                         f"at most {best[0]} at frame {best[1]}); nothing to track")
+
+
 def track_result_to_trackfile(seq: Sequence, result: TrackResult, object_id: str, init_box: Box,
-                              label: str | None = None, config_extra: dict[str, Any] | None = None) -> TrackFile:
-    """The track file record of ``result`` (world states, per-frame diagnostics, the config used)."""
+                              label: str | None = None, config_extra: dict[str, Any] | None = None,
+                              with_time_ms: bool = True) -> TrackFile:
+    """The track file record of ``result`` (world states, per-frame diagnostics, the config used). Quality is
+    clipped to [0, 1] (the schema's range). ``with_time_ms=False`` leaves out the per-frame tracker time (it
+    differs run to run), so the file is reproducible byte for byte (the pipeline)."""
     records = [FrameRecord(frame=e.frame, timestamp_ns=int(seq.frames[e.frame].timestamp_ns), state=e.state,
-                           num_points=int(e.num_points), quality=float(e.quality), flags=list(e.flags),
-                           time_ms=float(e.time_ms)) for e in result.estimates]
+                           num_points=int(e.num_points), quality=float(np.clip(e.quality, 0.0, 1.0)),
+                           flags=list(e.flags), time_ms=float(e.time_ms) if with_time_ms else None)
+               for e in result.estimates]
     config = result.config.to_dict()
     if config_extra:
         config.update(config_extra)
@@ -86,13 +117,14 @@ def refine_track_offline(seq: Sequence, result: TrackResult) -> TrackResult:
 
 
 def write_track_result(directory: str | Path, seq: Sequence, result: TrackResult, object_id: str, init_box: Box,
-                       label: str | None = None, offline: bool = False) -> Path:
+                       label: str | None = None, offline: bool = False, with_time_ms: bool = True) -> Path:
     """Write ``directory/track.json`` and ``directory/shape.ply``; returns the json path.
 
     ``offline`` records in the config block that ``result`` was refined offline (``mode: offline``).
     """
     extra = {"mode": "offline", "refined": True} if offline else None
-    trackfile = track_result_to_trackfile(seq, result, object_id, init_box, label, config_extra=extra)
+    trackfile = track_result_to_trackfile(seq, result, object_id, init_box, label, config_extra=extra,
+                                          with_time_ms=with_time_ms)
     return write_track(directory, trackfile, result.shape)
 
 

@@ -159,7 +159,7 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
         track_stage = dataclasses.asdict(stages.track)
         units = [_make_unit(out, "track", f"track/{o.key}", o.sequence, o.object_id,
                             {"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage},
-                            st.track_object, {"out": str(out), "plan": o, "stage": track_stage})
+                            st.track_object, {"out": str(out), "plan": o, "stage": stages.track})
                  for o in plan.objects]
         start = time.perf_counter()
         track_records = _run_units(units, out, session, "track", progress)
@@ -188,13 +188,13 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
             stage_doc = dataclasses.asdict(stages.bank)
             units.append(_make_unit(out, "bank", f"bank/{s.name}", s.name, None, {"tracks": checks, "stage": stage_doc},
                                     st.bank_sequence, {"out": str(out), "sequence": s.name, "object_ids": objs,
-                                                       "stage": stage_doc}))
+                                                       "stage": stages.bank}))
         if stages.motion.enabled:
             stage_doc = dataclasses.asdict(stages.motion)
             units.append(_make_unit(out, "motion", f"motion/{s.name}", s.name, None,
                                     {"tracks": checks, "stage": stage_doc, "seq": s.path},
                                     st.motion_sequence, {"out": str(out), "sequence": s.name, "path": s.path,
-                                                         "format": s.format, "object_ids": objs, "stage": stage_doc}))
+                                                         "format": s.format, "object_ids": objs, "stage": stages.motion}))
         if stages.flow.enabled:
             stage_doc = dataclasses.asdict(stages.flow)
             wanted = s.cameras if stages.flow.cameras is None else [c for c in stages.flow.cameras if c in s.cameras]
@@ -206,7 +206,7 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
                                         {"tracks": checks, "stage": stage_doc, "seq": s.path, "camera": camera},
                                         st.flow_camera, {"out": str(out), "sequence": s.name, "path": s.path,
                                                          "format": s.format, "camera": camera, "object_ids": objs,
-                                                         "stage": stage_doc}))
+                                                         "stage": stages.flow}))
     start = time.perf_counter()
     batch = _run_units(units, out, session, "bank/motion/flow", progress)
     elapsed = time.perf_counter() - start
