@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import points_in_box
+from tracker import points_in_box
 
 from .io.sequence import AnnotatedTrack, Sequence
 from .objects.selection import DEFAULT_SELECTION, Selection

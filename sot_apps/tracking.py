@@ -12,9 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from tracker.config import TrackerConfig
-from tracker.geometry import Box, points_in_box
-from tracker.sotracker import TrackResult, track
+from tracker import Box, TrackResult, TrackerConfig, points_in_box, track
 
 from .errors import InputError
 from .io.sequence import Sequence
@@ -77,7 +75,7 @@ def first_box_with_points(seq: Sequence, annotated: list[tuple[int, Box]] | tupl
                           config: TrackerConfig, min_points: int = MIN_INIT_POINTS) -> tuple[int, Box]:
     """The first annotated (frame, box) whose box holds ``min_points`` non-ground points, as the tracker counts
     them at its start; the last annotated frame cannot start a track. None such: :class:`TrackingFailed`."""
-    from tracker.sotracker import Tracker
+    from tracker import Tracker
 
     best = (0, annotated[0][0])
     for k, box in annotated[:-1]:
@@ -111,7 +109,7 @@ def track_result_to_trackfile(seq: Sequence, result: TrackResult, object_id: str
 
 def refine_track_offline(seq: Sequence, result: TrackResult) -> TrackResult:
     """Offline refinement of an online result: all states jointly against the final shape (tracker.offline)."""
-    from tracker.offline import refine_offline
+    from tracker import refine_offline
 
     return refine_offline(seq, result, result.config)
 

@@ -105,3 +105,12 @@ def test_the_contract_checker_sees_imports():
     assert "sot_apps.objects.selection" in graph["sot_apps.summary"]
     assert "sot_apps.evaluation.tracker" in graph["sot_apps.cli.eval"]        # inside run()
     assert "sot_apps.raycast" in graph["sot_apps.lidar_sim.scan"]
+
+
+def test_apps_import_the_tracker_through_its_package():
+    """``tracker/__init__`` exports what the apps use; the apps import from it, not from its modules.
+    (sot_apps.io is left to the reader branches merged on top.)"""
+    graph = imports_by_module()
+    bad = sorted(f"{m} imports {i}" for m, found in graph.items() if _in(m, "sot_apps") and not _in(m, "sot_apps.io")
+                 for i in found if i.startswith("tracker.") and i.split(".")[1] not in __import__("tracker").__all__)
+    assert bad == []

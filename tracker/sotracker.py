@@ -25,7 +25,7 @@ from .association import NearestNeighbors, random_subset, ransac_rigid_2d
 from .config import TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, points_in_box, transform_points, wrap_angle
-from .ground import GroundParams, ground_mask
+from .ground import ground_mask
 from .motion import MotionPrior
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
@@ -181,9 +181,7 @@ class Tracker:
     def __init__(self, config: TrackerConfig | None = None) -> None:
         self.config = config or TrackerConfig()
         c = self.config
-        self.ground_params = GroundParams(lpr_count=c.gpf_lpr_count, seed_threshold=c.gpf_seed_threshold,
-                                          distance_threshold=c.gpf_distance_threshold, iterations=c.gpf_iterations,
-                                          segment_length=c.gpf_segment_length, outlier_depth=c.gpf_outlier_depth)
+        self.ground_params = c.ground_params()
         self._started = False
 
     # ------------------------------------------------------------------ points

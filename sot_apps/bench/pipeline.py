@@ -28,7 +28,7 @@ EXECUTOR_NAMES = {"inline": "in process", "local": "local processes", "dask": "D
 
 def _warm(sequence: str) -> int:
     import sot_apps.pipeline.stages  # noqa: F401 - the import is the warm-up
-    import tracker.sotracker  # noqa: F401
+    import tracker  # noqa: F401
     from sot_apps.pipeline.plan import open_cached
 
     open_cached(sequence, None)   # as the planner already did in this process

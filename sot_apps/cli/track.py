@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tracker.config import get_preset, preset_names
+from tracker import get_preset, preset_names
 
 from ..errors import InputError
 from .common import add_sequence_argument, add_subcommand, load_sequence

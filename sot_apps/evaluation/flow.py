@@ -99,8 +99,8 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
     passed it, as PandaSet's boxes do). The first estimate is the ground-truth start box: it keeps
     the boxes' own time convention ``box_time`` ("frame" for ``sot-apps synth``, "points" for PandaSet).
     """
-    from tracker.geometry import points_in_box, transform_points
-    from tracker.sotracker import track
+    from tracker import points_in_box, transform_points
+    from tracker import track
 
     out = []
     tracks = seq.tracks()

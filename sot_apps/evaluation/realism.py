@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tracker.metrics import chamfer_distance
+from tracker import chamfer_distance
 
 __all__ = ["evaluate_realism", "format_tables", "chamfer", "Row"]
 
@@ -52,7 +52,7 @@ def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_
                      origin: tuple[float, float, float] | None = None) -> list[Row]:
     from tqdm import tqdm
 
-    from tracker.geometry import Box, invert_transform, points_in_box, transform_points
+    from tracker import Box, invert_transform, points_in_box, transform_points
 
     from ..lidar_sim.bank import GROUND_CLEARANCE, Bank, BankEntry, track_points_by_frame
     from ..objects.meshes import SurfelParams, box_mesh, surfel_mesh

@@ -25,26 +25,10 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from tracker.config import TrackerConfig, get_preset, preset_names
-from tracker.frames import LidarFrame
-from tracker.geometry import Box
-from tracker.ground import GroundParams
-from tracker.metrics import (
-    DIFFICULTIES,
-    DIFFICULTY_THRESHOLDS,
-    PRECISION_THRESHOLDS,
-    ROB_THRESHOLDS,
-    SUCCESS_THRESHOLDS,
-    PooledMetrics,
-    TrackletScores,
-    chamfer_distance,
-    difficulty,
-    pool_metrics,
-    score_tracklet,
-    tracklet_metrics,
-)
-from tracker.pseudo_gt import mean_points_in_boxes, pseudo_gt_shape
-from tracker.sotracker import TrackResult, track
+from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
+                     Box, LidarFrame, PooledMetrics, TrackResult, TrackerConfig, TrackletScores, chamfer_distance,
+                     difficulty, get_preset, mean_points_in_boxes, pool_metrics, preset_names, pseudo_gt_shape,
+                     score_tracklet, track, tracklet_metrics)
 
 from ..errors import InputError
 from ..objects.selection import DEFAULT_SELECTION, Selection, annotated_span
@@ -150,19 +134,13 @@ def select_moving_vehicle_tracks(sequence: LidarSequence, config: EvalConfig = E
     return selected
 
 
-def _ground_params(config: TrackerConfig) -> GroundParams:
-    return GroundParams(lpr_count=config.gpf_lpr_count, seed_threshold=config.gpf_seed_threshold,
-                        distance_threshold=config.gpf_distance_threshold, iterations=config.gpf_iterations,
-                        segment_length=config.gpf_segment_length, outlier_depth=config.gpf_outlier_depth)
-
-
 def prepare_tracks(sequence: LidarSequence, track_ids: Iterable[str], source: CachedSource,
                    config: EvalConfig = EvalConfig(), end_frame: int | None = None,
                    with_shape: bool = True) -> list[TrackSpec]:
     """TrackSpecs for ``track_ids`` (unique prefixes allowed); spans are cut at ``end_frame``. Without
     ``with_shape`` no pseudo-ground-truth shape is built (Shape is then NaN)."""
     tracks = sequence.tracks()
-    ground = _ground_params(TrackerConfig())
+    ground = TrackerConfig().ground_params()
     specs = []
     for prefix in track_ids:
         tid = sequence.resolve_track_id(prefix)
@@ -349,7 +327,7 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
         raise InputError(sequence.root, "no track to evaluate (no moving vehicle track matches the selection)")
     specs = prepare_tracks(sequence, ids, source, config, end_frame, with_shape)
     if offline and refine is None:
-        from tracker.offline import refine_offline as refine
+        from tracker import refine_offline as refine
     jobs = [(p, s, spec) for p in presets for s in seeds for spec in specs]
     online: dict[str, list[RunRecord]] = {p: [] for p in presets}
     refined: dict[str, list[RunRecord]] = {p: [] for p in presets}

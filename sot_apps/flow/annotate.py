@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import invert_transform, transform_points
+from tracker import invert_transform, transform_points
 
 from ..errors import InputError
 from ..io.atomic import write_bytes, write_json

@@ -17,7 +17,7 @@ from typing import Iterable
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import Box, points_in_box, transform_points
+from tracker import Box, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker.geometry import invert_transform
+from tracker import invert_transform
 
 from .camera import CameraModel, apply_transform, project
 from ..objects.meshes import Mesh

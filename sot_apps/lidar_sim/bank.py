@@ -30,7 +30,7 @@ from typing import Iterable
 
 import numpy as np
 
-from tracker.geometry import Box, points_in_box, transform_points
+from tracker import Box, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.atomic import write_json

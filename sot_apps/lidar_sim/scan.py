@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker.geometry import invert_transform
+from tracker import invert_transform
 
 from .noise import Realism, apply_range_noise, drop_mask, incidence_cosine, lambertian_intensity
 from ..raycast import RaycastScene, RayHits

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tracker.geometry import Box
+from tracker import Box
 
 from ..errors import InputError
 from ..schemas import validate

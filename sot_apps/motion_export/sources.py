@@ -15,8 +15,7 @@ from typing import Iterable, Sequence as Seq
 
 import numpy as np
 
-from tracker.geometry import Box, invert_transform, points_in_box, transform_points
-from tracker.metrics import voxel_downsample_centres
+from tracker import Box, invert_transform, points_in_box, transform_points, voxel_downsample_centres
 
 from ..errors import InputError
 from ..io.sequence import Sequence

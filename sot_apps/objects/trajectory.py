@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from tracker.geometry import make_transform, rotation_z
+from tracker import make_transform, rotation_z
 
 __all__ = ["ObjectTrajectory", "interpolate_pose", "world_from_object"]
 

@@ -25,7 +25,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from tracker.geometry import Box
+from tracker import Box
 
 from ..errors import InputError
 from ..io import open_sequence

@@ -36,8 +36,8 @@ def _files_under(directory: Path) -> list[Path]:
 
 def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> dict:
     """Track one object and write ``OUT/<seq>/tracks/<object>/{track.json, shape.ply}`` (sot_apps.tracking)."""
-    from tracker.config import get_preset
-    from tracker.sotracker import track
+    from tracker import get_preset
+    from tracker import track
 
     seq = open_cached(plan.sequence_path, plan.format)
     config = get_preset(stage.preset, **dict(stage.overrides or {}))

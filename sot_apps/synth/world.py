@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import Box, invert_transform, transform_points
+from tracker import Box, invert_transform, transform_points
 
 from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
@@ -389,7 +389,7 @@ def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: st
 
 def _write_preview(path: Path, world: World, scan: Scan, info: FrameInfo) -> None:
     """Bird's-eye view of the last frame (ego frame) with its ground-truth boxes."""
-    from tracker.geometry import invert_transform
+    from tracker import invert_transform
 
     from ..lidar_sim.preview import write_bev_png
 
