@@ -186,7 +186,8 @@ def simulate_scene(out: str, entry_id: str, range_m: float, headings_deg: list[f
     directory = Path(out) / "scans" / scene_name(entry_id, range_m)
     outputs = run_simulation(spec, bank, directory, preview_extent=max(25.0, range_m * 1.25))
     counts = [int((outputs.result.scan.instance == i).sum()) for i in range(len(objects))]
-    DoneMarker(Path(out), f"scans/{scene_name(entry_id, range_m)}").mark(digest, outputs.files,
-                                                                         extra={"counts": counts})
+    DoneMarker(Path(out), f"scans/{scene_name(entry_id, range_m)}").mark(
+        digest, outputs.files, extra={"scene": scene_name(entry_id, range_m), "entry": entry_id, "range_m": range_m,
+                                      "counts": counts})
     return {"scene": scene_name(entry_id, range_m), "entry": entry_id, "range_m": range_m,
             "headings_deg": list(headings_deg), "points": counts}
