@@ -129,7 +129,7 @@ def test_backends_agree_on_ground_and_meshes():
     for scene in scenes.values():
         for v, f in meshes:
             scene.add_mesh(v, f)
-    assert [r.geom_id for r in scenes["compiled"]._rects] == [0, 1]
+    assert scenes["compiled"].rectangle_ids == scenes["embreex"].rectangle_ids == [0, 1]
     dirs = rng.normal(size=(20_000, 3))
     dirs[:, 2] = -np.abs(dirs[:, 2]) * rng.uniform(0.02, 1.0, len(dirs))
     dirs[::7, 2] *= -1                                                    # some rays go up
@@ -154,7 +154,7 @@ def test_backends_agree_on_ground_and_meshes():
     v = v.copy()
     v[0, 2] -= 1e-5
     plain.add_mesh(v, f)
-    assert not plain._rects
+    assert not plain.rectangle_ids
     c = plain.cast(origins, dirs)
     only_ground = RaycastScene("compiled")
     only_ground.add_mesh(*meshes[0])
