@@ -1,0 +1,119 @@
+"""Conversions shared by the Waymo v1 and v2 readers: boxes, cameras, image cache."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from collections.abc import Sequence as SequenceABC
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from tracker.geometry import Box
+
+from ...errors import InputError
+from ..atomic import write_bytes
+from ..sequence import BoxAnnotation, CameraFrame
+from .messages import LABEL_TYPES
+
+__all__ = ["LABEL_TYPES", "micros_to_ns", "seconds_to_ns", "transform_4x4", "box_annotation", "camera_intrinsics",
+           "OPENCV_TO_WAYMO_CAMERA", "ImageRecord", "LazyCameraFrames", "image_cache_dir"]
+
+# Waymo's camera frame is x forward, y left, z up; OpenCV's is x right, y down, z forward.
+# waymo_camera_from_opencv_camera: columns are the OpenCV axes expressed in Waymo's camera frame.
+OPENCV_TO_WAYMO_CAMERA = np.array([[0.0, 0.0, 1.0, 0.0],
+                                   [-1.0, 0.0, 0.0, 0.0],
+                                   [0.0, -1.0, 0.0, 0.0],
+                                   [0.0, 0.0, 0.0, 1.0]])
+
+
+def micros_to_ns(micros: int) -> int:
+    return int(micros) * 1000
+
+
+def seconds_to_ns(seconds: float) -> int:
+    """Seconds since the epoch (double) to integer ns, rounded to the microsecond a double resolves."""
+    return int(round(float(seconds) * 1e6)) * 1000
+
+
+def transform_4x4(values, path: Path, what: str) -> np.ndarray:
+    """A row-major 16-value transform as a checked 4x4 matrix."""
+    matrix = np.asarray(list(values), dtype=np.float64)
+    if matrix.size != 16:
+        raise InputError(path, f"{what}: a transform needs 16 values, got {matrix.size}")
+    matrix = matrix.reshape(4, 4)
+    rotation = matrix[:3, :3]
+    if (not np.isfinite(matrix).all() or not np.allclose(matrix[3], [0, 0, 0, 1], atol=1e-6)
+            or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-4) or np.linalg.det(rotation) < 0):
+        raise InputError(path, f"{what}: not a rigid 4x4 transform")
+    return matrix
+
+
+def box_annotation(track_id: str, type_code: int, center: tuple[float, float, float], length: float, width: float,
+                   height: float, heading: float, world_from_ego: np.ndarray, path: Path, where: str) -> BoxAnnotation:
+    """A Waymo box (vehicle frame of the frame pose; length along the heading) as a WORLD-frame annotation."""
+    values = (*center, length, width, height, heading)
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(path, f"{where}: box {track_id!r} has a non-finite value")
+    if min(length, width, height) <= 0:
+        raise InputError(path, f"{where}: box {track_id!r} has a non-positive size {length}x{width}x{height}")
+    box = Box(float(center[0]), float(center[1]), float(center[2]), float(heading), float(length), float(width),
+              float(height)).transformed(world_from_ego)
+    return BoxAnnotation(track_id=track_id, label=LABEL_TYPES.get(int(type_code), "Unknown"), box=box)
+
+
+def camera_intrinsics(f_u: float, f_v: float, c_u: float, c_v: float) -> np.ndarray:
+    return np.array([[f_u, 0.0, c_u], [0.0, f_v, c_v], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class ImageRecord:
+    """Where one camera image is and when/where it was taken (no pixels)."""
+
+    timestamp_ns: int
+    world_from_camera: np.ndarray
+    read_jpeg: Callable[[], bytes]
+
+
+def image_cache_dir(source: Path, segment: str) -> Path:
+    """Per-source cache directory for extracted JPEGs (``$XDG_CACHE_HOME/sot-apps/waymo-images/...``).
+
+    Keyed by the source's resolved path, size and modification time, so a changed file gets a new one.
+    """
+    stat = source.stat()
+    key = hashlib.sha1(f"{source.resolve()}|{stat.st_size}|{stat.st_mtime_ns}".encode()).hexdigest()[:12]
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "sot-apps" / "waymo-images"
+    return base / f"{segment}-{key}"
+
+
+class LazyCameraFrames(SequenceABC):
+    """A camera's ``frames`` list whose JPEGs are extracted from the dataset file on first access.
+
+    ``frames[k].image_path`` is a real file (written atomically into the cache directory the first
+    time frame k is looked up), so code that reads images by path works unchanged.
+    """
+
+    def __init__(self, records: list[ImageRecord], directory: Path) -> None:
+        self._records = records
+        self._directory = directory
+
+    def __len__(self) -> int:
+        return len(self._records)
+
+    def __getitem__(self, index):  # type: ignore[override]
+        if isinstance(index, slice):
+            return [self[k] for k in range(*index.indices(len(self)))]
+        record = self._records[index]
+        k = index % len(self._records)
+        path = self._directory / f"{k:06d}.jpg"
+        if not path.is_file():
+            write_bytes(path, record.read_jpeg())
+        return CameraFrame(timestamp_ns=record.timestamp_ns, image_path=path, world_from_camera=record.world_from_camera)
+
+    @property
+    def timestamps_ns(self) -> list[int]:
+        """Image times without extracting any image."""
+        return [r.timestamp_ns for r in self._records]
