@@ -53,7 +53,8 @@ def transform_4x4(values, path: Path, what: str) -> np.ndarray:
 
 
 def box_annotation(track_id: str, type_code: int, center: tuple[float, float, float], length: float, width: float,
-                   height: float, heading: float, world_from_ego: np.ndarray, path: Path, where: str) -> BoxAnnotation:
+                   height: float, heading: float, world_from_ego: np.ndarray, path: Path, where: str,
+                   num_points: int | None = None) -> BoxAnnotation:
     """A Waymo box (vehicle frame of the frame pose; length along the heading) as a WORLD-frame annotation."""
     values = (*center, length, width, height, heading)
     if not all(math.isfinite(v) for v in values):
@@ -62,7 +63,8 @@ def box_annotation(track_id: str, type_code: int, center: tuple[float, float, fl
         raise InputError(path, f"{where}: box {track_id!r} has a non-positive size {length}x{width}x{height}")
     box = Box(float(center[0]), float(center[1]), float(center[2]), float(heading), float(length), float(width),
               float(height)).transformed(world_from_ego)
-    return BoxAnnotation(track_id=track_id, label=LABEL_TYPES.get(int(type_code), "Unknown"), box=box)
+    return BoxAnnotation(track_id=track_id, label=LABEL_TYPES.get(int(type_code), "Unknown"), box=box,
+                         num_points=None if num_points is None else int(num_points))
 
 
 def camera_intrinsics(f_u: float, f_v: float, c_u: float, c_v: float) -> np.ndarray:

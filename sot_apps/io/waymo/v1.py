@@ -122,7 +122,9 @@ def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None) -> Se
         annotations.append([box_annotation(label.id, label.type, (label.box.center_x, label.box.center_y,
                                                                    label.box.center_z),
                                            label.box.length, label.box.width, label.box.height, label.box.heading,
-                                           world_from_ego, path, f"record {k}")
+                                           world_from_ego, path, f"record {k}",
+                                           label.num_lidar_points_in_box if label.HasField("num_lidar_points_in_box")
+                                           else None)
                             for label in header.laser_labels])
         image_slices.append(images)
         laser_slices.append(lasers)

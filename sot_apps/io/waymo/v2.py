@@ -234,8 +234,10 @@ def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo],
 def _boxes(path: Path, segment: str, frames: list[FrameInfo], frame_of: dict[int, int]) -> list[list[BoxAnnotation]]:
     fields = ["box.center.x", "box.center.y", "box.center.z", "box.size.x", "box.size.y", "box.size.z", "box.heading",
               "type"]
-    table = _ComponentTable(path, segment, [TIME, OBJECT], [BOX + f for f in fields])
+    count = BOX + "num_lidar_points_in_box"
+    table = _ComponentTable(path, segment, [TIME, OBJECT], [BOX + f for f in fields], optional=(count,))
     columns = {f: table.column(BOX + f) for f in fields}
+    counts = table.column(count) if table.has(count) else [None] * len(table.keys)
     out: list[list[BoxAnnotation]] = [[] for _ in frames]
     for i, (t, object_id) in enumerate(zip(table.column(TIME), table.column(OBJECT))):
         k = frame_of.get(int(t))
@@ -244,7 +246,7 @@ def _boxes(path: Path, segment: str, frames: list[FrameInfo], frame_of: dict[int
         c = {f: columns[f][i] for f in fields}
         out[k].append(box_annotation(str(object_id), c["type"], (c["box.center.x"], c["box.center.y"], c["box.center.z"]),
                                      c["box.size.x"], c["box.size.y"], c["box.size.z"], c["box.heading"],
-                                     frames[k].world_from_ego, path, f"row {i}"))
+                                     frames[k].world_from_ego, path, f"row {i}", counts[i]))
     return out
 
 
