@@ -17,11 +17,10 @@ from __future__ import annotations
 import zlib
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .wire import WireError, fields, varint
 
-__all__ = ["decode_matrix_float", "row_inclinations", "column_azimuths", "range_image_points"]
+__all__ = ["decode_matrix_float", "row_inclinations", "column_azimuths", "LidarGeometry", "range_image_points"]
 
 
 def decode_matrix_float(compressed: bytes) -> np.ndarray:
@@ -64,6 +63,59 @@ def column_azimuths(width: int, vehicle_from_lidar: np.ndarray) -> np.ndarray:
     return np.pi * (1.0 - (2.0 * np.arange(width) + 1.0) / width) - yaw
 
 
+def _pixel_rotations(pose: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) Rz(yaw) Ry(pitch) Rx(roll) from (..., 6) [roll, pitch, yaw, x, y, z]."""
+    cr, sr = np.cos(pose[..., 0]), np.sin(pose[..., 0])
+    cp, sp = np.cos(pose[..., 1]), np.sin(pose[..., 1])
+    cy, sy = np.cos(pose[..., 2]), np.sin(pose[..., 2])
+    return np.stack([np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+                     np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+                     np.stack([-sp, cp * sr, cp * cr], -1)], -2)
+
+
+class LidarGeometry:
+    """Everything that maps one lidar's range image pixels to points of a frame, computed once per frame.
+
+    Per pixel: the ray direction in the vehicle frame, and with a pixel pose image the transform from
+    that pixel's vehicle frame to the frame's vehicle frame.
+    """
+
+    def __init__(self, height: int, width: int, vehicle_from_lidar: np.ndarray, inclinations: np.ndarray,
+                 pixel_pose: np.ndarray | None = None, vehicle_from_world: np.ndarray | None = None) -> None:
+        self.shape = (height, width)
+        inc = np.asarray(inclinations, dtype=np.float64)
+        az = column_azimuths(width, vehicle_from_lidar)
+        rays = np.stack([np.cos(inc)[:, None] * np.cos(az)[None, :], np.cos(inc)[:, None] * np.sin(az)[None, :],
+                         np.broadcast_to(np.sin(inc)[:, None], (height, width))], -1)
+        self.directions = rays @ vehicle_from_lidar[:3, :3].T  # (H, W, 3) vehicle frame
+        self.origin = vehicle_from_lidar[:3, 3].copy()
+        self.rotation = self.translation = None
+        if pixel_pose is not None:
+            if pixel_pose.shape[:2] != (height, width) or pixel_pose.shape[-1] != 6:
+                raise WireError(f"pixel pose image {pixel_pose.shape} does not match range image {self.shape}")
+            if vehicle_from_world is None:
+                raise ValueError("vehicle_from_world is needed with a pixel pose")
+            pose = pixel_pose.astype(np.float64)
+            r_frame = vehicle_from_world[:3, :3]
+            world_from_frame_t = -r_frame.T @ vehicle_from_world[:3, 3]
+            # frame_from_pixel = vehicle_from_world @ world_from_pixel; subtract before rotating (large world values)
+            self.rotation = r_frame @ _pixel_rotations(pose)
+            self.translation = (pose[..., 3:6] - world_from_frame_t) @ r_frame.T
+
+    def points(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points (N, 3) float64 in the frame's vehicle frame and intensities (N,) float32 of a [H, W, C] image."""
+        if image.ndim != 3 or image.shape[:2] != self.shape:
+            raise WireError(f"range image of shape {image.shape}, expected [{self.shape[0]}, {self.shape[1]}, 4]")
+        rng = image[..., 0]
+        rows, cols = np.nonzero(rng > 0)
+        r = rng[rows, cols].astype(np.float64)[:, None]
+        xyz = self.origin + r * self.directions[rows, cols]
+        if self.rotation is not None:
+            xyz = np.einsum("nij,nj->ni", self.rotation[rows, cols], xyz) + self.translation[rows, cols]
+        intensity = image[rows, cols, 1].astype(np.float32) if image.shape[2] > 1 else np.zeros(len(r), np.float32)
+        return xyz, intensity
+
+
 def range_image_points(image: np.ndarray, vehicle_from_lidar: np.ndarray, inclinations: np.ndarray,
                        pixel_pose: np.ndarray | None = None,
                        vehicle_from_world: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -72,24 +124,5 @@ def range_image_points(image: np.ndarray, vehicle_from_lidar: np.ndarray, inclin
     ``pixel_pose`` ([H, W, 6], TOP lidar) moves each point with the vehicle pose of its own pixel and
     then into the frame's vehicle frame with ``vehicle_from_world`` (inverse of the frame pose).
     """
-    height, width = image.shape[:2]
-    rng = image[..., 0].astype(np.float64)
-    rows, cols = np.nonzero(rng > 0)
-    r = rng[rows, cols]
-    inc = inclinations[rows]
-    az = column_azimuths(width, vehicle_from_lidar)[cols]
-    cos_inc = np.cos(inc)
-    lidar = np.stack([r * cos_inc * np.cos(az), r * cos_inc * np.sin(az), r * np.sin(inc)], axis=1)
-    vehicle = lidar @ vehicle_from_lidar[:3, :3].T + vehicle_from_lidar[:3, 3]
-    if pixel_pose is not None:
-        if pixel_pose.shape[:2] != (height, width):
-            raise WireError(f"pixel pose image {pixel_pose.shape} does not match range image {image.shape}")
-        if vehicle_from_world is None:
-            raise ValueError("vehicle_from_world is needed with a pixel pose")
-        pose = pixel_pose[rows, cols].astype(np.float64)
-        rotation = Rotation.from_euler("ZYX", pose[:, [2, 1, 0]]).as_matrix()  # Rz(yaw) Ry(pitch) Rx(roll)
-        world = np.einsum("nij,nj->ni", rotation, vehicle) + pose[:, 3:6]
-        # subtract the translation first: world coordinates are large
-        vehicle = (world - vehicle_from_world[:3, :3].T @ -vehicle_from_world[:3, 3]) @ vehicle_from_world[:3, :3].T
-    intensity = image[rows, cols, 1].astype(np.float32) if image.shape[2] > 1 else np.zeros(len(r), np.float32)
-    return vehicle, intensity
+    return LidarGeometry(image.shape[0], image.shape[1], vehicle_from_lidar, inclinations, pixel_pose,
+                         vehicle_from_world).points(image)

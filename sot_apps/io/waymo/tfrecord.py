@@ -33,84 +33,95 @@ def _byte_table() -> np.ndarray:
     return reg
 
 
-def _zero_shift(reg: int, table: np.ndarray) -> int:
-    """Register after feeding one zero byte."""
-    return (reg >> 8) ^ int(table[reg & 0xFF])
+def _compose(outer: tuple[int, ...], inner: tuple[int, ...]) -> tuple[int, ...]:
+    """Columns of the GF(2)-linear map outer . inner (maps given by their images of 1 << i)."""
+    return tuple(_apply(outer, c) for c in inner)
 
 
-@lru_cache(maxsize=64)
-def _shift_columns(nbytes: int) -> tuple[int, ...]:
-    """The GF(2)-linear map 'feed ``nbytes`` zero bytes' as its 32 columns (images of 1 << i)."""
-    table = _byte_table()
-
-    def apply(columns: tuple[int, ...], reg: int) -> int:
-        out = 0
-        i = 0
-        while reg:
-            if reg & 1:
-                out ^= columns[i]
-            reg >>= 1
-            i += 1
-        return out
-
-    result = tuple(1 << i for i in range(32))  # identity
-    power = tuple(_zero_shift(1 << i, table) for i in range(32))  # one byte
-    n = nbytes
-    while n:
-        if n & 1:
-            result = tuple(apply(power, c) for c in result)
-        power = tuple(apply(power, c) for c in power)
-        n >>= 1
-    return result
-
-
-def _apply_shift(nbytes: int, reg: int) -> int:
-    columns = _shift_columns(nbytes)
+def _apply(columns: tuple[int, ...], reg: int) -> int:
     out = 0
-    for i in range(32):
-        if reg >> i & 1:
+    i = 0
+    while reg:
+        if reg & 1:
             out ^= columns[i]
+        reg >>= 1
+        i += 1
     return out
 
 
-def _raw_register(data: np.ndarray, chunk: int) -> int:
+@lru_cache(maxsize=128)
+def _shift_columns(nbytes: int) -> tuple[int, ...]:
+    """The linear map 'feed ``nbytes`` zero bytes into the register', as its 32 columns."""
+    if nbytes == 0:
+        return tuple(1 << i for i in range(32))
+    if nbytes == 1:
+        table = _byte_table()
+        return tuple((1 << i >> 8) ^ int(table[(1 << i) & 0xFF]) for i in range(32))
+    half = _shift_columns(nbytes // 2)
+    columns = _compose(half, half)
+    return _compose(_shift_columns(1), columns) if nbytes % 2 else columns
+
+
+@lru_cache(maxsize=128)
+def _shift_tables(nbytes: int) -> np.ndarray:
+    """(4, 256) lookup tables applying the ``nbytes`` zero-byte shift to a register byte by byte."""
+    columns = np.array(_shift_columns(nbytes), dtype=np.uint32)
+    bits = (np.arange(256)[:, None] >> np.arange(8)) & 1
+    tables = np.zeros((4, 256), dtype=np.uint32)
+    for j in range(4):
+        tables[j] = np.bitwise_xor.reduce(np.where(bits == 1, columns[8 * j:8 * j + 8][None, :], 0).astype(np.uint32),
+                                          axis=1)
+    return tables
+
+
+@lru_cache(maxsize=1)
+def _word_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Tables applying the 4-zero-byte shift to the low and the high 16 bits of a register."""
+    columns = np.array(_shift_columns(4), dtype=np.uint32)
+    bits = ((np.arange(65536, dtype=np.uint32)[:, None] >> np.arange(16, dtype=np.uint32)) & 1).astype(bool)
+    low = np.bitwise_xor.reduce(np.where(bits, columns[None, :16], np.uint32(0)), axis=1).astype(np.uint32)
+    high = np.bitwise_xor.reduce(np.where(bits, columns[None, 16:], np.uint32(0)), axis=1).astype(np.uint32)
+    return low, high
+
+
+_CHUNK = 256  # bytes per parallel lane
+
+
+def _raw_register(data: np.ndarray) -> int:
     """Register after feeding ``data`` into a zero register (no init, no final xor), vectorised.
 
-    The data are left-padded with zeros (which leave a zero register unchanged) to whole chunks; all
-    chunks are run in parallel, then combined: reg = shift_chunk(reg) ^ chunk_register.
+    Leading zero bytes leave a zero register unchanged, so the data are left-padded to whole chunks
+    (and a zero chunk is put in front whenever a level has an odd count). The chunks run in parallel, four bytes per step (register ^= word, then
+    the 4-zero-byte shift by two 16-bit table lookups); then neighbours are combined pairwise
+    (reg(AB) = shift_len(B)(reg(A)) ^ reg(B)) until one register is left.
     """
-    table = _byte_table()
-    n = data.size
-    rows = -(-n // chunk)
-    padded = np.zeros(rows * chunk, dtype=np.uint8)
-    padded[rows * chunk - n:] = data
-    block = padded.reshape(rows, chunk).T.copy()  # (chunk, rows): contiguous per step
+    low, high = _word_tables()
+    rows = -(-data.size // _CHUNK)
+    padded = np.zeros(rows * _CHUNK, dtype=np.uint8)
+    padded[padded.size - data.size:] = data
+    words = padded.view("<u4").reshape(rows, _CHUNK // 4).T.copy()  # (words per chunk, rows)
     regs = np.zeros(rows, dtype=np.uint32)
-    for j in range(chunk):
-        regs = (regs >> np.uint32(8)) ^ table[(regs ^ block[j]) & np.uint32(0xFF)]
-    columns = _shift_columns(chunk)
-    reg = 0
-    for value in regs.tolist():
-        shifted = 0
-        i = 0
-        while reg:
-            if reg & 1:
-                shifted ^= columns[i]
-            reg >>= 1
-            i += 1
-        reg = shifted ^ value
-    return reg
+    for j in range(_CHUNK // 4):
+        regs ^= words[j]
+        regs = low[regs & np.uint32(0xFFFF)] ^ high[regs >> np.uint32(16)]
+    length = _CHUNK
+    while regs.size > 1:
+        if regs.size % 2:
+            regs = np.concatenate([np.zeros(1, np.uint32), regs])
+        tables = _shift_tables(length)
+        left, right = regs[0::2], regs[1::2]
+        regs = (tables[0][left & 0xFF] ^ tables[1][(left >> 8) & 0xFF] ^ tables[2][(left >> 16) & 0xFF]
+                ^ tables[3][left >> 24] ^ right)
+        length *= 2
+    return int(regs[0])
 
 
 def crc32c(data: bytes | memoryview | np.ndarray) -> int:
     """CRC-32C (Castagnoli) of ``data``."""
     array = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data.view(np.uint8).ravel()
-    n = array.size
-    if n == 0:
+    if array.size == 0:
         return 0
-    chunk = max(64, int(np.sqrt(n)) // 4)
-    raw = _raw_register(array, chunk)
-    return (raw ^ _apply_shift(n, 0xFFFFFFFF)) ^ 0xFFFFFFFF
+    return (_raw_register(array) ^ _apply(_shift_columns(array.size), 0xFFFFFFFF)) ^ 0xFFFFFFFF
 
 
 def masked_crc32c(data: bytes | memoryview | np.ndarray) -> int:

@@ -39,7 +39,7 @@ from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
 from .common import (OPENCV_TO_WAYMO_CAMERA, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
                      image_cache_dir, micros_to_ns, seconds_to_ns, transform_4x4)
 from .messages import CAMERA_IMAGE_BYTES, CAMERA_NAMES, FRAME_IMAGES, FRAME_LASERS, LASER_NAMES, messages
-from .range_image import decode_matrix_float, range_image_points, row_inclinations
+from .range_image import LidarGeometry, decode_matrix_float, row_inclinations
 from .tfrecord import TFRecordFile
 from .wire import WireError, fields, select
 
@@ -173,12 +173,15 @@ def _load_sweep(records: TFRecordFile, index: int, slices: list[tuple[int, int]]
             pixel_pose = None
             if laser.ri_return1.range_image_pose_compressed:
                 pixel_pose = decode_matrix_float(laser.ri_return1.range_image_pose_compressed)
+            geometry = None
             for ri in returns:
                 image = decode_matrix_float(ri.range_image_compressed)
                 if image.ndim != 3 or image.shape[2] < 1:
                     raise WireError(f"range image of shape {image.shape}, expected [H, W, 4]")
-                xyz, intensity = range_image_points(image, calib.vehicle_from_lidar, calib.rows(image.shape[0]),
-                                                    pixel_pose, vehicle_from_world)
+                if geometry is None:
+                    geometry = LidarGeometry(image.shape[0], image.shape[1], calib.vehicle_from_lidar,
+                                             calib.rows(image.shape[0]), pixel_pose, vehicle_from_world)
+                xyz, intensity = geometry.points(image)
                 xyz_parts.append(xyz)
                 intensity_parts.append(intensity)
         except (WireError, ValueError, OSError) as exc:  # zlib.error is an Exception subclass of its own

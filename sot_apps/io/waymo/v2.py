@@ -32,7 +32,7 @@ from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
 from .common import (OPENCV_TO_WAYMO_CAMERA, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
                      image_cache_dir, micros_to_ns, seconds_to_ns, transform_4x4)
 from .messages import CAMERA_NAMES, LASER_NAMES
-from .range_image import range_image_points, row_inclinations
+from .range_image import LidarGeometry, row_inclinations
 from .wire import WireError
 
 __all__ = ["read_waymo_v2", "is_waymo_v2", "COMPONENTS", "v2_segment_files"]
@@ -211,15 +211,18 @@ def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo],
             if lidar_pose is not None and (index, laser) in pose_rows:
                 pose_row = lidar_pose.row(pose_rows[(index, laser)], pose_columns)
                 pixel_pose = _range_image(pose_row, *pose_columns, files["lidar_pose"], f"frame {index} lidar {name}")
+            geometry = None
             for r in (1, 2):
                 image = _range_image(row, LIDAR.format(r, "values"), LIDAR.format(r, "shape"), files["lidar"],
                                      f"frame {index} lidar {name} return {r}")
                 if image is None:
                     continue
                 try:
-                    xyz, intensity = range_image_points(image, extrinsic, row_inclinations(image.shape[0], incl, inc_min,
-                                                                                           inc_max),
-                                                        pixel_pose, vehicle_from_world)
+                    if geometry is None:
+                        geometry = LidarGeometry(image.shape[0], image.shape[1], extrinsic,
+                                                 row_inclinations(image.shape[0], incl, inc_min, inc_max), pixel_pose,
+                                                 vehicle_from_world)
+                    xyz, intensity = geometry.points(image)
                 except WireError as exc:
                     raise InputError(files["lidar"], f"frame {index} lidar {name}: {exc}") from exc
                 xyz_parts.append(xyz)
