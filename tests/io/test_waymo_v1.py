@@ -110,8 +110,12 @@ def test_real_boxes_project_onto_the_files_projected_labels(real, real_seq):
 
 def test_real_camera_images_are_extracted_lazily(real_seq):
     camera = real_seq.cameras["FRONT"]
-    assert camera.frames.timestamps_ns[0] - real_seq.frames[0].timestamp_ns == pytest.approx(52.4e6, abs=0.1e6)
-    path = camera.frames[0].image_path
+    frame = camera.frames[0]
+    assert frame.timestamp_ns - real_seq.frames[0].timestamp_ns == pytest.approx(52.4e6, abs=0.1e6)
+    cached = frame._path
+    assert not cached.exists()  # nothing extracted until the path is used
+    path = frame.image_path
+    assert path == cached and path.is_file()
     image = cv2.imread(str(path))
     assert image.shape == (1280, 1920, 3)
 

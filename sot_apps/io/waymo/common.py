@@ -91,11 +91,29 @@ def image_cache_dir(source: Path, segment: str) -> Path:
     return base / f"{segment}-{key}"
 
 
-class LazyCameraFrames(SequenceABC):
-    """A camera's ``frames`` list whose JPEGs are extracted from the dataset file on first access.
+class _LazyImageFrame(CameraFrame):
+    """A CameraFrame whose JPEG is written to its ``image_path`` the first time the path is asked for."""
 
-    ``frames[k].image_path`` is a real file (written atomically into the cache directory the first
-    time frame k is looked up), so code that reads images by path works unchanged.
+    def __init__(self, record: ImageRecord, path: Path) -> None:  # noqa: D107 - fields set like the dataclass's
+        object.__setattr__(self, "timestamp_ns", record.timestamp_ns)
+        object.__setattr__(self, "world_from_camera", record.world_from_camera)
+        object.__setattr__(self, "_path", path)
+        object.__setattr__(self, "_read", record.read_jpeg)
+
+    @property  # type: ignore[override]
+    def image_path(self) -> Path:
+        path: Path = self._path  # type: ignore[attr-defined]
+        if not path.is_file():
+            write_bytes(path, self._read())  # type: ignore[attr-defined]
+        return path
+
+
+class LazyCameraFrames(SequenceABC):
+    """A camera's ``frames`` list whose JPEGs stay in the dataset file until their path is used.
+
+    ``frames[k].timestamp_ns`` and ``.world_from_camera`` cost nothing; ``frames[k].image_path`` writes
+    the JPEG atomically into the cache directory the first time, so code that reads images by path works
+    unchanged.
     """
 
     def __init__(self, records: list[ImageRecord], directory: Path) -> None:
@@ -110,12 +128,4 @@ class LazyCameraFrames(SequenceABC):
             return [self[k] for k in range(*index.indices(len(self)))]
         record = self._records[index]
         k = index % len(self._records)
-        path = self._directory / f"{k:06d}.jpg"
-        if not path.is_file():
-            write_bytes(path, record.read_jpeg())
-        return CameraFrame(timestamp_ns=record.timestamp_ns, image_path=path, world_from_camera=record.world_from_camera)
-
-    @property
-    def timestamps_ns(self) -> list[int]:
-        """Image times without extracting any image."""
-        return [r.timestamp_ns for r in self._records]
+        return _LazyImageFrame(record, self._directory / f"{k:06d}.jpg")
