@@ -16,11 +16,11 @@ from tracker.geometry import Box
 
 from ...errors import InputError
 from ..atomic import write_bytes
-from ..sequence import BoxAnnotation, CameraFrame
+from ..sequence import BoxAnnotation, CameraFrame, Sweep
 from .messages import LABEL_TYPES
 
 __all__ = ["LABEL_TYPES", "micros_to_ns", "seconds_to_ns", "transform_4x4", "box_annotation", "camera_intrinsics",
-           "OPENCV_TO_WAYMO_CAMERA", "ImageRecord", "LazyCameraFrames", "image_cache_dir"]
+           "OPENCV_TO_WAYMO_CAMERA", "ImageRecord", "LazyCameraFrames", "image_cache_dir", "sweep_from_parts"]
 
 # Waymo's camera frame is x forward, y left, z up; OpenCV's is x right, y down, z forward.
 # waymo_camera_from_opencv_camera: columns are the OpenCV axes expressed in Waymo's camera frame.
@@ -65,6 +65,16 @@ def box_annotation(track_id: str, type_code: int, center: tuple[float, float, fl
               float(height)).transformed(world_from_ego)
     return BoxAnnotation(track_id=track_id, label=LABEL_TYPES.get(int(type_code), "Unknown"), box=box,
                          num_points=None if num_points is None else int(num_points))
+
+
+def sweep_from_parts(xyz: list[np.ndarray], intensity: list[np.ndarray], path: Path, where: str) -> Sweep:
+    """One sweep from the lidars' point arrays (an empty sweep when there are none)."""
+    if not xyz:
+        return Sweep(xyz=np.zeros((0, 3), np.float32), intensity=np.zeros(0, np.float32))
+    points = np.concatenate(xyz)
+    if not np.isfinite(points).all():
+        raise InputError(path, f"{where}: range images give non-finite points")
+    return Sweep(xyz=points.astype(np.float32), intensity=np.concatenate(intensity))
 
 
 def camera_intrinsics(f_u: float, f_v: float, c_u: float, c_v: float) -> np.ndarray:

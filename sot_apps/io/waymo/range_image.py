@@ -15,12 +15,14 @@ capture time, rotation Rz(yaw) Ry(pitch) Rx(roll); the second return shares it.
 from __future__ import annotations
 
 import zlib
+from dataclasses import dataclass
 
 import numpy as np
 
 from .wire import WireError, fields, varint
 
-__all__ = ["decode_matrix_float", "row_inclinations", "column_azimuths", "LidarGeometry", "range_image_points"]
+__all__ = ["decode_matrix_float", "row_inclinations", "column_azimuths", "LaserCalibration", "LidarGeometry",
+           "lidar_points", "range_image_points"]
 
 
 def decode_matrix_float(compressed: bytes) -> np.ndarray:
@@ -44,6 +46,20 @@ def decode_matrix_float(compressed: bytes) -> np.ndarray:
     if not dims or int(np.prod(dims)) != values.size:
         raise WireError(f"MatrixFloat has {values.size} values but shape {dims}")
     return values.reshape(dims)
+
+
+@dataclass(frozen=True)
+class LaserCalibration:
+    """One lidar's calibration: ``vehicle_from_lidar`` and beam inclinations (per beam, or None = uniform)."""
+
+    name: str
+    vehicle_from_lidar: np.ndarray
+    inclinations: np.ndarray | None
+    inclination_min: float
+    inclination_max: float
+
+    def rows(self, height: int) -> np.ndarray:
+        return row_inclinations(height, self.inclinations, self.inclination_min, self.inclination_max)
 
 
 def row_inclinations(height: int, inclinations: np.ndarray | None, inc_min: float, inc_max: float) -> np.ndarray:
@@ -126,3 +142,20 @@ def range_image_points(image: np.ndarray, vehicle_from_lidar: np.ndarray, inclin
     """
     return LidarGeometry(image.shape[0], image.shape[1], vehicle_from_lidar, inclinations, pixel_pose,
                          vehicle_from_world).points(image)
+
+
+def lidar_points(images: list[np.ndarray], calibration: LaserCalibration, pixel_pose: np.ndarray | None,
+                 vehicle_from_world: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Points and intensities of each return image of one lidar (all share the pixel geometry)."""
+    xyz, intensity = [], []
+    geometry = None
+    for image in images:
+        if image.ndim != 3 or image.shape[2] < 1:
+            raise WireError(f"range image of shape {image.shape}, expected [H, W, 4]")
+        if geometry is None:
+            geometry = LidarGeometry(image.shape[0], image.shape[1], calibration.vehicle_from_lidar,
+                                     calibration.rows(image.shape[0]), pixel_pose, vehicle_from_world)
+        points, values = geometry.points(image)
+        xyz.append(points)
+        intensity.append(values)
+    return xyz, intensity

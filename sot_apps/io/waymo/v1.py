@@ -27,6 +27,7 @@ or images are first read (checking all data at open would read the whole ~1 GB s
 
 from __future__ import annotations
 
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -37,13 +38,13 @@ from tracker.geometry import invert_transform
 from ...errors import InputError
 from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
 from .common import (OPENCV_TO_WAYMO_CAMERA, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
-                     image_cache_dir, micros_to_ns, seconds_to_ns, transform_4x4)
+                     image_cache_dir, micros_to_ns, seconds_to_ns, sweep_from_parts, transform_4x4)
 from .messages import CAMERA_IMAGE_BYTES, CAMERA_NAMES, FRAME_IMAGES, FRAME_LASERS, LASER_NAMES, messages
-from .range_image import LidarGeometry, decode_matrix_float, row_inclinations
+from .range_image import LaserCalibration, decode_matrix_float, lidar_points
 from .tfrecord import TFRecordFile
 from .wire import WireError, fields, select
 
-__all__ = ["read_waymo_v1", "is_waymo_v1", "LaserCalibration"]
+__all__ = ["read_waymo_v1", "is_waymo_v1"]
 
 _HEADER_FIELDS = {1, 2, 3, 6}
 _CAMERA_META_FIELDS = {1, 3, 5, 6, 7, 8}
@@ -54,20 +55,6 @@ def is_waymo_v1(path: Path) -> bool:
     if path.is_file():
         return path.suffix == ".tfrecord"
     return path.is_dir() and len(list(path.glob("*.tfrecord"))) == 1
-
-
-class LaserCalibration:
-    """One lidar's extrinsic and per-row inclinations (row 0 highest)."""
-
-    def __init__(self, name: str, vehicle_from_lidar: np.ndarray, inclinations: np.ndarray | None,
-                 inc_min: float, inc_max: float) -> None:
-        self.name = name
-        self.vehicle_from_lidar = vehicle_from_lidar
-        self._inclinations = inclinations
-        self._min, self._max = inc_min, inc_max
-
-    def rows(self, height: int) -> np.ndarray:
-        return row_inclinations(height, self._inclinations, self._min, self._max)
 
 
 def _frame_parts(payload: memoryview, path: Path, k: int):
@@ -100,7 +87,6 @@ def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None) -> Se
     records = TFRecordFile(path)
     if len(records) == 0:
         raise InputError(path, "the TFRecord file holds no records")
-    m = messages()
 
     frames: list[FrameInfo] = []
     annotations: list[list[BoxAnnotation]] = []
@@ -132,7 +118,7 @@ def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None) -> Se
     if np.any(np.diff(stamps) <= 0):
         raise InputError(path, f"frame timestamps must increase strictly (record {int(np.argmax(np.diff(stamps) <= 0)) + 1})")
 
-    lasers = {}
+    lasers: dict[int, LaserCalibration] = {}
     for calib in context.laser_calibrations:
         name = LASER_NAMES.get(calib.name, f"LASER_{calib.name}")
         lasers[calib.name] = LaserCalibration(
@@ -150,7 +136,7 @@ def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None) -> Se
                     ego_from_lidar=ego_from_lidar, cameras=cameras, annotations=annotations)
 
 
-def _load_sweep(records: TFRecordFile, index: int, slices: list[tuple[int, int]], lasers: dict,
+def _load_sweep(records: TFRecordFile, index: int, slices: list[tuple[int, int]], lasers: dict[int, LaserCalibration],
                 world_from_ego: np.ndarray) -> Sweep:
     path = records.path
     payload = records.payload(index, verify=True)
@@ -168,34 +154,19 @@ def _load_sweep(records: TFRecordFile, index: int, slices: list[tuple[int, int]]
         name = LASER_NAMES.get(laser.name, str(laser.name))
         if laser.name not in lasers:
             raise InputError(path, f"record {index}: lidar {name} has range images but no calibration")
-        calib = lasers[laser.name]
         try:
             pixel_pose = None
             if laser.ri_return1.range_image_pose_compressed:
                 pixel_pose = decode_matrix_float(laser.ri_return1.range_image_pose_compressed)
-            geometry = None
-            for ri in returns:
-                image = decode_matrix_float(ri.range_image_compressed)
-                if image.ndim != 3 or image.shape[2] < 1:
-                    raise WireError(f"range image of shape {image.shape}, expected [H, W, 4]")
-                if geometry is None:
-                    geometry = LidarGeometry(image.shape[0], image.shape[1], calib.vehicle_from_lidar,
-                                             calib.rows(image.shape[0]), pixel_pose, vehicle_from_world)
-                xyz, intensity = geometry.points(image)
-                xyz_parts.append(xyz)
-                intensity_parts.append(intensity)
-        except (WireError, ValueError, OSError) as exc:  # zlib.error is an Exception subclass of its own
-            raise InputError(path, f"record {index}: lidar {name}: bad range image ({exc})") from exc
-        except Exception as exc:  # noqa: BLE001 - zlib.error
-            if type(exc).__name__ != "error":
-                raise
+            images = [decode_matrix_float(ri.range_image_compressed) for ri in returns]
+            xyz, intensity = lidar_points(images, lasers[laser.name], pixel_pose, vehicle_from_world)
+        except zlib.error as exc:
             raise InputError(path, f"record {index}: lidar {name}: range image does not decompress ({exc})") from exc
-    if not xyz_parts:
-        return Sweep(xyz=np.zeros((0, 3), np.float32), intensity=np.zeros(0, np.float32))
-    xyz = np.concatenate(xyz_parts)
-    if not np.isfinite(xyz).all():
-        raise InputError(path, f"record {index}: range images give non-finite points")
-    return Sweep(xyz=xyz.astype(np.float32), intensity=np.concatenate(intensity_parts))
+        except (WireError, ValueError) as exc:
+            raise InputError(path, f"record {index}: lidar {name}: bad range image ({exc})") from exc
+        xyz_parts += xyz
+        intensity_parts += intensity
+    return sweep_from_parts(xyz_parts, intensity_parts, path, f"record {index}")
 
 
 def _cameras(records: TFRecordFile, context, image_slices: list[list[tuple[int, int]]], path: Path,

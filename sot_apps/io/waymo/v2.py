@@ -30,9 +30,9 @@ from tracker.geometry import invert_transform
 from ...errors import InputError
 from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
 from .common import (OPENCV_TO_WAYMO_CAMERA, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
-                     image_cache_dir, micros_to_ns, seconds_to_ns, transform_4x4)
+                     image_cache_dir, micros_to_ns, seconds_to_ns, sweep_from_parts, transform_4x4)
 from .messages import CAMERA_NAMES, LASER_NAMES
-from .range_image import LidarGeometry, row_inclinations
+from .range_image import LaserCalibration, lidar_points
 from .wire import WireError
 
 __all__ = ["read_waymo_v2", "is_waymo_v2", "COMPONENTS", "v2_segment_files"]
@@ -159,27 +159,29 @@ def read_waymo_v2(path: str | Path, image_cache: str | Path | None = None) -> Se
     ego_from_lidar = np.eye(4)
     if "lidar_calibration" in files:
         calibrations = _lidar_calibrations(files["lidar_calibration"], segment)
-        ego_from_lidar = calibrations[1][0] if 1 in calibrations else np.eye(4)
+        ego_from_lidar = calibrations[1].vehicle_from_lidar if 1 in calibrations else np.eye(4)
     return Sequence(id=segment, root=files["vehicle_pose"], format="waymo_v2", frames=frames, load_sweep=load,
                     ego_from_lidar=ego_from_lidar, cameras=cameras, annotations=annotations)
 
 
-def _lidar_calibrations(path: Path, segment: str) -> dict[int, tuple[np.ndarray, np.ndarray | None, float, float]]:
+def _lidar_calibrations(path: Path, segment: str) -> dict[int, LaserCalibration]:
     cols = [LCAL + "extrinsic.transform", LCAL + "beam_inclination.min", LCAL + "beam_inclination.max"]
-    table = _ComponentTable(path, segment, [LASER], cols, optional=(LCAL + "beam_inclination.values",))
-    values = table.column(LCAL + "beam_inclination.values") if table.has(LCAL + "beam_inclination.values") else None
+    values = LCAL + "beam_inclination.values"
+    table = _ComponentTable(path, segment, [LASER], cols, optional=(values,))
+    per_beam = table.column(values) if table.has(values) else [None] * len(table.keys)
     out = {}
-    for i, name in enumerate(table.column(LASER)):
-        incl = values[i] if values is not None else None
-        out[int(name)] = (transform_4x4(table.column(cols[0])[i], path, f"laser {name} extrinsic"),
-                          np.asarray(incl, dtype=np.float64) if incl else None,
-                          float(table.column(cols[1])[i]), float(table.column(cols[2])[i]))
+    for i, code in enumerate(table.column(LASER)):
+        name = LASER_NAMES.get(int(code), str(code))
+        out[int(code)] = LaserCalibration(
+            name, transform_4x4(table.column(cols[0])[i], path, f"laser {name} extrinsic"),
+            np.asarray(per_beam[i], dtype=np.float64) if per_beam[i] else None,
+            float(table.column(cols[1])[i]), float(table.column(cols[2])[i]))
     return out
 
 
 def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo], frame_of: dict[int, int]):
     if "lidar" not in files:
-        return lambda index: Sweep(xyz=np.zeros((0, 3), np.float32), intensity=np.zeros(0, np.float32))
+        return lambda index: sweep_from_parts([], [], files["vehicle_pose"], f"frame {index}")
     if "lidar_calibration" not in files:
         raise InputError(files["lidar"], "range images need lidar_calibration/<segment>.parquet beside lidar/")
     calibrations = _lidar_calibrations(files["lidar_calibration"], segment)
@@ -205,31 +207,21 @@ def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo],
             name = LASER_NAMES.get(laser, str(laser))
             if laser not in calibrations:
                 raise InputError(files["lidar_calibration"], f"no calibration for lidar {name}")
-            extrinsic, incl, inc_min, inc_max = calibrations[laser]
             row = lidar.row(row_index, range_columns)
             pixel_pose = None
             if lidar_pose is not None and (index, laser) in pose_rows:
                 pose_row = lidar_pose.row(pose_rows[(index, laser)], pose_columns)
                 pixel_pose = _range_image(pose_row, *pose_columns, files["lidar_pose"], f"frame {index} lidar {name}")
-            geometry = None
-            for r in (1, 2):
-                image = _range_image(row, LIDAR.format(r, "values"), LIDAR.format(r, "shape"), files["lidar"],
-                                     f"frame {index} lidar {name} return {r}")
-                if image is None:
-                    continue
-                try:
-                    if geometry is None:
-                        geometry = LidarGeometry(image.shape[0], image.shape[1], extrinsic,
-                                                 row_inclinations(image.shape[0], incl, inc_min, inc_max), pixel_pose,
-                                                 vehicle_from_world)
-                    xyz, intensity = geometry.points(image)
-                except WireError as exc:
-                    raise InputError(files["lidar"], f"frame {index} lidar {name}: {exc}") from exc
-                xyz_parts.append(xyz)
-                intensity_parts.append(intensity)
-        if not xyz_parts:
-            return Sweep(xyz=np.zeros((0, 3), np.float32), intensity=np.zeros(0, np.float32))
-        return Sweep(xyz=np.concatenate(xyz_parts).astype(np.float32), intensity=np.concatenate(intensity_parts))
+            images = [_range_image(row, LIDAR.format(r, "values"), LIDAR.format(r, "shape"), files["lidar"],
+                                   f"frame {index} lidar {name} return {r}") for r in (1, 2)]
+            try:
+                xyz, intensity = lidar_points([i for i in images if i is not None], calibrations[laser], pixel_pose,
+                                              vehicle_from_world)
+            except WireError as exc:
+                raise InputError(files["lidar"], f"frame {index} lidar {name}: {exc}") from exc
+            xyz_parts += xyz
+            intensity_parts += intensity
+        return sweep_from_parts(xyz_parts, intensity_parts, files["lidar"], f"frame {index}")
 
     return load
 
