@@ -179,6 +179,27 @@ def test_synthetic_boxes_tracks_and_camera(synthetic):
         np.testing.assert_allclose(uv, ws.waymo_project(point, truth.image_world_from_vehicle[k]), atol=1e-6)
 
 
+def test_lidar_sot_segment_is_found_and_its_ids_are_the_readers_track_ids(real, tmp_path):
+    """LiDAR-SOT names this frame's segment; find_waymo_segment finds it under its official file name and
+    11 of the 14 LiDAR-SOT tracklet ids of the segment are track ids of the frame (the others start later)."""
+    import json
+
+    lists = REAL.parent / "lidar_sot_benchmark"
+    tracklets = [t for kind in ("vehicle", "pedestrian") for t in json.loads((lists / kind / "bench_list.json").read_text())
+                 if CONTEXT in t["segment_name"]]
+    assert len(tracklets) == 14
+    name = tracklets[0]["segment_name"]
+    (tmp_path / f"{name}.tfrecord").symlink_to(real)
+    path = find_waymo_segment(tmp_path, name)
+    assert path == tmp_path / f"{name}.tfrecord"
+    seq = read_waymo_v1(path, image_cache=tmp_path / "images")
+    ids = set(seq.tracks())
+    assert sum(t["id"] in ids for t in tracklets) == 11
+    types = {t["id"]: t["type"] for t in tracklets}
+    labels = {1: "Vehicle", 2: "Pedestrian"}
+    assert all(seq.tracks()[i].label == labels[types[i]] for i in ids & set(types))
+
+
 def test_directory_with_one_tfrecord_and_find_segment(synthetic, tmp_path):
     path, truth = synthetic
     assert detect_format(path.parent) == "waymo_v1"
