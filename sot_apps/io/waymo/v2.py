@@ -105,8 +105,8 @@ class _ComponentTable:
     def has(self, name: str) -> bool:
         return name in self.keys.column_names
 
-    def row(self, index: int, columns: list[str]) -> dict:
-        """One row's ``columns`` (reads and caches the row group that holds it)."""
+    def row(self, index: int, columns: list[str]) -> pa.Table:
+        """One row's ``columns`` as a one-row table (reads and caches the row group that holds it)."""
         group = int(np.searchsorted(self._starts, index, side="right") - 1)
         key = (group, tuple(columns))
         if key not in self._cache:
@@ -116,14 +116,18 @@ class _ComponentTable:
                 raise InputError(self.path, f"cannot read row group {group} ({exc})") from exc
             while len(self._cache) > 2:
                 self._cache.popitem(last=False)
-        return self._cache[key].slice(index - int(self._starts[group]), 1).to_pylist()[0]
+        return self._cache[key].slice(index - int(self._starts[group]), 1)
 
 
-def _range_image(row: dict, values: str, shape: str, path: Path, what: str) -> np.ndarray | None:
-    data, dims = row.get(values), row.get(shape)
-    if data is None or dims is None or len(data) == 0:
+def _range_image(row: pa.Table, values: str, shape: str, path: Path, what: str) -> np.ndarray | None:
+    """The [H, W, C] image of a one-row table's ``values``/``shape`` list columns (None when null or empty)."""
+    data, dims = row.column(values).combine_chunks(), row.column(shape).combine_chunks()
+    if data.null_count or dims.null_count:
         return None
-    array = np.asarray(data, dtype=np.float32)
+    array = data.flatten().to_numpy(zero_copy_only=False).astype(np.float32, copy=False)
+    dims = dims.flatten().to_numpy(zero_copy_only=False)
+    if array.size == 0:
+        return None
     if int(np.prod(dims)) != array.size:
         raise InputError(path, f"{what}: {array.size} values for shape {list(dims)}")
     return array.reshape([int(d) for d in dims])
@@ -286,7 +290,7 @@ def _cameras(files: dict[str, Path], segment: str, frames: list[FrameInfo], fram
 
 def _jpeg_reader(images: _ComponentTable, index: int):
     def read() -> bytes:
-        data = images.row(index, [CIMG + "image"])[CIMG + "image"]
+        data = images.row(index, [CIMG + "image"]).column(0)[0].as_py()
         if not data:
             raise InputError(images.path, f"row {index}: no JPEG data")
         return bytes(data)
