@@ -248,6 +248,10 @@ def test_bad_data_crc_is_named_when_the_frame_is_read(synthetic, tmp_path):
     with pytest.raises(InputError, match="record 0 .* fails its data CRC"):
         seq.sweep(0)
     assert len(seq.sweep(1)) > 0
+    data[12] = 0x07  # the first tag: wire type 7 does not exist, the record no longer parses
+    bad.write_bytes(bytes(data))
+    with pytest.raises(InputError, match="record 0 .* fails its data CRC"):
+        open_sequence(bad)
 
 
 def test_not_a_frame(tmp_path):

@@ -57,8 +57,11 @@ def is_waymo_v1(path: Path) -> bool:
     return path.is_dir() and len(list(path.glob("*.tfrecord"))) == 1
 
 
-def _frame_parts(payload: memoryview, path: Path, k: int):
-    """(header message, [image slices], [laser slices]) of record k."""
+def _frame_parts(records: TFRecordFile, k: int):
+    """(header message, [image slices], [laser slices]) of record k (its data CRC is checked only when
+    it does not parse, to say whether the file is corrupt or not a Frame file)."""
+    path = records.path
+    payload = records.payload(k, verify=False)
     images: list[tuple[int, int]] = []
     lasers: list[tuple[int, int]] = []
     try:
@@ -72,6 +75,7 @@ def _frame_parts(payload: memoryview, path: Path, k: int):
                 header_bytes.append(bytes(payload[tag_start:end]))
         header = messages().FrameHeader.FromString(b"".join(header_bytes))
     except (WireError, DecodeError) as exc:
+        records.payload(k, verify=True)  # a corrupt record is named as such
         raise InputError(path, f"record {k} is not a Waymo Frame message ({exc})") from exc
     return header, images, lasers
 
@@ -94,8 +98,7 @@ def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None) -> Se
     laser_slices: list[list[tuple[int, int]]] = []
     context = None
     for k in range(len(records)):
-        payload = records.payload(k, verify=False)
-        header, images, lasers = _frame_parts(payload, path, k)
+        header, images, lasers = _frame_parts(records, k)
         if context is None:
             context = header.context
         elif header.context.name != context.name:
