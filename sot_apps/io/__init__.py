@@ -22,7 +22,7 @@ def detect_format(path: str | Path) -> str:
         raise InputError(path, "no such file or directory")
     if path.is_file() and path.name == "sequence.json":
         return "sequence"
-    waymo = _detect_waymo(path)
+    waymo = _detect_waymo(path) if path.is_file() else None
     if waymo:
         return waymo
     if not path.is_dir():
@@ -31,6 +31,9 @@ def detect_format(path: str | Path) -> str:
         return "sequence"
     if is_pandaset(path):
         return "pandaset"
+    waymo = _detect_waymo(path)
+    if waymo:
+        return waymo
     raise InputError(path, "unknown sequence format: expected sequence.json (canonical), lidar/poses.json with "
                            "lidar/NN.npz|.pkl.gz (PandaSet), a Waymo v1 .tfrecord or Waymo v2 component parquet files")
 
