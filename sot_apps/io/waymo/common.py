@@ -19,12 +19,12 @@ from ..atomic import write_bytes
 from ..sequence import BoxAnnotation, CameraFrame, Sweep
 from .messages import LABEL_TYPES
 
-__all__ = ["LABEL_TYPES", "micros_to_ns", "seconds_to_ns", "transform_4x4", "box_annotation", "camera_intrinsics",
-           "OPENCV_TO_WAYMO_CAMERA", "ImageRecord", "LazyCameraFrames", "image_cache_dir", "sweep_from_parts"]
+__all__ = ["micros_to_ns", "seconds_to_ns", "transform_4x4", "box_annotation", "camera_intrinsics",
+           "WAYMO_CAMERA_FROM_OPENCV", "ImageRecord", "LazyCameraFrames", "image_cache_dir", "sweep_from_parts"]
 
 # Waymo's camera frame is x forward, y left, z up; OpenCV's is x right, y down, z forward.
-# waymo_camera_from_opencv_camera: columns are the OpenCV axes expressed in Waymo's camera frame.
-OPENCV_TO_WAYMO_CAMERA = np.array([[0.0, 0.0, 1.0, 0.0],
+# WAYMO_CAMERA_FROM_OPENCV: columns are the OpenCV axes expressed in Waymo's camera frame.
+WAYMO_CAMERA_FROM_OPENCV = np.array([[0.0, 0.0, 1.0, 0.0],
                                    [-1.0, 0.0, 0.0, 0.0],
                                    [0.0, -1.0, 0.0, 0.0],
                                    [0.0, 0.0, 0.0, 1.0]])

@@ -37,7 +37,7 @@ from tracker.geometry import invert_transform
 
 from ...errors import InputError
 from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
-from .common import (OPENCV_TO_WAYMO_CAMERA, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
+from .common import (WAYMO_CAMERA_FROM_OPENCV, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
                      image_cache_dir, micros_to_ns, seconds_to_ns, sweep_from_parts, transform_4x4)
 from .messages import CAMERA_IMAGE_BYTES, CAMERA_NAMES, FRAME_IMAGES, FRAME_LASERS, LASER_NAMES, messages
 from .range_image import LaserCalibration, decode_matrix_float, lidar_points
@@ -178,7 +178,7 @@ def _cameras(records: TFRecordFile, context, image_slices: list[list[tuple[int, 
     per_camera: dict[int, list[ImageRecord]] = {}
     calibrations = {c.name: c for c in context.camera_calibrations}
     ego_from_camera = {name: transform_4x4(c.extrinsic.transform, path, f"camera calibration {CAMERA_NAMES.get(name)}")
-                       @ OPENCV_TO_WAYMO_CAMERA for name, c in calibrations.items()}
+                       @ WAYMO_CAMERA_FROM_OPENCV for name, c in calibrations.items()}
     complete = {name: True for name in calibrations}
     for k, slices in enumerate(image_slices):
         payload = records.payload(k, verify=False)

@@ -29,7 +29,7 @@ from tracker.geometry import invert_transform
 
 from ...errors import InputError
 from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
-from .common import (OPENCV_TO_WAYMO_CAMERA, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
+from .common import (WAYMO_CAMERA_FROM_OPENCV, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
                      image_cache_dir, micros_to_ns, seconds_to_ns, sweep_from_parts, transform_4x4)
 from .messages import CAMERA_NAMES, LASER_NAMES
 from .range_image import LaserCalibration, lidar_points
@@ -267,7 +267,7 @@ def _cameras(files: dict[str, Path], segment: str, frames: list[FrameInfo], fram
         name = int(name)
         label = CAMERA_NAMES.get(name, f"CAMERA_{name}")
         ego_from_camera = transform_4x4(cal.column(CCAL + "extrinsic.transform")[j], cal_path,
-                                        f"camera {label} extrinsic") @ OPENCV_TO_WAYMO_CAMERA
+                                        f"camera {label} extrinsic") @ WAYMO_CAMERA_FROM_OPENCV
         rows = by_camera.get(name, {})
         records = []
         for k in range(len(frames)):  # the camera's frames are the first n lidar frames
