@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 import waymo_synth as ws
 from sot_apps.errors import InputError
 from sot_apps.io import detect_format, open_sequence
-from sot_apps.io.waymo import find_waymo_segment, read_waymo_v1
+from sot_apps.io.waymo import PointSelection, find_waymo_segment, read_waymo_v1
 from sot_apps.io.waymo.messages import messages
 from sot_apps.io.waymo.range_image import range_image_points
 from sot_apps.io.waymo.tfrecord import TFRecordFile, crc32c
@@ -136,6 +136,21 @@ def test_synthetic_points_match_the_ray_cast_truth(synthetic):
         np.testing.assert_allclose(sweep.intensity[index], truth.intensity[k], atol=1e-6)
         np.testing.assert_allclose(seq.frames[k].world_from_ego, truth.world_from_ego[k])
         assert seq.frames[k].timestamp_ns == truth.timestamps_us[k] * 1000
+
+
+def test_choosing_lidars_and_returns(synthetic):
+    path, truth = synthetic
+    pose = truth.world_from_ego[0]
+    cast = ws.cast_lidar(ws.TOP, ws.Scene.around(truth.world_from_ego[0]), pose, (1.0, 0.03))
+    first = np.isfinite(cast.range_images[0][..., 0]) & (cast.range_images[0][..., 0] > 0)
+    seq = read_waymo_v1(path, points=PointSelection(lidars=("TOP",), returns=(1,)))
+    sweep = seq.sweep(0)
+    assert len(sweep) == int(first.sum())
+    assert cKDTree(cast.points_ego).query(sweep.xyz)[0].max() < 1e-4
+    second_only = read_waymo_v1(path, points=PointSelection(returns=(2,))).sweep(0)
+    assert 0 < len(second_only) < len(open_sequence(path).sweep(0)) - len(sweep)
+    with pytest.raises(InputError, match="unknown Waymo lidar"):
+        PointSelection(lidars=("LEFT",))
 
 
 def test_top_lidar_pixel_poses_matter():

@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 import waymo_synth as ws
 from sot_apps.errors import InputError
 from sot_apps.io import detect_format, open_sequence
-from sot_apps.io.waymo import find_waymo_segment
+from sot_apps.io.waymo import PointSelection, find_waymo_segment, read_waymo_v2
 from tracker.geometry import invert_transform, transform_points
 
 REAL = (Path(__file__).resolve().parents[3] / "shared" / "data" / "readers" / "waymo_v1_one_frame" / "v2_vehicle_pose"
@@ -79,6 +79,14 @@ def test_synthetic_components_match_truth(synthetic):
             assert np.cos(a.box.heading - b.world[3]) == pytest.approx(1.0)
     assert seq.annotations[2] == []
     assert seq.tracks()["car-7"].frames == [0, 1, 50]
+
+
+def test_choosing_a_lidar(synthetic):
+    root, truth = synthetic
+    front = ws.cast_lidar(ws.FRONT, ws.Scene.around(truth.world_from_ego[0]), truth.world_from_ego[0], (1.0, 0.03))
+    sweep = read_waymo_v2(root, points=PointSelection(lidars=("FRONT",))).sweep(0)
+    assert len(sweep) == len(front.points_ego)
+    assert cKDTree(front.points_ego).query(sweep.xyz)[0].max() < 3e-3
 
 
 def test_synthetic_camera(synthetic):

@@ -6,8 +6,9 @@
 
 from __future__ import annotations
 
+from .common import PointSelection
 from .segments import find_waymo_segment
 from .v1 import is_waymo_v1, read_waymo_v1
 from .v2 import is_waymo_v2, read_waymo_v2
 
-__all__ = ["read_waymo_v1", "read_waymo_v2", "is_waymo_v1", "is_waymo_v2", "find_waymo_segment"]
+__all__ = ["read_waymo_v1", "read_waymo_v2", "is_waymo_v1", "is_waymo_v2", "find_waymo_segment", "PointSelection"]

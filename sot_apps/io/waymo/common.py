@@ -17,10 +17,11 @@ from tracker.geometry import Box
 from ...errors import InputError
 from ..atomic import write_bytes
 from ..sequence import BoxAnnotation, CameraFrame, Sweep
-from .messages import LABEL_TYPES
+from .messages import LABEL_TYPES, LASER_NAMES
 
 __all__ = ["micros_to_ns", "seconds_to_ns", "transform_4x4", "box_annotation", "camera_intrinsics",
-           "WAYMO_CAMERA_FROM_OPENCV", "ImageRecord", "LazyCameraFrames", "image_cache_dir", "sweep_from_parts"]
+           "WAYMO_CAMERA_FROM_OPENCV", "ImageRecord", "LazyCameraFrames", "image_cache_dir", "sweep_from_parts",
+           "PointSelection"]
 
 # Waymo's camera frame is x forward, y left, z up; OpenCV's is x right, y down, z forward.
 # WAYMO_CAMERA_FROM_OPENCV: columns are the OpenCV axes expressed in Waymo's camera frame.
@@ -65,6 +66,24 @@ def box_annotation(track_id: str, type_code: int, center: tuple[float, float, fl
               float(height)).transformed(world_from_ego)
     return BoxAnnotation(track_id=track_id, label=LABEL_TYPES.get(int(type_code), "Unknown"), box=box,
                          num_points=None if num_points is None else int(num_points))
+
+
+@dataclass(frozen=True)
+class PointSelection:
+    """Which lidars (Waymo names: TOP, FRONT, SIDE_LEFT, SIDE_RIGHT, REAR; None = all) and returns go into a sweep."""
+
+    lidars: tuple[str, ...] | None = None
+    returns: tuple[int, ...] = (1, 2)
+
+    def __post_init__(self) -> None:
+        known = set(LASER_NAMES.values()) - {"UNKNOWN"}
+        if self.lidars is not None and not set(self.lidars) <= known:
+            raise InputError(None, f"unknown Waymo lidar(s) {sorted(set(self.lidars) - known)}; known: {sorted(known)}")
+        if not self.returns or not set(self.returns) <= {1, 2}:
+            raise InputError(None, f"Waymo returns must be a non-empty subset of (1, 2), got {self.returns}")
+
+    def wants(self, laser_code: int) -> bool:
+        return self.lidars is None or LASER_NAMES.get(laser_code) in self.lidars
 
 
 def sweep_from_parts(xyz: list[np.ndarray], intensity: list[np.ndarray], path: Path, where: str) -> Sweep:

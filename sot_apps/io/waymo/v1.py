@@ -38,7 +38,7 @@ from tracker.geometry import invert_transform
 from ...errors import InputError
 from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
 from .common import (WAYMO_CAMERA_FROM_OPENCV, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
-                     image_cache_dir, micros_to_ns, seconds_to_ns, sweep_from_parts, transform_4x4)
+                     image_cache_dir, micros_to_ns, PointSelection, seconds_to_ns, sweep_from_parts, transform_4x4)
 from .messages import CAMERA_IMAGE_BYTES, CAMERA_NAMES, FRAME_IMAGES, FRAME_LASERS, LASER_NAMES, messages
 from .range_image import LaserCalibration, decode_matrix_float, lidar_points
 from .tfrecord import TFRecordFile
@@ -80,8 +80,13 @@ def _frame_parts(records: TFRecordFile, k: int):
     return header, images, lasers
 
 
-def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None) -> Sequence:
-    """Open a Waymo v1 segment (a ``.tfrecord`` file, or a directory holding exactly one)."""
+def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None,
+                  points: PointSelection = PointSelection()) -> Sequence:
+    """Open a Waymo v1 segment (a ``.tfrecord`` file, or a directory holding exactly one).
+
+    ``points`` chooses the lidars and returns of the sweeps (default: all lidars, both returns);
+    ``image_cache`` is where JPEGs are extracted (default: the user cache, see :func:`.common.image_cache_dir`).
+    """
     path = Path(path)
     if path.is_dir():
         found = sorted(path.glob("*.tfrecord"))
@@ -131,7 +136,7 @@ def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None) -> Se
     ego_from_lidar = lasers[1].vehicle_from_lidar if 1 in lasers else np.eye(4)
 
     def load(index: int) -> Sweep:
-        return _load_sweep(records, index, laser_slices[index], lasers, frames[index].world_from_ego)
+        return _load_sweep(records, index, laser_slices[index], lasers, frames[index].world_from_ego, points)
 
     cache_root = Path(image_cache) if image_cache is not None else image_cache_dir(path, context.name)
     cameras = _cameras(records, context, image_slices, path, cache_root)
@@ -140,7 +145,7 @@ def read_waymo_v1(path: str | Path, image_cache: str | Path | None = None) -> Se
 
 
 def _load_sweep(records: TFRecordFile, index: int, slices: list[tuple[int, int]], lasers: dict[int, LaserCalibration],
-                world_from_ego: np.ndarray) -> Sweep:
+                world_from_ego: np.ndarray, selection: PointSelection) -> Sweep:
     path = records.path
     payload = records.payload(index, verify=True)
     vehicle_from_world = invert_transform(world_from_ego)
@@ -151,8 +156,9 @@ def _load_sweep(records: TFRecordFile, index: int, slices: list[tuple[int, int]]
             laser = m.Laser.FromString(bytes(payload[start:end]))
         except DecodeError as exc:
             raise InputError(path, f"record {index}: malformed Laser message ({exc})") from exc
-        returns = [ri for ri in (laser.ri_return1, laser.ri_return2) if ri.range_image_compressed]
-        if not returns:
+        returns = [ri for r, ri in ((1, laser.ri_return1), (2, laser.ri_return2))
+                   if r in selection.returns and ri.range_image_compressed]
+        if not returns or not selection.wants(laser.name):
             continue
         name = LASER_NAMES.get(laser.name, str(laser.name))
         if laser.name not in lasers:

@@ -30,7 +30,7 @@ from tracker.geometry import invert_transform
 from ...errors import InputError
 from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
 from .common import (WAYMO_CAMERA_FROM_OPENCV, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
-                     image_cache_dir, micros_to_ns, seconds_to_ns, sweep_from_parts, transform_4x4)
+                     image_cache_dir, micros_to_ns, PointSelection, seconds_to_ns, sweep_from_parts, transform_4x4)
 from .messages import CAMERA_NAMES, LASER_NAMES
 from .range_image import LaserCalibration, lidar_points
 from .wire import WireError
@@ -133,8 +133,12 @@ def _range_image(row: pa.Table, values: str, shape: str, path: Path, what: str) 
     return array.reshape([int(d) for d in dims])
 
 
-def read_waymo_v2(path: str | Path, image_cache: str | Path | None = None) -> Sequence:
-    """Open one Waymo v2 segment (a data directory with one segment, or any component file of it)."""
+def read_waymo_v2(path: str | Path, image_cache: str | Path | None = None,
+                  points: PointSelection = PointSelection()) -> Sequence:
+    """Open one Waymo v2 segment (a data directory with one segment, or any component file of it).
+
+    ``points`` and ``image_cache`` as for :func:`.v1.read_waymo_v1`.
+    """
     path = Path(path)
     found = _segment_root(path)
     if found is None:
@@ -154,7 +158,7 @@ def read_waymo_v2(path: str | Path, image_cache: str | Path | None = None) -> Se
               for k, i in enumerate(order)]
     frame_of = {int(stamps[i]): k for k, i in enumerate(order)}
 
-    load = _sweep_loader(files, segment, frames, frame_of)
+    load = _sweep_loader(files, segment, frames, frame_of, points)
     annotations = _boxes(files["lidar_box"], segment, frames, frame_of) if "lidar_box" in files else None
     cameras = {}
     if "camera_image" in files and "camera_calibration" in files:
@@ -183,7 +187,8 @@ def _lidar_calibrations(path: Path, segment: str) -> dict[int, LaserCalibration]
     return out
 
 
-def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo], frame_of: dict[int, int]):
+def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo], frame_of: dict[int, int],
+                  selection: PointSelection):
     if "lidar" not in files:
         return lambda index: sweep_from_parts([], [], files["vehicle_pose"], f"frame {index}")
     if "lidar_calibration" not in files:
@@ -192,7 +197,7 @@ def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo],
     lidar = _ComponentTable(files["lidar"], segment, [TIME, LASER])
     rows: dict[int, list[tuple[int, int]]] = {}
     for i, (t, laser) in enumerate(zip(lidar.column(TIME), lidar.column(LASER))):
-        if int(t) in frame_of:
+        if int(t) in frame_of and selection.wants(int(laser)):
             rows.setdefault(frame_of[int(t)], []).append((i, int(laser)))
     pose_rows: dict[tuple[int, int], int] = {}
     lidar_pose = None
@@ -201,7 +206,7 @@ def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo],
         for i, (t, laser) in enumerate(zip(lidar_pose.column(TIME), lidar_pose.column(LASER))):
             if int(t) in frame_of:
                 pose_rows[(frame_of[int(t)], int(laser))] = i
-    range_columns = [LIDAR.format(r, f) for r in (1, 2) for f in ("values", "shape")]
+    range_columns = [LIDAR.format(r, f) for r in selection.returns for f in ("values", "shape")]
     pose_columns = [LIDAR_POSE.format("values"), LIDAR_POSE.format("shape")]
 
     def load(index: int) -> Sweep:
@@ -217,7 +222,7 @@ def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo],
                 pose_row = lidar_pose.row(pose_rows[(index, laser)], pose_columns)
                 pixel_pose = _range_image(pose_row, *pose_columns, files["lidar_pose"], f"frame {index} lidar {name}")
             images = [_range_image(row, LIDAR.format(r, "values"), LIDAR.format(r, "shape"), files["lidar"],
-                                   f"frame {index} lidar {name} return {r}") for r in (1, 2)]
+                                   f"frame {index} lidar {name} return {r}") for r in selection.returns]
             try:
                 xyz, intensity = lidar_points([i for i in images if i is not None], calibrations[laser], pixel_pose,
                                               vehicle_from_world)
