@@ -158,16 +158,14 @@ def read_waymo_v2(path: str | Path, image_cache: str | Path | None = None,
               for k, i in enumerate(order)]
     frame_of = {int(stamps[i]): k for k, i in enumerate(order)}
 
-    load = _sweep_loader(files, segment, frames, frame_of, points)
+    calibrations = _lidar_calibrations(files["lidar_calibration"], segment) if "lidar_calibration" in files else {}
+    load = _sweep_loader(files, segment, frames, frame_of, calibrations, points)
     annotations = _boxes(files["lidar_box"], segment, frames, frame_of) if "lidar_box" in files else None
     cameras = {}
     if "camera_image" in files and "camera_calibration" in files:
         cache = Path(image_cache) if image_cache is not None else image_cache_dir(files["camera_image"], segment)
         cameras = _cameras(files, segment, frames, frame_of, cache)
-    ego_from_lidar = np.eye(4)
-    if "lidar_calibration" in files:
-        calibrations = _lidar_calibrations(files["lidar_calibration"], segment)
-        ego_from_lidar = calibrations[1].vehicle_from_lidar if 1 in calibrations else np.eye(4)
+    ego_from_lidar = calibrations[1].vehicle_from_lidar if 1 in calibrations else np.eye(4)
     return Sequence(id=segment, root=files["vehicle_pose"], format="waymo_v2", frames=frames, load_sweep=load,
                     ego_from_lidar=ego_from_lidar, cameras=cameras, annotations=annotations)
 
@@ -188,12 +186,11 @@ def _lidar_calibrations(path: Path, segment: str) -> dict[int, LaserCalibration]
 
 
 def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo], frame_of: dict[int, int],
-                  selection: PointSelection):
+                  calibrations: dict[int, LaserCalibration], selection: PointSelection):
     if "lidar" not in files:
         return lambda index: sweep_from_parts([], [], files["vehicle_pose"], f"frame {index}")
     if "lidar_calibration" not in files:
         raise InputError(files["lidar"], "range images need lidar_calibration/<segment>.parquet beside lidar/")
-    calibrations = _lidar_calibrations(files["lidar_calibration"], segment)
     lidar = _ComponentTable(files["lidar"], segment, [TIME, LASER])
     rows: dict[int, list[tuple[int, int]]] = {}
     for i, (t, laser) in enumerate(zip(lidar.column(TIME), lidar.column(LASER))):
