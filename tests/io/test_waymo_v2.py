@@ -50,7 +50,9 @@ def test_real_vehicle_poses_alone(real_pose, tmp_path):
     table = pq.read_table(real_pose)
     first = int(np.argmin(table.column("key.frame_timestamp_micros").to_numpy()))
     expected = np.asarray(table.column(2).to_pylist()[first], dtype=np.float64).reshape(4, 4)
-    np.testing.assert_array_equal(seq.frames[0].world_from_ego, expected)
+    np.testing.assert_allclose(seq.frames[0].world_from_ego, expected, atol=1e-6)  # rotation snapped to orthonormal
+    rotation = seq.frames[0].world_from_ego[:3, :3]
+    np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
     assert seq.annotations is None and seq.cameras == {} and len(seq.sweep(0)) == 0
 
 
@@ -64,8 +66,8 @@ def test_synthetic_components_match_truth(synthetic):
         sweep = seq.sweep(k)
         assert len(sweep) == len(points) > 1000
         distance, index = cKDTree(sweep.xyz).query(points)
-        # the real poses are float32 at ~15.6 km from the origin: their rotations are orthonormal to ~1e-7,
-        # so inverse and transpose differ by ~1.5 mm there; a convention error would be metres off
+        # the real poses are float32 at ~15.6 km from the origin: the reader snaps their rotations to
+        # orthonormal (~1e-7 change), which moves points by ~1.5 mm there; a convention error would be metres off
         assert distance.max() < 3e-3
         np.testing.assert_allclose(sweep.intensity[index], truth.intensity[k], atol=1e-6)
     assert len(seq.sweep(2)) == 0  # frames without lidar rows are empty sweeps

@@ -41,15 +41,22 @@ def seconds_to_ns(seconds: float) -> int:
 
 
 def transform_4x4(values, path: Path, what: str) -> np.ndarray:
-    """A row-major 16-value transform as a checked 4x4 matrix."""
+    """A row-major 16-value transform as a checked 4x4 matrix.
+
+    The rotation is snapped to the nearest proper rotation (Waymo stores some transforms as float32,
+    orthonormal only to ~1e-7); one further than 1e-3 from a rotation is bad input.
+    """
     matrix = np.asarray(list(values), dtype=np.float64)
     if matrix.size != 16:
         raise InputError(path, f"{what}: a transform needs 16 values, got {matrix.size}")
     matrix = matrix.reshape(4, 4)
     rotation = matrix[:3, :3]
     if (not np.isfinite(matrix).all() or not np.allclose(matrix[3], [0, 0, 0, 1], atol=1e-6)
-            or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-4) or np.linalg.det(rotation) < 0):
+            or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-3) or np.linalg.det(rotation) < 0):
         raise InputError(path, f"{what}: not a rigid 4x4 transform")
+    u, _, vt = np.linalg.svd(rotation)
+    matrix[:3, :3] = u @ vt
+    matrix[3] = [0.0, 0.0, 0.0, 1.0]
     return matrix
 
 
