@@ -22,7 +22,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "its first position, or a short track moves >= 0.3 m at >= 1 m/s; see docs/data-formats.md).",
         examples=["sot-apps info --tiny", "sot-apps info ../shared/data/pandaset_002 --vehicles-only",
                   "sot-apps info out/pandaset_002_canonical --json > info.json"])
-    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence directory (canonical or PandaSet)")
+    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence: a directory (canonical, PandaSet, Waymo v2) or a file (Waymo v1 .tfrecord, Waymo v2 component .parquet)")
     parser.add_argument("--format", choices=FORMATS, default=None, help="force the reader (default: auto-detect)")
     parser.add_argument("--tiny", action="store_true",
                         help="use the built-in tiny synthetic sequence (generated into ~/.cache/sot-apps)")
@@ -66,6 +66,9 @@ def format_summary(s: SequenceSummary) -> str:
            f"frames    {s.num_frames}, time span {s.time_span_s:.3f} s ({s.rate_hz:.2f} Hz)"]
     if s.points_min is not None:
         out.append(f"points    per frame: min {s.points_min}, median {s.points_median:.0f}, max {s.points_max}")
+        if s.points_max == 0:
+            out.append("          no points in any frame: the source holds no lidar data (e.g. a Waymo file without "
+                       "range images)")
     if s.cameras:
         out += ["", "cameras"]
         out += ["  " + r for r in _table(

@@ -10,11 +10,11 @@ from .sequence import AnnotatedTrack, BoxAnnotation, Camera, CameraFrame, FrameI
 __all__ = ["open_sequence", "detect_format", "FORMATS", "Sequence", "Sweep", "FrameInfo", "Camera",
            "CameraFrame", "BoxAnnotation", "AnnotatedTrack"]
 
-FORMATS = ("sequence", "pandaset")
+FORMATS = ("sequence", "pandaset", "waymo_v1", "waymo_v2")
 
 
 def detect_format(path: str | Path) -> str:
-    """Name of the format of the sequence directory ``path`` (see FORMATS)."""
+    """Name of the format of the sequence at ``path`` (see FORMATS)."""
     from .pandaset import is_pandaset
 
     path = Path(path)
@@ -22,17 +22,34 @@ def detect_format(path: str | Path) -> str:
         raise InputError(path, "no such file or directory")
     if path.is_file() and path.name == "sequence.json":
         return "sequence"
+    waymo = _detect_waymo(path) if path.is_file() else None
+    if waymo:
+        return waymo
     if not path.is_dir():
         raise InputError(path, "not a sequence directory")
     if (path / "sequence.json").is_file():
         return "sequence"
     if is_pandaset(path):
         return "pandaset"
-    raise InputError(path, "unknown sequence format: expected sequence.json (canonical) or lidar/poses.json with lidar/NN.npz|.pkl.gz (PandaSet)")
+    waymo = _detect_waymo(path)
+    if waymo:
+        return waymo
+    raise InputError(path, "unknown sequence format: expected sequence.json (canonical), lidar/poses.json with "
+                           "lidar/NN.npz|.pkl.gz (PandaSet), a Waymo v1 .tfrecord or Waymo v2 component parquet files")
+
+
+def _detect_waymo(path: Path) -> str | None:
+    from .waymo import is_waymo_v1, is_waymo_v2
+
+    if is_waymo_v1(path):
+        return "waymo_v1"
+    if is_waymo_v2(path):
+        return "waymo_v2"
+    return None
 
 
 def open_sequence(path: str | Path, format: str | None = None) -> Sequence:
-    """Open a sequence; ``format`` forces a reader ("sequence" or "pandaset")."""
+    """Open a sequence; ``format`` forces a reader (one of FORMATS)."""
     path = Path(path)
     fmt = format or detect_format(path)
     if fmt == "pandaset":
@@ -43,4 +60,8 @@ def open_sequence(path: str | Path, format: str | None = None) -> Sequence:
         from .canonical import read_sequence
 
         return read_sequence(path.parent if path.name == "sequence.json" else path)
+    if fmt in ("waymo_v1", "waymo_v2"):
+        from .waymo import read_waymo_v1, read_waymo_v2
+
+        return (read_waymo_v1 if fmt == "waymo_v1" else read_waymo_v2)(path)
     raise InputError(path, f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")

@@ -83,12 +83,16 @@ class Camera:
 
 @dataclass(frozen=True)
 class BoxAnnotation:
-    """A ground-truth box of one object at one frame (world frame)."""
+    """A ground-truth box of one object at one frame (world frame).
+
+    ``num_points``: the dataset's own count of lidar points in the box, when it has one.
+    """
 
     track_id: str
     label: str
     box: Box
     stationary: bool | None = None
+    num_points: int | None = None
 
 
 @dataclass(frozen=True)
