@@ -75,7 +75,7 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
     motion is not compensated, so its state at frame k describes the object when the beam passed it,
     while track.json records the frame timestamp. ``"frame"`` keeps track.json's ``timestamp_ns``.
     """
-    from ..io.tracks import read_track
+    from ..io.tracks import check_track_belongs, read_track
 
     if box_time not in ("points", "frame"):
         raise ValueError(f"box_time must be 'points' or 'frame', not {box_time!r}")
@@ -85,6 +85,8 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
         track, shape = read_track(directory)
         if not track.frames:
             raise InputError(directory, "track has no frames")
+        if seq is not None:
+            check_track_belongs(track, seq, Path(directory) / "track.json")
         times = [r.timestamp_ns for r in track.frames]
         if box_time == "points" and seq is not None:
             for i, record in enumerate(track.frames):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,7 +19,10 @@ from ..schemas import load_json_validated, validate
 from .atomic import write_json
 from .ply import read_ply_points, write_ply_points
 
-__all__ = ["Size", "FrameRecord", "TrackFile", "read_track", "write_track", "SCHEMA_VERSION"]
+if TYPE_CHECKING:
+    from .sequence import Sequence
+
+__all__ = ["Size", "FrameRecord", "TrackFile", "read_track", "write_track", "check_track_belongs", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 1
 
@@ -173,3 +176,24 @@ def read_track(path: str | Path) -> tuple[TrackFile, np.ndarray]:
     _check_frames(doc, json_path)
     track = TrackFile.from_json(doc)
     return track, read_ply_points(json_path.parent / track.shape)
+
+
+def check_track_belongs(track: TrackFile, sequence: "Sequence", path: str | Path) -> None:
+    """Refuse (InputError naming ``path``) a track that was not made from ``sequence``.
+
+    The one belongs-to-this-sequence check of every command that takes track directories with a
+    sequence (flow, motion-export, bench motion, pipeline): the recorded sequence name must be the
+    sequence's id or directory name, every frame index must exist and every frame's ``timestamp_ns``
+    must equal the sequence's (a renamed or re-converted sequence with other timestamps is refused too).
+    """
+    if track.sequence not in (sequence.id, Path(sequence.root).name):
+        raise InputError(path, f"track of sequence {track.sequence!r}, not of {sequence.id!r}")
+    n = len(sequence.frames)
+    bad = [r.frame for r in track.frames if not 0 <= r.frame < n]
+    if bad:
+        raise InputError(path, f"frame {bad[0]} is outside the sequence {sequence.id!r} (frames 0..{n - 1})")
+    for r in track.frames:
+        expected = int(sequence.frames[r.frame].timestamp_ns)
+        if r.timestamp_ns != expected:
+            raise InputError(path, f"frame {r.frame}: timestamp_ns {r.timestamp_ns} differs from the sequence "
+                                   f"{sequence.id!r}'s {expected}: the track was made from another sequence")

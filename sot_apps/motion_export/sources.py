@@ -36,22 +36,13 @@ def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_
 def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
                    invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> ObjectTrack:
     """Read ``directory/track.json`` + ``shape.ply`` into an ObjectTrack."""
-    from ..io.tracks import read_track
+    from ..io.tracks import check_track_belongs, read_track
 
     directory = Path(directory)
     track, shape = read_track(directory)
     json_path = directory if directory.suffix == ".json" else directory / "track.json"
     if sequence is not None:
-        if track.sequence not in (sequence.id, Path(sequence.root).name):
-            raise InputError(json_path, f"track of sequence {track.sequence!r}, not of {sequence.id!r}")
-        n = len(sequence.frames)
-        bad = [r.frame for r in track.frames if r.frame >= n]
-        if bad:
-            raise InputError(json_path, f"frame {bad[0]} is outside the sequence (frames 0..{n - 1})")
-        for r in track.frames:
-            if r.timestamp_ns != sequence.frames[r.frame].timestamp_ns:
-                raise InputError(json_path, f"frame {r.frame}: timestamp_ns {r.timestamp_ns} differs from the "
-                                            f"sequence's {sequence.frames[r.frame].timestamp_ns}")
+        check_track_belongs(track, sequence, json_path)
     records = sorted(track.frames, key=lambda r: r.frame)
     if not records:
         raise InputError(json_path, "frames: the track has no frames")
