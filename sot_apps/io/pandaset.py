@@ -157,8 +157,14 @@ def _truthy(value: Any) -> bool | None:
 
 def _cuboid_rows(path: Path) -> list[dict[str, Any]]:
     if path.name.endswith(".csv"):
-        with open(path, newline="", encoding="utf-8") as handle:
-            return list(csv.DictReader(handle))
+        try:
+            with open(path, newline="", encoding="utf-8") as handle:
+                return list(csv.DictReader(handle))
+        except UnicodeDecodeError as exc:
+            raise InputError(path, f"not UTF-8 text (byte {exc.object[exc.start]:#04x} at offset {exc.start}); "
+                                   "cuboid CSVs must be UTF-8") from None
+        except csv.Error as exc:
+            raise InputError(path, f"malformed CSV ({exc})") from None
     frame = _read_native_pickle(path)
     return frame.to_dict("records")
 

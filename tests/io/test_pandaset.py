@@ -98,3 +98,22 @@ def test_pandaset_converts_to_canonical(pandaset_root, tmp_path):
         np.testing.assert_array_equal(canonical.sweep(k).time_offset_ns, native.sweep(k).time_offset_ns)
     assert canonical.annotations == native.annotations
     assert {a.stationary for a in canonical.annotations[0]} == {True, False}
+
+
+def test_cuboids_csv_that_is_not_utf8_is_one_line_exit_2(tmp_path, pandaset_root, capsys):
+    """Issue 16, defect 3: a non-UTF-8 cuboids CSV gave exit 1 and an unnamed UnicodeDecodeError."""
+    import shutil
+
+    from sot_apps.cli.main import main
+
+    root = tmp_path / "pandaset_bad"
+    root.mkdir()
+    for name in ("camera", "lidar", "meta"):
+        (root / name).symlink_to((pandaset_root / name).resolve())
+    shutil.copytree(pandaset_root / "annotations", root / "annotations")
+    bad = root / "annotations" / "cuboids" / "03.csv"
+    bad.write_bytes(bad.read_bytes().replace(b"Car", b"C\xe9\xff", 1))
+    code = main(["info", str(root)])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "03.csv" in err and "UTF-8" in err
