@@ -39,7 +39,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "and objects: tracking (one task per object), vehicle bank, motion export (MCAP + tables), optical "
                     "flow, and simulated scans of bank vehicles. Finished units are skipped on a rerun (resume after a "
                     "crash or Ctrl-C); a failed unit is listed in OUT/failures.json and does not stop the run (exit code 1 "
-                    "when any unit failed). "
+                    "when any unit failed). Only one run at a time may write into an output directory (a lock in OUT; a "
+                    "second run is refused with exit code 2). "
                     "See docs/pipeline.md for the output tree.",
         examples=[
             "sot-apps run examples/pipeline.json",

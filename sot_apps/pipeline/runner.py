@@ -22,6 +22,7 @@ from typing import Callable
 from ..io.atomic import write_json
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
+from .lock import RunLock
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
 from .plan import Plan, make_plan, open_sequences, safe_name
 from . import stages as st
@@ -134,11 +135,18 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
     """Run every enabled stage of ``config``; returns what ran, was cached or failed (see module doc).
 
     ``session``: an open :class:`ExecutorSession` to reuse (e.g. over several runs); by default one is
-    opened for this run from ``executor``.
+    opened for this run from ``executor``. ``config.out`` is locked for the run (:class:`RunLock`): a
+    concurrent run into the same directory raises InputError.
     """
     if session is None:
-        with ExecutorSession(executor) as own:
+        with RunLock(config.out), ExecutorSession(executor) as own:
             return run_pipeline(config, executor, progress, plan, own)
+    with RunLock(config.out):
+        return _run_with_session(config, executor, progress, plan, session)
+
+
+def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: bool, plan: Plan | None,
+                      session: ExecutorSession) -> PipelineResult:
     started = time.time()
     t0 = time.perf_counter()
     out = Path(config.out)
