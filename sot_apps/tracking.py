@@ -18,10 +18,36 @@ from .errors import InputError
 from .io.sequence import Sequence
 from .io.tracks import FrameRecord, Size, TrackFile, write_track
 
-__all__ = ["parse_init_box", "resolve_span", "track_sequence", "refine_track_offline", "track_result_to_trackfile",
+__all__ = ["parse_init_box", "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence", "refine_track_offline", "track_result_to_trackfile",
            "write_track_result", "first_box_with_points", "TrackingFailed", "MIN_INIT_POINTS"]
 
 MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box
+
+
+# What a road vehicle can measure (metres): from a small motorbike or bicycle to a long articulated
+# truck / road-train unit (EU and US limits are 16.5-25.25 m long, 2.55-2.6 m wide, about 4-4.3 m high;
+# wide and high loads stay under 5 m and 6 m). Init boxes outside are refused unless allowed explicitly.
+VEHICLE_SIZE_RANGE_M: dict[str, tuple[float, float]] = {"length": (0.5, 30.0), "width": (0.3, 5.0),
+                                                        "height": (0.3, 6.0)}
+
+
+def implausible_size(box: Box) -> str | None:
+    """Why ``box``'s size cannot be a road vehicle (:data:`VEHICLE_SIZE_RANGE_M`), or None if it can."""
+    bad = [f"{name} {getattr(box, name):g} m (expected {lo:g}..{hi:g})"
+           for name, (lo, hi) in VEHICLE_SIZE_RANGE_M.items() if not lo <= getattr(box, name) <= hi]
+    return ", ".join(bad) or None
+
+
+def check_vehicle_size(box: Box, where: str | Path | None, allow: bool, flag: str = "--allow-any-size") -> str | None:
+    """Refuse an init box no road vehicle can fill (InputError naming ``where``), unless ``allow``: then
+    return the warning to print (None when the size is plausible)."""
+    why = implausible_size(box)
+    if why is None:
+        return None
+    if not allow:
+        raise InputError(where, f"init box size is not a road vehicle's: {why}; check the box (metres, "
+                                f"length/width/height order) or pass {flag} to track it anyway")
+    return f"warning: init box size is not a road vehicle's ({why}); tracking it as asked ({flag})"
 
 
 class TrackingFailed(RuntimeError):

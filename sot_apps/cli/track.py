@@ -27,6 +27,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                                                        "box is its annotation at the start frame")
     who.add_argument("--init-box", metavar="x,y,z,heading,length,width,height",
                      help="start box in the WORLD frame at the start frame (metres, radians; heading of the length axis)")
+    parser.add_argument("--allow-any-size", action="store_true",
+                        help="track an --init-box whose size no road vehicle has (default: refused; limits in "
+                             "sot_apps.tracking.VEHICLE_SIZE_RANGE_M: length 0.5-30 m, width 0.3-5 m, height 0.3-6 m)")
     parser.add_argument("--start-frame", type=int, default=None,
                         help="first frame (default: 0, or the track's first annotated frame)")
     parser.add_argument("--end-frame", type=int, default=None,
@@ -45,7 +48,7 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..tracking import (TrackingFailed, first_box_with_points, init_points, parse_init_box, refine_track_offline,
+    from ..tracking import (TrackingFailed, check_vehicle_size, first_box_with_points, init_points, parse_init_box, refine_track_offline,
                             track_sequence, write_track_result)
 
     overrides = {"seed": args.seed}
@@ -74,6 +77,9 @@ def run(args: argparse.Namespace) -> int:
                                        f"(annotated frames {annotated.frames[0]}..{annotated.frames[-1]})")
     else:
         init_box = parse_init_box(args.init_box)
+        warning = check_vehicle_size(init_box, "--init-box", args.allow_any_size)
+        if warning:
+            sys.stderr.write(warning + "\n")
         object_id = "custom"
         start = 0 if args.start_frame is None else args.start_frame
         end = args.end_frame

@@ -202,6 +202,14 @@ def _check_objects(objects: ObjectSource, path) -> None:
         raise InputError(path, "objects: 'from: detections' needs 'path' (the detections file)")
     if objects.kind == "boxes" and not objects.boxes:
         raise InputError(path, "objects: 'from: boxes' needs a non-empty 'boxes' list")
+    from tracker import Box
+
+    from ..tracking import check_vehicle_size
+
+    for b in objects.boxes:
+        if not b.get("allow_any_size", False):
+            box = Box(*(float(b["box"][f]) for f in ("x", "y", "z", "heading", "length", "width", "height")))
+            check_vehicle_size(box, f"{path}: box {b['id']!r}", False, flag="\"allow_any_size\": true")
 
 
 def load_config(path: str | Path, out: str | Path | None = None) -> PipelineConfig:

@@ -88,3 +88,38 @@ def test_empty_init_box_is_flagged_not_fatal(pandaset_root, tmp_path, capsys):
     assert "no points" in captured.err
     track, shape = read_track(out)
     assert all("no_points" in r.flags for r in track.frames) and len(shape) == 0
+
+
+def test_implausible_init_box_size_is_refused_unless_allowed(pandaset_root, tmp_path, capsys):
+    """Issue 16, defect 7: a 1e6 m init box was tracked without a warning."""
+    huge = "-5.49,-6.11,0.43,0.77,1e6,1e6,1e6"
+    code = main(["track", str(pandaset_root), "--init-box", huge, "--end-frame", "1", "--quiet",
+                 "--out", str(tmp_path / "huge")])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "road vehicle" in err and "--allow-any-size" in err
+    assert not (tmp_path / "huge").exists()
+    # a 0.05 m box is as implausible as a 1 km one
+    assert main(["track", str(pandaset_root), "--init-box", "-5.49,-6.11,0.43,0.77,0.05,1.9,1.5", "--quiet",
+                 "--out", str(tmp_path / "tiny")]) == 2
+    capsys.readouterr()
+    # the flag lets a deliberate oddity through (a 30 x 4 x 4.5 m load), with a warning
+    code = main(["track", str(pandaset_root), "--init-box", "-5.49,-6.11,0.43,0.77,40,4,4.5", "--end-frame", "1",
+                 "--quiet", "--allow-any-size", "--out", str(tmp_path / "allowed")])
+    assert code == 0 and "warning" in capsys.readouterr().err
+
+
+def test_pipeline_boxes_of_implausible_size_are_refused(tmp_path, pandaset_root):
+    from sot_apps.errors import InputError
+    from sot_apps.pipeline.config import load_config
+
+    box = {"x": 0.0, "y": 0.0, "z": 1.0, "heading": 0.0, "length": 1e6, "width": 2.0, "height": 1.5}
+    doc = {"out": "out", "sequences": [{"path": str(pandaset_root), "objects": {
+        "from": "boxes", "boxes": [{"id": "huge", "frame": 0, "box": box}]}}]}
+    path = tmp_path / "p.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="huge.*road vehicle"):
+        load_config(path)
+    doc["sequences"][0]["objects"]["boxes"][0]["allow_any_size"] = True
+    path.write_text(json.dumps(doc))
+    load_config(path)
