@@ -8,8 +8,10 @@ in KITTI's rectified CAMERA frame (x right, y down, z forward) with the camera a
 rectification: ``x_cam = -y_lidar``, ``y_cam = -z_lidar``, ``z_cam = x_lidar``. ``(x, y, z)`` is the centre
 of the box's BOTTOM face (``y_cam = -(z_centre - h/2)``), ``rotation_y = -heading - pi/2`` (wrapped; the
 rotation about the camera's y axis, 0 = facing camera x), ``alpha = rotation_y - atan2(x, z)``. No image
-exists, so the 2D box is written as ``-1 -1 -1 -1``, truncated 0 and occluded 0 (3 = unknown would break
-some tools). ``.bin`` is KITTI's Velodyne layout: float32 x, y, z, intensity (intensity in [0, 1]).
+exists, so the 2D box is written as ``-1 -1 -1 -1``. ``truncated`` and ``occluded`` say what the LiDAR saw
+(``sot_apps.lidar_sim.visibility``: share of the box outside the field of view; KITTI occlusion level from the
+share of its unoccluded returns it got); a vehicle with no return is left out of the labels (``boxes.json``
+keeps it with ``"visible": false``). ``.bin`` is KITTI's Velodyne layout: float32 x, y, z, intensity (intensity in [0, 1]).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from tracker import Box, wrap_angle
 from ..io.atomic import write_bytes, write_json, write_npz, write_text
 from ..io.ply import write_ply_points
 from .scan import Scan, range_image
+from .visibility import Visibility
 
 __all__ = ["write_scan_npz", "write_bin", "write_pcd", "write_ply", "kitti_label_lines", "write_boxes",
            "FORMATS"]
@@ -70,25 +73,35 @@ def write_ply(path: Path, scan: Scan) -> None:
                      instance=scan.instance.astype(np.int32))
 
 
-def kitti_label_lines(boxes: list[Box], labels: list[str]) -> list[str]:
+def kitti_label_lines(boxes: list[Box], labels: list[str], visibility: list[Visibility] | None = None) -> list[str]:
+    """KITTI label lines; with ``visibility``, invisible vehicles are left out and the others carry their
+    truncation and occlusion level (without: truncated 0, occluded 0)."""
     lines = []
-    for box, label in zip(boxes, labels):
+    for i, (box, label) in enumerate(zip(boxes, labels)):
+        truncated, occluded = 0.0, 0
+        if visibility is not None:
+            if not visibility[i].visible:
+                continue
+            truncated, occluded = visibility[i].truncated, visibility[i].occluded
         x_cam, y_cam, z_cam = -box.y, -(box.z - box.height / 2.0), box.x
         rot_y = float(wrap_angle(-box.heading - math.pi / 2.0))
         alpha = float(wrap_angle(rot_y - math.atan2(x_cam, z_cam)))
         kitti_type = label if label in ("Car", "Van", "Truck", "Pedestrian", "Cyclist", "Tram", "Misc") else "Car"
-        lines.append(f"{kitti_type} 0.00 0 {alpha:.4f} -1 -1 -1 -1 {box.height:.4f} {box.width:.4f} {box.length:.4f} "
+        lines.append(f"{kitti_type} {truncated:.2f} {occluded:d} {alpha:.4f} -1 -1 -1 -1 {box.height:.4f} {box.width:.4f} {box.length:.4f} "
                      f"{x_cam:.4f} {y_cam:.4f} {z_cam:.4f} {rot_y:.4f}")
     return lines
 
 
-def write_boxes(out_dir: Path, boxes: list[Box], labels: list[str], bank_ids: list[str], counts: list[int]) -> None:
+def write_boxes(out_dir: Path, boxes: list[Box], labels: list[str], bank_ids: list[str],
+                visibility: list[Visibility]) -> None:
+    """``boxes.json`` (every placed vehicle, with what the sensor saw of it) and ``labels_kitti.txt``
+    (the vehicles that got returns)."""
     doc = {"version": 1, "frame": "sensor", "boxes": [
         {"index": i, "bank_id": b_id, "label": lab, "x": b.x, "y": b.y, "z": b.z, "heading": b.heading,
-         "length": b.length, "width": b.width, "height": b.height, "num_points": int(n)}
-        for i, (b, lab, b_id, n) in enumerate(zip(boxes, labels, bank_ids, counts))]}
+         "length": b.length, "width": b.width, "height": b.height, **v.to_json()}
+        for i, (b, lab, b_id, v) in enumerate(zip(boxes, labels, bank_ids, visibility))]}
     write_json(out_dir / "boxes.json", doc)
-    lines = kitti_label_lines(boxes, labels)
+    lines = kitti_label_lines(boxes, labels, visibility)
     write_text(out_dir / "labels_kitti.txt", "\n".join(lines) + ("\n" if lines else ""))
 
 

@@ -32,6 +32,7 @@ from .noise import Realism
 from ..raycast import RaycastScene
 from .scan import Scan, SimObject, Trajectory, simulate_scan
 from .sensors import Sensor, load_sensor
+from .visibility import Visibility, vehicle_visibility
 
 __all__ = ["SceneObject", "SceneSpec", "SimResult", "load_scene", "random_scene", "simulate_scene",
            "insert_into_background", "OCCLUDER_MARGIN_M"]
@@ -71,6 +72,7 @@ class SimResult:
     labels: list[str]
     removed_background: int = 0
     removed_vehicle: int = 0
+    visibility: list[Visibility] = field(default_factory=list)   # per object: what the sensor saw of it
 
 
 def load_scene(path: str | Path) -> SceneSpec:
@@ -174,7 +176,8 @@ def simulate_scene(spec: SceneSpec, bank: Bank) -> SimResult:
     vehicles, boxes, labels = _placed_objects(spec, bank, None)
     objects = vehicles + ([_ground(float(spec.ground_z))] if spec.ground_z is not None else [])
     scan = simulate_scan(spec.sensor, objects, np.eye(4), realism=spec.realism)
-    return SimResult(scan, boxes, spec.objects, labels)
+    return SimResult(scan, boxes, spec.objects, labels,
+                     visibility=vehicle_visibility(spec.sensor, vehicles, boxes, scan.instance))
 
 
 def insert_into_background(spec: SceneSpec, bank: Bank, background_xyz: np.ndarray,
@@ -228,7 +231,8 @@ def insert_into_background(spec: SceneSpec, bank: Bank, background_xyz: np.ndarr
                 num_beams=spec.sensor.beams, num_columns=spec.sensor.columns,
                 extra={"background_kept": keep_bg})
     return SimResult(scan, boxes, spec.objects, labels, removed_background=int(occluded.sum()),
-                     removed_vehicle=removed_vehicle)
+                     removed_vehicle=removed_vehicle,
+                     visibility=vehicle_visibility(spec.sensor, vehicles, boxes, scan.instance))
 
 
 def _subset(scan: Scan, mask: np.ndarray) -> Scan:

@@ -42,8 +42,7 @@ def run_simulation(spec: SceneSpec, bank: Bank, out: Path, formats: tuple[str, .
     scan = result.scan
     files = [out / "scan.npz", out / "boxes.json", out / "labels_kitti.txt", out / "preview.png", out / "scene.json"]
     write_scan_npz(out / "scan.npz", scan)
-    counts = [int((scan.instance == i).sum()) for i in range(len(result.boxes))]
-    write_boxes(out, result.boxes, result.labels, [o.bank_id for o in result.objects], counts)
+    write_boxes(out, result.boxes, result.labels, [o.bank_id for o in result.objects], result.visibility)
     write_bev_png(out / "preview.png", scan.xyz, scan.instance, result.boxes, extent=preview_extent)
     if result.boxes:
         write_object_gallery(out / "objects.png", scan.xyz, scan.instance, result.boxes)
@@ -64,9 +63,13 @@ def run_simulation(spec: SceneSpec, bank: Bank, out: Path, formats: tuple[str, .
 
 
 def counts_table(result: SimResult) -> list[str]:
-    scan = result.scan
-    lines = ["index  bank_id                          range_m  heading_deg  points"]
-    for i, (o, b) in enumerate(zip(result.objects, result.boxes)):
+    lines = ["index  bank_id                          range_m  heading_deg  points  visible  occluded  truncated"]
+    for i, (o, b, v) in enumerate(zip(result.objects, result.boxes, result.visibility)):
         lines.append(f"{i:5d}  {o.bank_id:31s}  {np.hypot(b.x, b.y):7.1f}  {np.degrees(b.heading):11.1f}  "
-                     f"{int((scan.instance == i).sum()):6d}")
+                     f"{v.num_points:6d}  {100 * v.visible_share:6.0f}%  "
+                     f"{v.occluded if v.visible else '-':>8}  {v.truncated:9.2f}")
+    hidden = sum(not v.visible for v in result.visibility)
+    if hidden:
+        lines.append(f"{hidden} of {len(result.visibility)} vehicles got no return: left out of labels_kitti.txt, "
+                     "kept in boxes.json with \"visible\": false")
     return lines

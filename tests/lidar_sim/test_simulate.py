@@ -192,3 +192,29 @@ def test_bank_build_from_tracker_output_dir(tmp_path, capsys):
     out = capsys.readouterr().out
     assert main(["bank", "list", str(bank_dir)]) == 0
     assert "seqA_car7" in capsys.readouterr().out and "seqA_car7" in out
+
+
+def test_labels_say_what_the_sensor_saw(box_bank, tmp_path):
+    """Issue 16, defect 6: a vehicle with 0 simulated points was labelled KITTI occluded=0."""
+    from sot_apps.lidar_sim.simulate import run_simulation
+
+    entry = box_bank.entries[0].id
+    objects = [SceneObject(entry, 10.0, 0.0, 0.0, 0.0),      # A: in front, fully visible
+               SceneObject(entry, 30.0, 0.0, -1.0, 0.0),     # B: right behind A, fully hidden
+               SceneObject(entry, 30.0, 3.0, -1.0, 0.0),     # C: behind A's edge, partly hidden
+               SceneObject(entry, 15.0, -10.0, 0.0, 0.0)]    # D: alone, fully visible
+    spec = SceneSpec(PRESETS["pandar64"], None, objects, Realism.ideal())
+    out = run_simulation(spec, box_bank, tmp_path / "sim")
+    counts = [int((out.result.scan.instance == i).sum()) for i in range(4)]
+    assert counts[0] > 100 and counts[1] == 0 and counts[2] > 0 and counts[3] > 100
+    boxes = json.loads((tmp_path / "sim" / "boxes.json").read_text())["boxes"]
+    assert [b["num_points"] for b in boxes] == counts
+    assert [b["visible"] for b in boxes] == [True, False, True, True]
+    share = [b["visible_share"] for b in boxes]
+    assert share[0] > 0.95 and share[3] > 0.95 and share[1] == 0.0 and 0.05 < share[2] < 0.8
+    assert [b["occluded"] for b in boxes][:1] == [0] and boxes[2]["occluded"] in (1, 2) and boxes[3]["occluded"] == 0
+    # KITTI labels: only what the sensor saw, with its occlusion level; the hidden vehicle is left out
+    lines = (tmp_path / "sim" / "labels_kitti.txt").read_text().splitlines()
+    assert len(lines) == 3
+    assert [int(line.split()[2]) for line in lines] == [boxes[i]["occluded"] for i in (0, 2, 3)]
+    assert all(float(line.split()[1]) == boxes[i]["truncated"] for line, i in zip(lines, (0, 2, 3)))
