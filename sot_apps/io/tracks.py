@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Iterable
 
 import numpy as np
 
@@ -22,9 +22,18 @@ from .ply import read_ply_points, write_ply_points
 if TYPE_CHECKING:
     from .sequence import Sequence
 
-__all__ = ["Size", "FrameRecord", "TrackFile", "read_track", "write_track", "check_track_belongs", "SCHEMA_VERSION"]
+__all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "Size", "FrameRecord", "TrackFile", "read_track", "write_track", "check_track_belongs", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 1
+
+# Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points and prior_only).
+DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost"})
+
+
+def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> bool:
+    """A frame whose state was measured (the start frame always is); advisory flags keep it valid."""
+    flags = set(flags)
+    return "init" in flags or not (flags & set(invalid_flags))
 
 
 @dataclass(frozen=True)

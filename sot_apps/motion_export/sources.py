@@ -19,19 +19,11 @@ from tracker import Box, invert_transform, points_in_box, transform_points, voxe
 
 from ..errors import InputError
 from ..io.sequence import Sequence
+from ..io.tracks import DEFAULT_INVALID_FLAGS, frame_is_valid
 from ..objects.smoother import ObjectTrack
 
 __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
            "aggregate_shape"]
-
-# Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points and prior_only).
-DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost"})
-
-
-def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> bool:
-    flags = set(flags)
-    return "init" in flags or not (flags & set(invalid_flags))
-
 
 def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
                    invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> ObjectTrack:

@@ -117,14 +117,16 @@ def versions() -> dict[str, str]:
     return out
 
 
-def write_manifest(out_dir: str | Path, config: dict, stages: list[dict], started_unix: float) -> Path:
-    """Write ``out_dir/manifest.json``: config, versions, per-stage units with status and checksums."""
+def write_manifest(out_dir: str | Path, config: dict, stages: list[dict], started_unix: float,
+                   extra: dict | None = None) -> Path:
+    """Write ``out_dir/manifest.json``: config, versions, per-stage units with status and checksums
+    (+ ``extra`` top-level entries, e.g. ``track_health``)."""
     out_dir = Path(out_dir)
     path = out_dir / "manifest.json"
     write_json(path, {
         "schema": "sot-apps/manifest", "version": 1,
         "config": config, "versions": versions(),
         "started_unix": started_unix, "finished_unix": time.time(),
-        "stages": stages,
+        "stages": stages, **(extra or {}),
     })
     return path

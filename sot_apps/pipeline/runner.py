@@ -22,6 +22,7 @@ from typing import Callable
 from ..io.atomic import write_json
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
+from .health import health_lines, run_track_health
 from .lock import RunLock
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
 from .plan import Plan, make_plan, open_sequences, safe_name
@@ -57,6 +58,7 @@ class PipelineResult:
     manifest: Path
     failures: Path
     stage_seconds: dict[str, float] = field(default_factory=dict)
+    track_health: list[dict] = field(default_factory=list)   # per finished track: pipeline.health
 
     def by_stage(self, stage: str) -> list[UnitRecord]:
         return [u for u in self.units if u.stage == stage]
@@ -80,7 +82,7 @@ class PipelineResult:
             count = {s: sum(u.status == s for u in units) for s in ("done", "cached", "failed", "skipped")}
             lines.append(f"{stage:8s} {count['done']:5d} {count['cached']:6d} {count['failed']:6d} {count['skipped']:7d} "
                          f"{self.stage_seconds.get(stage, 0.0):8.1f}")
-        return "\n".join(lines)
+        return "\n".join(lines + health_lines(self.track_health))
 
 
 @dataclass
@@ -262,9 +264,12 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
     failures_path = out / "failures.json"
     write_json(failures_path, {"failures": failures})
     stage_docs = [{"stage": r.stage, **r.to_json()} for r in records]
+    health = run_track_health(out, records)
     manifest = write_manifest(out, {**config.to_json(), "executor": executor.describe(),
-                                    "objects": [o.to_json() for o in plan.objects]}, stage_docs, started)
-    return PipelineResult(out, plan, records, time.perf_counter() - t0, manifest, failures_path, stage_seconds)
+                                    "objects": [o.to_json() for o in plan.objects]}, stage_docs, started,
+                              {"track_health": health})
+    return PipelineResult(out, plan, records, time.perf_counter() - t0, manifest, failures_path, stage_seconds,
+                          health)
 
 
 def _sha_or_none(path: Path) -> str | None:

@@ -62,11 +62,15 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
         tracks = [read_track(d) for d in dirs]
         scores = score_tracks(seq, tracks)
         sec = Section(f"{s.name}: tracks against ground truth")
+        health = {h["object"]: h for h in result.track_health if h["sequence"] == s.name}
         sec.tables.append(table_html(
-            ["object", "label", "frames", "mean 3D IoU", "mean centre error (cm)", "points / frame", "quality",
-             "shape points"],
-            [[sc.object_id[:12], sc.label, sc.frames, _fmt(sc.mean_iou, 3), _fmt(sc.mean_centre_error_m, 1, 100),
-              f"{sc.mean_points:.0f}", f"{sc.mean_quality:.2f}", sc.shape_points] for sc in scores]))
+            ["object", "label", "frames", "measured frames", "tracker's verdict", "mean 3D IoU",
+             "mean centre error (cm)", "points / frame", "quality", "shape points"],
+            [[sc.object_id[:12], sc.label, sc.frames, _measured(health.get(sc.object_id)),
+              health.get(sc.object_id, {}).get("status", "?"), _fmt(sc.mean_iou, 3),
+              _fmt(sc.mean_centre_error_m, 1, 100), f"{sc.mean_points:.0f}", f"{sc.mean_quality:.2f}", sc.shape_points]
+             for sc in scores]))
+        sec.paragraphs.append(_lost_paragraph(health, scores))
         name = f"{s.name}_tracks_bev.png"
         tracks_bev_figure(seq, tracks, figures / name)
         sec.images.append((f"figures/{name}", "Tracked boxes (coloured) and annotated boxes (green), bird's-eye view"))
@@ -116,3 +120,22 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
     intro = list(intro or [])
     intro.append(f"Report written in {time.perf_counter() - start:.1f} s.")
     return write_page(report / "index.html", title, intro, sections)
+
+
+GT_LOST_IOU = 0.3   # mean 3D IoU below which the report calls a track lost against the annotations
+
+
+def _measured(h: dict | None) -> str:
+    return "?" if h is None else f"{h['measured']}/{h['frames']}"
+
+
+def _lost_paragraph(health: dict, scores) -> str:
+    """Which tracks look lost by the tracker's own evidence (no ground truth needed) and which are lost
+    against the annotations (mean 3D IoU < GT_LOST_IOU)."""
+    own = sorted(o[:8] for o, h in health.items() if h["status"] == "lost")
+    weak = sorted(o[:8] for o, h in health.items() if h["status"] == "weak")
+    truth = sorted(sc.object_id[:8] for sc in scores if sc.mean_iou is not None and sc.mean_iou < GT_LOST_IOU)
+    return (f"<b>Tracks that look lost</b> (the tracker's own evidence: measured in fewer than 20 % of the frames after "
+            f"the start; rule in docs/pipeline.md): {html.escape(', '.join(own) or 'none')}. Weak (measured in fewer "
+            f"than 80 %): {html.escape(', '.join(weak) or 'none')}. Lost against the annotations (mean 3D IoU below "
+            f"{GT_LOST_IOU}): {html.escape(', '.join(truth) or 'none')}.")

@@ -40,6 +40,9 @@ def test_readme_first_command_demo_report_opens_with_every_figure(tmp_path):
     assert f"report: {out / 'report' / 'index.html'}" in done.stdout
     page = out / "report" / "index.html"
     source = page.read_text()
+    # issue 16, defect 10: the summary and the report say which tracks look lost, not just "done"
+    assert "track health (tracker's own evidence" in done.stdout
+    assert "Tracks that look lost" in source and "verdict</th>" in source
     sources = re.findall(r'<img src="([^"]+)"', source)
     # the paper-like figures: tracks vs GT, shape growth, flow, simulated scans, motion error curve
     for part in ("tracks_bev", "shape_growth", "front_camera_flow", "scans", "motion_error"):
