@@ -28,7 +28,9 @@ Ground truth beyond the sequence (``DIR/gt/``, see docs/synth.md):
 
 ``DIR/preview.png`` is a bird's-eye view of the last frame (ego frame) with the ground-truth boxes.
 
-Same arguments, same bytes: every random draw comes from ``numpy.random.default_rng(seed)``.
+Same arguments, same bytes: every random draw comes from ``numpy.random.default_rng(seed)``. The one
+exception is camera PNGs (Mesa software OpenGL resolves some depth ties at triangle edges differently run to
+run: a few single edge pixels may differ; see ``sot-apps synth --help``).
 """
 
 from __future__ import annotations
