@@ -58,6 +58,7 @@ class SequenceSummary:
     points_max: int | None
     cameras: list[CameraSummary]
     tracks: list[TrackSummary]
+    empty_sweeps: list[int] | None = None   # frames whose sweep has no point (None: sweeps not read)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -123,11 +124,12 @@ def summarize_sequence(seq: Sequence, point_stats: bool = True, vehicles_only: b
     stamps = seq.timestamps_ns
     span = (int(stamps[-1]) - int(stamps[0])) * 1e-9 if len(stamps) else 0.0
     rate = (len(stamps) - 1) / span if span > 0 else 0.0
-    pmin = pmed = pmax = None
+    pmin = pmed = pmax = empty = None
     if point_stats:
         counts = np.array([len(seq.sweep(k)) for k in tqdm(range(len(seq)), desc="reading sweeps", unit="frame",
                                                             disable=not progress, leave=False)])
         pmin, pmed, pmax = int(counts.min()), float(np.median(counts)), int(counts.max())
+        empty = [int(k) for k in np.flatnonzero(counts == 0)]
     cameras = []
     for name, cam in seq.cameras.items():
         offsets = [(cf.timestamp_ns - seq.frames[k].timestamp_ns) * 1e-6 for k, cf in enumerate(cam.frames)]
@@ -136,4 +138,4 @@ def summarize_sequence(seq: Sequence, point_stats: bool = True, vehicles_only: b
     tracks = summarize_tracks(seq, vehicles_only=vehicles_only, progress=progress)
     return SequenceSummary(id=seq.id, format=seq.format, root=str(seq.root), num_frames=len(seq), time_span_s=span,
                            rate_hz=rate, points_min=pmin, points_median=pmed, points_max=pmax, cameras=cameras,
-                           tracks=tracks)
+                           tracks=tracks, empty_sweeps=empty)

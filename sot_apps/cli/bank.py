@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import add_subcommand
+from .common import add_action, add_subcommand
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -21,8 +21,12 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "sot-apps bank build --from-annotations ../shared/data/pandaset_002 --all --min-points 2000 --out bank",
                   "sot-apps bank build car.obj --out bank", "sot-apps bank list bank"])
     sub = parser.add_subparsers(dest="bank_command", metavar="ACTION")
-    build = sub.add_parser("build", help="add entries to a bank (created if missing)",
-                           description="Add entries to BANK (entries with the same id are replaced).")
+    build = add_action(sub, "build", help="add entries to a bank (created if missing)",
+                       description="Add entries to BANK (entries with the same id are replaced). A build that adds "
+                                   "no entry (every input skipped) is an error (exit code 2).",
+                       examples=["sot-apps bank build out/tracks/* --out bank",
+                                 "sot-apps bank build --from-annotations ../shared/data/pandaset_002 --track-id 20d13d1d "
+                                 "--mirror --out bank"])
     build.add_argument("inputs", nargs="*", metavar="TRACK_DIR_OR_MESH",
                        help="tracker output directories (track.json + shape.ply) or mesh files")
     build.add_argument("--out", required=True, metavar="BANK", help="bank directory")
@@ -34,7 +38,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                        help="skip annotated tracks with fewer aggregated points (default 200)")
     build.add_argument("--mirror", action="store_true", help="mirror-complete about the length axis (y -> -y)")
     build.set_defaults(func=run_build)
-    lst = sub.add_parser("list", help="print the entries of a bank")
+    lst = add_action(sub, "list", help="print the entries of a bank", description="Print the entries of BANK.",
+                     examples=["sot-apps bank list bank"])
     lst.add_argument("bank", metavar="BANK")
     lst.set_defaults(func=run_list)
     parser.set_defaults(func=lambda args: (parser.print_help(), 2)[1])
@@ -75,6 +80,9 @@ def run_build(args: argparse.Namespace) -> int:
         added += entries
         for msg in skipped:
             sys.stderr.write(f"skipped {msg}\n")
+    if not added:
+        raise InputError(out, "bank build: no entry added (every input was skipped; see the lines above); "
+                              "nothing written")
     for entry in added:
         bank.upsert(entry)
     write_bank_index(bank)

@@ -24,3 +24,9 @@ def example_epilog(*examples: str) -> str:
 def add_subcommand(subparsers, name: str, help: str, description: str, examples: list[str]) -> argparse.ArgumentParser:
     return subparsers.add_parser(name, help=help, description=description, epilog=example_epilog(*examples),
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def add_action(subparsers, name: str, help: str, description: str, examples: list[str]) -> argparse.ArgumentParser:
+    """A nested action (``bank build``, ``sensor fit``) with examples in its ``--help``."""
+    return subparsers.add_parser(name, help=help, description=description, epilog=example_epilog(*examples),
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -23,7 +23,11 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    print(f"reading {args.sequence} ...", flush=True)
     seq = load_sequence(args)
+    images = sum(len(c.frames) for c in seq.cameras.values())
+    print(f"converting {seq.id}: {len(seq)} point files and {images} camera images -> {args.out} (rerun resumes)",
+          flush=True)
     path = write_sequence(seq, args.out, progress=sys.stderr.isatty())
     print(f"wrote {path} ({len(seq)} frames, {len(seq.cameras)} cameras, {len(seq.tracks())} annotated tracks)")
     return 0

@@ -8,7 +8,7 @@ from .common import add_subcommand
 
 
 def register(subparsers) -> argparse.ArgumentParser:
-    from .run import add_executor_arguments
+    from .run import EXIT_RULE, add_executor_arguments
 
     parser = add_subcommand(
         subparsers, "demo",
@@ -17,7 +17,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "camera, moving vehicles with ground truth), run every pipeline stage on its moving vehicles "
                     "(tracking, vehicle bank, motion export to MCAP, optical flow, simulated scans at 20 m and 40 m) "
                     "and write OUT/report/index.html with the figures. With --sequence: the same on a real sequence "
-                    "(objects = its moving vehicles; flow on the front camera, first 10 pairs). A rerun resumes.",
+                    "(objects = its moving vehicles; flow on the front camera, first 10 pairs). A rerun resumes. "
+                    f"Exit code: as sot-apps run. {EXIT_RULE}",
         examples=[
             "sot-apps demo --out demo_out   # then open demo_out/report/index.html",
             "sot-apps demo --out demo_pandaset --sequence ../shared/data/pandaset_002 --workers 2",
@@ -59,4 +60,4 @@ def run(args: argparse.Namespace) -> int:
         if mcap.is_file():
             print(f"MCAP: {mcap}")
     print(f"report: {result.report}")
-    return 0
+    return p.exit_code()

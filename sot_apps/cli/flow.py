@@ -27,7 +27,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "invalid. Output layout: docs/flow.md. Rerunning resumes (finished pairs are skipped).",
         examples=["sot-apps flow ../shared/data/pandaset_002 --from-annotations --track-id 8ac00bad "
                   "--camera front_camera --pairs 0:5 --out out/flow",
-                  "sot-apps flow ../shared/data/pandaset_002 --tracks out/track/8ac00bad out/track/20d13d1d "
+                  "sot-apps flow ../shared/data/pandaset_002 --tracks out/tracks/8ac00bad out/tracks/20d13d1d "
                   "--camera front_camera --out out/flow",
                   "sot-apps flow SEQ --from-annotations --moving-only --camera front_camera --mode sparse --out out/flow"])
     add_sequence_argument(parser)

@@ -21,7 +21,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     f"displacement and motion (moving = the box centre gets >= {DEFAULT_SELECTION.min_displacement_m:g} m from "
                     "its first position, or a short track moves >= 0.3 m at >= 1 m/s; see docs/data-formats.md).",
         examples=["sot-apps info --tiny", "sot-apps info ../shared/data/pandaset_002 --vehicles-only",
-                  "sot-apps info out/pandaset_002_canonical --json > info.json"])
+                  "sot-apps info out/pandaset_002 --json > info.json"])
     parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence: a directory (canonical, PandaSet, Waymo v2) or a file (Waymo v1 .tfrecord, Waymo v2 component .parquet)")
     parser.add_argument("--format", choices=FORMATS, default=None, help="force the reader (default: auto-detect)")
     parser.add_argument("--tiny", action="store_true",
@@ -69,6 +69,10 @@ def format_summary(s: SequenceSummary) -> str:
         if s.points_max == 0:
             out.append("          no points in any frame: the source holds no lidar data (e.g. a Waymo file without "
                        "range images)")
+        elif s.empty_sweeps:
+            shown = ", ".join(map(str, s.empty_sweeps[:10])) + (", ..." if len(s.empty_sweeps) > 10 else "")
+            out.append(f"          empty sweeps: {len(s.empty_sweeps)} (frame{'s' if len(s.empty_sweeps) > 1 else ''} "
+                       f"{shown}); trackers go through them on the motion prior (frames flagged no_points)")
     if s.cameras:
         out += ["", "cameras"]
         out += ["  " + r for r in _table(

@@ -51,10 +51,17 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"sot_apps.cli.{name}")
         register = getattr(module, "register", None)
         if register is not None:
-            sub = register(subparsers)
-            sub.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                             help="show full tracebacks on errors")
+            _add_debug(register(subparsers))
     return parser
+
+
+def _add_debug(parser: argparse.ArgumentParser) -> None:
+    """``--debug`` after a subcommand, and after a nested action (``bank build``, ``sensor fit``) too."""
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show full tracebacks on errors")
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in dict.fromkeys(action.choices.values()):
+                _add_debug(child)
 
 
 def _version() -> str:

@@ -56,6 +56,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.track_id and not args.from_annotations:
         raise InputError(None, "--track-id selects annotated tracks and needs --from-annotations")
+    if args.invalid_flags is not None:
+        from ..io.tracks import TRACKER_FLAGS
+
+        unknown = sorted(set(args.invalid_flags) - TRACKER_FLAGS)
+        if unknown:
+            raise InputError(None, f"--invalid-flags: unknown flag {', '.join(map(repr, unknown))}; tracker flags: "
+                                   f"{', '.join(sorted(TRACKER_FLAGS))}")
     if args.observed_steps is not None and args.observed_steps < 0:
         raise InputError(None, "--observed-steps must be >= 0")
     sequence = load_sequence(args)

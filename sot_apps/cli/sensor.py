@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import add_action, add_sequence_argument, add_subcommand, load_sequence
+
+MAX_PLAUSIBLE_BEAMS = 128   # the most beams of any spinning LiDAR on sale (e.g. Hesai OT128, Ouster OS-128)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -19,11 +22,14 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "elevation histogram, the azimuth step is the median gap between a beam's consecutive returns, "
                     "spin rate and direction come from per-point times. Writes a sensor JSON (schema sensor) usable "
                     "by simulate-lidar and synth. See docs/lidar_sim.md for how it fares on PandaSet.",
-        examples=["sot-apps sensor fit ../shared/data/pandaset_002 --out pandar64_fit.json --compare pandar64",
+        examples=["sot-apps sensor fit ../shared/data/pandaset_002 --align --out pandar64_fit.json --compare pandar64",
                   "sot-apps sensor fit out/world --frames 0,5 --out fitted.json"])
     sub = parser.add_subparsers(dest="sensor_command", metavar="ACTION")
-    fit = sub.add_parser("fit", help="fit beam elevations and azimuth resolution",
-                         description="Fit a sensor model to sweeps (points in the LiDAR frame).")
+    fit = add_action(sub, "fit", help="fit beam elevations and azimuth resolution",
+                     description="Fit a sensor model to sweeps (points in the LiDAR frame).",
+                     examples=["sot-apps sensor fit ../shared/data/pandaset_002 --align --out pandar64_fit.json "
+                               "--compare pandar64",
+                               "sot-apps sensor fit out/world --frames 0,5 --out fitted.json"])
     add_sequence_argument(fit)
     fit.add_argument("--frames", default="0,10,20", help="comma-separated frames to use (default 0,10,20)")
     fit.add_argument("--out", required=True, metavar="SENSOR.json", help="output sensor JSON")
@@ -98,5 +104,10 @@ def run_fit(args: argparse.Namespace) -> int:
           f"direction {s.direction:+d}, max range {s.max_range:g} m")
     if args.compare:
         print(json.dumps(doc["fit"]["comparison"]))
+    expected = preset(args.compare).beams if args.compare else None
+    if (expected is not None and s.beams != expected) or s.beams > MAX_PLAUSIBLE_BEAMS:
+        reason = f"{args.compare} has {expected}" if expected is not None else f"no spinning LiDAR has more than {MAX_PLAUSIBLE_BEAMS}"
+        sys.stderr.write(f"warning: fitted {s.beams} beams but {reason}: the sweeps are probably not in the sensor's "
+                         f"optical-centre frame{'' if args.align else ' (try --align)'}\n")
     print(f"wrote {args.out}")
     return 0

@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io import open_sequence
     from ..lidar_sim.bank import read_bank
     from ..lidar_sim.export import FORMATS
-    from ..lidar_sim.scene import load_scene, random_scene
+    from ..lidar_sim.scene import load_scene, overlapping_objects, random_scene
     from ..lidar_sim.sensors import load_sensor
     from ..lidar_sim.simulate import counts_table, run_simulation
 
@@ -60,6 +60,11 @@ def run(args: argparse.Namespace) -> int:
         background.check_index(args.frame)
     if args.scene:
         spec = load_scene(args.scene)
+        overlaps = overlapping_objects(spec, bank)
+        if overlaps:
+            pairs = ", ".join(f"{a} and {b}" for a, b in overlaps[:5])
+            raise InputError(args.scene, f"objects {pairs} overlap (their footprints intersect); vehicles cannot "
+                                         "share space: move them apart")
         if args.sensor:
             spec = replace(spec, sensor=load_sensor(args.sensor))
     else:

@@ -20,7 +20,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "differently from run to run, so an image may differ in a few single edge pixels (measured: "
                     "1 pixel in 3 of 20 images). LiDAR sweeps, labels, ground truth and the sequence file are "
                     "byte-identical; never hash camera images to compare runs.",
-        examples=["sot-apps synth --out /tmp/world --frames 20 --vehicles 3 --sensor pandar64 --seed 0",
+        examples=["sot-apps synth --out out/world --frames 20 --vehicles 3 --sensor pandar64 --seed 0",
                   "sot-apps synth --out /tmp/world_cam --frames 10 --vehicles 4 --cameras --camera-size 640x360"])
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--frames", type=int, default=20, help="number of frames (default 20)")

@@ -17,10 +17,10 @@ def register(subparsers) -> argparse.ArgumentParser:
         description="Track one vehicle through a sequence from its box at the start frame (model-free SOTracker) "
                     "and write DIR/track.json (WORLD states, per-frame points, quality, flags, time) and "
                     "DIR/shape.ply (the aggregated shape in the object frame).",
-        examples=["sot-apps track ../shared/data/pandaset_002 --track-id 8ac00bad --out out/8ac00bad",
+        examples=["sot-apps track ../shared/data/pandaset_002 --track-id 8ac00bad --out out/tracks/8ac00bad",
                   "sot-apps track ../shared/data/pandaset_002 --init-box -5.49,-6.11,0.43,0.77,4.73,1.97,1.55 "
                   "--start-frame 0 --end-frame 20 --preset full --out out/car",
-                  "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --offline --out out/91aa5b5c"])
+                  "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --offline --out out/tracks/91aa5b5c"])
     add_sequence_argument(parser)
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--track-id", metavar="ID", help="annotated track id (a unique prefix is enough); the start "

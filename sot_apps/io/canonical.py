@@ -18,7 +18,6 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
-import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +29,7 @@ from tracker.geometry import Box
 from ..errors import InputError
 from ..schemas import load_json_validated, validate
 from .atomic import atomic_path, write_json, write_npz
+from .npz import read_npz
 from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
 __all__ = ["read_sequence", "write_sequence", "read_points_file", "sequence_to_json", "SCHEMA_VERSION"]
@@ -58,11 +58,7 @@ def read_points_file(path: str | Path) -> Sweep:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "point file is missing")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
-        raise InputError(path, f"cannot read npz: file is truncated or corrupt ({type(exc).__name__}: {exc})") from exc
+    arrays = read_npz(path)
     unknown = sorted(set(arrays) - set(POINT_ARRAYS))
     if unknown:
         raise InputError(path, f"unknown arrays {unknown}; allowed: {sorted(POINT_ARRAYS)}")
@@ -275,5 +271,6 @@ def write_sequence(seq: Sequence, out_dir: str | Path, progress: bool = True) ->
                     raise InputError(source, "camera image is missing")
                 _copy_file(source, out_dir / doc["cameras"][name]["frames"][k]["image"])
                 bar.update()
+        bar.refresh()   # the last files go faster than tqdm's redraw interval: show 100 % before closing
     write_json(json_path, doc)
     return json_path

@@ -29,7 +29,6 @@ import csv
 import gzip
 import json
 import math
-import zipfile
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -39,6 +38,7 @@ from scipy.spatial.transform import Rotation
 from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle
 
 from ..errors import InputError
+from .npz import read_npz
 from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
 __all__ = ["is_pandaset", "read_pandaset", "pose_to_matrix", "seconds_to_ns"]
@@ -106,11 +106,7 @@ def _load_lidar_columns(path: Path) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise InputError(path, "point file is missing")
     if path.name.endswith(".npz"):
-        try:
-            with np.load(path) as data:
-                return {k: data[k] for k in data.files}
-        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
-            raise InputError(path, f"cannot read npz, file is truncated or corrupt ({exc})") from exc
+        return read_npz(path)
     frame = _read_native_pickle(path)
     return {k: frame[k].to_numpy() for k in frame.columns}
 

@@ -22,12 +22,15 @@ from .ply import read_ply_points, write_ply_points
 if TYPE_CHECKING:
     from .sequence import Sequence
 
-__all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "Size", "FrameRecord", "TrackFile", "read_track", "write_track", "check_track_belongs", "SCHEMA_VERSION"]
+__all__ = ["DEFAULT_INVALID_FLAGS", "TRACKER_FLAGS", "frame_is_valid", "Size", "FrameRecord", "TrackFile", "read_track", "write_track", "check_track_belongs", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 1
 
 # Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points and prior_only).
 DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost"})
+# Every flag the tracker (tracker/sotracker.py, tracker/offline.py) writes, plus "lost" (kept for older files).
+TRACKER_FLAGS: frozenset[str] = frozenset({"init", "no_points", "prior_only", "low_points", "nan_points",
+                                           "no_shape_inliers", "yaw_clamped", "motion_clamped", "offline", "lost"})
 
 
 def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> bool:

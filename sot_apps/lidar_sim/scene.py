@@ -34,7 +34,7 @@ from .scan import Scan, SimObject, Trajectory, simulate_scan
 from .sensors import Sensor, load_sensor
 from .visibility import Visibility, vehicle_visibility
 
-__all__ = ["SceneObject", "SceneSpec", "SimResult", "load_scene", "random_scene", "simulate_scene",
+__all__ = ["SceneObject", "SceneSpec", "SimResult", "load_scene", "overlapping_objects", "random_scene", "simulate_scene",
            "insert_into_background", "OCCLUDER_MARGIN_M"]
 
 OCCLUDER_MARGIN_M = 0.3
@@ -93,6 +93,19 @@ def load_scene(path: str | Path) -> SceneSpec:
                            float(o["heading"]), o.get("label"), float(o.get("reflectivity", 0.5)))
                for o in doc["objects"]]
     return SceneSpec(sensor, doc.get("ground_z"), objects, realism)
+
+
+def overlapping_objects(spec: SceneSpec, bank: Bank) -> list[tuple[int, int]]:
+    """Index pairs of scene objects whose bird's-eye-view footprints (bank box size, placed) intersect."""
+    from tracker.metrics import iou_bev_batch
+
+    n = len(spec.objects)
+    if n < 2:
+        return []
+    boxes = np.array([[o.x, o.y, 0.0, o.heading, *bank.get(o.bank_id).box_size()] for o in spec.objects])
+    i, j = np.triu_indices(n, k=1)
+    hit = iou_bev_batch(boxes[i], boxes[j]) > 0
+    return [(int(a), int(b)) for a, b in zip(i[hit], j[hit])]
 
 
 def _free_spot(background_xyz: np.ndarray, x: float, y: float, heading: float, size: tuple[float, float, float]) -> bool:

@@ -67,6 +67,16 @@ class PipelineResult:
     def failed(self) -> list[UnitRecord]:
         return [u for u in self.units if u.status == "failed"]
 
+    def unexpected_failures(self) -> list[UnitRecord]:
+        """Failed units, except annotated objects the tracker could not start or follow for lack of LiDAR
+        points (``TrackingFailed``): on real data far or hidden annotated vehicles are a normal outcome."""
+        annotated = {f"track/{o.key}" for o in self.plan.objects if o.annotated}
+        return [u for u in self.failed if not (u.key in annotated and (u.error or "").startswith("TrackingFailed"))]
+
+    def exit_code(self) -> int:
+        """The one rule of ``sot-apps run`` and ``sot-apps demo``: 1 when a unit failed unexpectedly, else 0."""
+        return 1 if self.unexpected_failures() else 0
+
     def ran(self, stage: str) -> list[UnitRecord]:
         return [u for u in self.by_stage(stage) if u.status == "done"]
 
