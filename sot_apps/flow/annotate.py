@@ -10,6 +10,7 @@ finished and skipped on a rerun) and ``stats.json`` (all pairs, data_schema/flow
 from __future__ import annotations
 
 import json
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -151,7 +152,13 @@ def write_pair_outputs(root: Path, k: int, result: PairFlow, image_path: Path, w
         colour = cv2.cvtColor(flow_to_color(result.flow, result.valid_occ), cv2.COLOR_RGB2BGR)
         _write_png(root / "vis" / f"{name}_flow.png", colour)
         image = cv2.imread(str(image_path), cv2.IMREAD_COLOR)
-        if image is not None and image.shape[:2] == result.instance.shape:
+        if image is None or image.shape[:2] != result.instance.shape:
+            problem = ("cannot decode the camera image" if image is None else
+                       f"camera image is {image.shape[1]}x{image.shape[0]}, the camera model says "
+                       f"{result.instance.shape[1]}x{result.instance.shape[0]}")
+            sys.stderr.write(f"warning: {image_path}: {problem}; vis/{name}_overlay.jpg not written (the flow itself "
+                             "does not use the image)\n")
+        else:
             _write_png(root / "vis" / f"{name}_overlay.jpg", overlay(image, result.flow, result.valid_occ, result.instance))
 
 

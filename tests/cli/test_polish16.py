@@ -128,3 +128,15 @@ def test_convert_says_what_it_is_doing_before_the_long_part(tmp_path, tiny_dir, 
     assert main(["convert", str(tiny_dir), "--out", str(tmp_path / "c")]) == 0
     out = capsys.readouterr().out
     assert out.startswith("reading ") and "converting" in out and "point files" in out
+
+
+def test_corrupt_camera_image_is_warned_about(tmp_path, capsys):
+    from sot_apps.synth import write_world
+
+    world = write_world(tmp_path / "w", frames=3, vehicles=2, sensor="vlp16", seed=4, cameras=True, camera_size=(96, 64))
+    image = sorted((world / "cameras" / "front_camera").glob("*.png"))[0]
+    image.write_bytes(b"\x89PNG garbage")
+    code = main(["flow", str(world), "--from-annotations", "--camera", "front_camera", "--pairs", "0:1",
+                 "--box-time", "frame", "--quiet", "--out", str(tmp_path / "F")])
+    err = capsys.readouterr().err
+    assert code == 0 and "warning" in err and image.name in err and "cannot decode" in err
