@@ -62,7 +62,8 @@ def test_info_planning_bank_and_eval_select_the_same_vehicles(pandaset, pandaset
         return [], []
 
     monkeypatch.setattr(bank_module, "entries_from_annotations", fake_entries)
-    assert main(["bank", "build", "--from-annotations", str(pandaset_root), "--all", "--out", str(tmp_path / "bank")]) == 0
+    # the fake builds no entry, and a bank build that adds nothing is exit code 2 (issue 16); the ids it was asked for count
+    assert main(["bank", "build", "--from-annotations", str(pandaset_root), "--all", "--out", str(tmp_path / "bank")]) == 2
 
     assert len(info_vehicles) == 76 and len(info_moving) == 20   # the motorcycle is not a vehicle
     assert set(captured) == info_vehicles == planned(moving_only=False)
