@@ -97,14 +97,15 @@ def load_scene(path: str | Path) -> SceneSpec:
 
 def overlapping_objects(spec: SceneSpec, bank: Bank) -> list[tuple[int, int]]:
     """Index pairs of scene objects whose bird's-eye-view footprints (bank box size, placed) intersect."""
-    from tracker.metrics import iou_bev_batch
+    from tracker import iou_3d_batch
 
     n = len(spec.objects)
     if n < 2:
         return []
-    boxes = np.array([[o.x, o.y, 0.0, o.heading, *bank.get(o.bank_id).box_size()] for o in spec.objects])
+    # footprints as boxes of one common height: their 3D IoU is positive exactly when the footprints intersect
+    boxes = np.array([[o.x, o.y, 0.0, o.heading, *bank.get(o.bank_id).box_size()[:2], 1.0] for o in spec.objects])
     i, j = np.triu_indices(n, k=1)
-    hit = iou_bev_batch(boxes[i], boxes[j]) > 0
+    hit = iou_3d_batch(boxes[i], boxes[j]) > 0
     return [(int(a), int(b)) for a, b in zip(i[hit], j[hit])]
 
 
