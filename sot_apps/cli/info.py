@@ -60,11 +60,26 @@ def _table(headers: list[str], rows: list[list[str]], right: set[int]) -> list[s
     return [line(headers)] + [line(r) for r in rows]
 
 
+def _frame_list(frames: list[int]) -> str:
+    """``[3, 4, 5, 9]`` -> ``"3-5, 9"`` (``"none"`` when empty)."""
+    if not frames:
+        return "none"
+    runs: list[list[int]] = []
+    for k in frames:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
+
+
 def format_summary(s: SequenceSummary) -> str:
     out = [f"sequence  {s.id}  ({s.format}: {s.root})",
            f"frames    {s.num_frames}, time span {s.time_span_s:.3f} s ({s.rate_hz:.2f} Hz)"]
     if s.points_min is not None:
         out.append(f"points    per frame: min {s.points_min}, median {s.points_median:.0f}, max {s.points_max}")
+    out.append(f"sweeps    {s.num_frames - len(s.missing_sweeps)} of {s.num_frames} frames; missing: "
+               f"{_frame_list(s.missing_sweeps)}" + ("" if s.empty_sweeps is None else f"; empty: {_frame_list(s.empty_sweeps)}"))
     if s.cameras:
         out += ["", "cameras"]
         out += ["  " + r for r in _table(
