@@ -192,6 +192,7 @@ class Tracker:
         """Non-ground world points near ``box`` (BEV radius of the box scaled by ``scale`` plus a margin)."""
         c = self.config
         flags: list[str] = []
+        self._ground_points = np.zeros((0, 3))
         pts = np.asarray(frame.points_ego)
         if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
             return np.zeros((0, 3)), flags
@@ -223,7 +224,6 @@ class Tracker:
         v = np.abs(d @ np.array([-sa, ca]))
         gscale = scale + 0.5
         world = world[(u <= 0.5 * box.length * gscale + c.gpf_margin) & (v <= 0.5 * box.width * gscale + c.gpf_margin)]
-        self._ground_points = np.zeros((0, 3))
         if c.ground_removal and len(world) >= 3:
             is_ground = ground_mask(world, self.ground_params)
             self._ground_points = world[is_ground]
