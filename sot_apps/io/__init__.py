@@ -10,25 +10,46 @@ from .sequence import AnnotatedTrack, BoxAnnotation, Camera, CameraFrame, FrameI
 __all__ = ["open_sequence", "detect_format", "FORMATS", "Sequence", "Sweep", "FrameInfo", "Camera",
            "CameraFrame", "BoxAnnotation", "AnnotatedTrack"]
 
-FORMATS = ("sequence", "pandaset")
+FORMATS = ("sequence", "pandaset",
+           # dataset readers of issue 14 (av2.py, nuscenes.py, kitti.py)
+           "av2", "nuscenes", "kitti_tracking", "kitti_object")
 
 
 def detect_format(path: str | Path) -> str:
     """Name of the format of the sequence directory ``path`` (see FORMATS)."""
     from .pandaset import is_pandaset
 
+    from .convert_util import split_selector
+
     path = Path(path)
+    base, name = split_selector(path)
+    if name is not None:
+        from .dataset_readers import detect_dataset
+
+        if base.exists() and detect_dataset(base):
+            return detect_dataset(base)
     if not path.exists():
         raise InputError(path, "no such file or directory")
     if path.is_file() and path.name == "sequence.json":
         return "sequence"
     if not path.is_dir():
+        from .dataset_readers import detect_dataset
+
+        found = detect_dataset(path)  # a dataset may name a sequence by one of its files
+        if found:
+            return found
         raise InputError(path, "not a sequence directory")
     if (path / "sequence.json").is_file():
         return "sequence"
     if is_pandaset(path):
         return "pandaset"
-    raise InputError(path, "unknown sequence format: expected sequence.json (canonical) or lidar/poses.json with lidar/NN.npz|.pkl.gz (PandaSet)")
+    from .dataset_readers import detect_dataset
+
+    found = detect_dataset(path)
+    if found:
+        return found
+    raise InputError(path, "unknown sequence format: expected sequence.json (canonical), lidar/poses.json with "
+                           "lidar/NN.npz|.pkl.gz (PandaSet), or a dataset layout of docs/data-formats.md")
 
 
 def open_sequence(path: str | Path, format: str | None = None) -> Sequence:
@@ -43,4 +64,8 @@ def open_sequence(path: str | Path, format: str | None = None) -> Sequence:
         from .canonical import read_sequence
 
         return read_sequence(path.parent if path.name == "sequence.json" else path)
+    from .dataset_readers import DATASET_READERS
+
+    if fmt in DATASET_READERS:
+        return DATASET_READERS[fmt](path)
     raise InputError(path, f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")
