@@ -72,25 +72,56 @@ def test_canonical_frames_without_points_and_empty_sweeps(tiny_copy, tmp_path, c
     assert [len(b) for b in again.annotations] == [len(b) for b in seq.annotations]
 
 
-def test_track_across_a_4_frame_gap_keeps_the_vehicle(gap_copy, pandaset, tmp_path, capsys):
-    out = tmp_path / "t"
+@pytest.fixture(scope="module")
+def gap_track(gap_copy, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("gap_track") / "t"
     code = main(["track", str(gap_copy), "--track-id", "8ac00bad", "--start-frame", "12", "--end-frame", "30",
                  "--quiet", "--out", str(out)])
-    assert code == 0, capsys.readouterr().err
-    from sot_apps.io.tracks import read_track
+    assert code == 0
+    return out
 
-    track, _ = read_track(out)
+
+def test_track_across_a_4_frame_gap_keeps_the_vehicle(gap_track, pandaset):
+    from sot_apps.io.tracks import read_track
+    from tracker.geometry import Box
+
+    track, _ = read_track(gap_track)
     truth = pandaset.tracks()[track.object_id]
     flags = {r.frame: r.flags for r in track.frames}
     assert [k for k, f in flags.items() if "no_sweep" in f] == [20, 21, 22, 23]
     assert all(r.num_points == 0 for r in track.frames if 20 <= r.frame <= 23)
     size = track.size
-    from tracker.geometry import Box
-
     ious = {r.frame: iou_3d(Box(r.state.x, r.state.y, r.state.z, r.state.heading, size.length, size.width, size.height),
                             truth.box_at(r.frame)) for r in track.frames}
-    after = [ious[k] for k in range(24, 31)]
-    assert min(after) > 0.5, ious
+    assert min(ious[k] for k in range(24, 31)) > 0.5, ious
+
+
+def test_motion_export_marks_frames_without_sweep(gap_track, gap_copy, tmp_path):
+    import pyarrow.parquet as pq
+    from mcap.reader import make_reader
+
+    code = main(["motion-export", str(gap_copy), "--tracks", str(gap_track), "--out", str(tmp_path / "m.mcap"),
+                 "--with-points", "--parquet", str(tmp_path / "m.parquet"), "--quiet"])
+    assert code == 0
+    rows = pq.read_table(tmp_path / "m.parquet").to_pylist()
+    assert [r["frame"] for r in rows if not r["valid"]] == [20, 21, 22, 23]
+    with open(tmp_path / "m.mcap", "rb") as handle:
+        summary = make_reader(handle).get_summary()
+    counts = {c.topic: summary.statistics.channel_message_counts[cid] for cid, c in summary.channels.items()}
+    assert counts["/lidar/points"] == 19 - 4  # frames 12..30 minus the four without a sweep
+
+
+def test_flow_marks_pairs_without_a_sweep(gap_copy, tmp_path):
+    from sot_apps.schemas import validate
+
+    out = tmp_path / "flow"
+    args = [str(gap_copy), "--from-annotations", "--track-id", "8ac00bad", "--camera", "front_camera",
+            "--pairs", "19:21", "--shape-frames", "10:30", "--mode", "sparse", "--no-vis", "--out", str(out), "--quiet"]
+    assert main(["flow", *args]) == 0
+    stats = json.loads((out / "front_camera" / "stats.json").read_text())
+    validate("flow_stats", stats, out / "stats.json")
+    assert [p.get("no_lidar_sweep") for p in stats["pairs"]] == [[20], [20, 21]]
+    assert all(p["pixels"] > 0 for p in stats["pairs"])  # the flow comes from the object states
 
 
 def test_tracker_prior_scales_with_elapsed_time():
