@@ -49,6 +49,8 @@ def track_object(out: str, plan: ObjectPlan, stage: dict, digest: str) -> dict:
     start_frame, init_box = plan.start, plan.init_box
     if plan.annotated and stage.get("start", "first_with_points") == "first_with_points":
         start_frame, init_box = _first_box_with_points(seq, plan, config, min_points)
+    if not seq.frames[start_frame].has_sweep:
+        raise TrackingFailed(f"{plan.key}: the start frame {start_frame} has no sweep; nothing to track")
     end_frame = plan.end if stage.get("max_frames") is None else min(plan.end, start_frame + int(stage["max_frames"]))
     start = time.perf_counter()
     result = track(seq, init_box, start_frame, end_frame, config)
@@ -86,6 +88,8 @@ def _first_box_with_points(seq, plan: ObjectPlan, config, min_points: int):
 
     best = (0, plan.start, plan.init_box)
     for k, box in plan.annotated[:-1]:
+        if not seq.frames[k].has_sweep:  # a frame without a sweep cannot start a track
+            continue
         n = Tracker(config).start(seq.lidar_frame(k), box).num_points
         if n >= min_points:
             return k, box
