@@ -13,7 +13,7 @@ from tracker.geometry import Box, make_transform, wrap_angle
 from ..errors import InputError
 
 __all__ = ["quaternion_wxyz_to_matrix", "quaternions_wxyz_to_matrices", "transform_from_quaternion", "box_from_transform", "pose_at",
-           "split_selector", "read_text_lines"]
+           "split_selector", "read_text_lines", "read_float32_records"]
 
 
 def quaternion_wxyz_to_matrix(w: float, x: float, y: float, z: float, path: Path, where: str) -> np.ndarray:
@@ -97,3 +97,19 @@ def read_text_lines(path: Path) -> list[str]:
         return path.read_text(encoding="utf-8").splitlines()
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not a text file ({exc})") from exc
+
+
+def read_float32_records(path: Path, columns: int) -> np.ndarray:
+    """(N, columns) float32 of a headerless little-endian float32 point file (KITTI ``.bin``, nuScenes
+    ``.pcd.bin``); InputError if it is missing, truncated or has non-finite x, y, z."""
+    if not path.is_file():
+        raise InputError(path, "point file is missing")
+    size = path.stat().st_size
+    if size % (4 * columns):
+        raise InputError(path, f"size {size} bytes is not a multiple of {4 * columns} ({columns} float32 per point): "
+                               "file is truncated")
+    data = np.fromfile(path, dtype="<f4").reshape(-1, columns)
+    bad = ~np.isfinite(data[:, :3]).all(axis=1)
+    if bad.any():
+        raise InputError(path, f"{int(bad.sum())} points have non-finite coordinates")
+    return data

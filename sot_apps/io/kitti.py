@@ -47,7 +47,7 @@ import numpy as np
 from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle
 
 from ..errors import InputError
-from .convert_util import read_text_lines, split_selector
+from .convert_util import read_float32_records, read_text_lines, split_selector
 from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
 __all__ = ["kitti_tracking_parts", "is_kitti_object", "read_kitti_tracking", "read_kitti_object", "read_calib",
@@ -64,14 +64,7 @@ _KEY_SPELLINGS = {"R0_rect": ("R0_rect", "R_rect"), "Tr_velo_to_cam": ("Tr_velo_
 
 def read_velodyne_bin(path: Path) -> Sweep:
     """A KITTI velodyne ``.bin`` (float32 x, y, z, reflectance)."""
-    if not path.is_file():
-        raise InputError(path, "point file is missing")
-    size = path.stat().st_size
-    if size % 16:
-        raise InputError(path, f"size {size} bytes is not a multiple of 16 (4 float32 per point): file is truncated")
-    data = np.fromfile(path, dtype="<f4").reshape(-1, 4)
-    if not np.isfinite(data[:, :3]).all():
-        raise InputError(path, f"{int((~np.isfinite(data[:, :3]).all(axis=1)).sum())} points have non-finite coordinates")
+    data = read_float32_records(path, 4)
     return Sweep(xyz=np.ascontiguousarray(data[:, :3]), intensity=np.ascontiguousarray(data[:, 3]))
 
 

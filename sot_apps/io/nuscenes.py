@@ -35,7 +35,7 @@ import numpy as np
 from tracker.geometry import Box, transform_points
 
 from ..errors import InputError
-from .convert_util import box_from_transform, transform_from_quaternion
+from .convert_util import box_from_transform, read_float32_records, transform_from_quaternion
 from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
 __all__ = ["is_nuscenes", "read_nuscenes", "annotation_box", "read_pcd_bin", "lidar_sweep_in_ego", "TABLES"]
@@ -86,15 +86,7 @@ def annotation_box(record: dict[str, Any], path: Path = Path("sample_annotation.
 
 def read_pcd_bin(path: Path) -> np.ndarray:
     """(N, 5) float32 x, y, z, intensity, ring of a nuScenes ``.pcd.bin``."""
-    if not path.is_file():
-        raise InputError(path, "point file is missing")
-    size = path.stat().st_size
-    if size % 20:
-        raise InputError(path, f"size {size} bytes is not a multiple of 20 (5 float32 per point): file is truncated")
-    data = np.fromfile(path, dtype="<f4").reshape(-1, 5)
-    if not np.isfinite(data[:, :3]).all():
-        raise InputError(path, "points have non-finite coordinates")
-    return data
+    return read_float32_records(path, 5)
 
 
 def lidar_sweep_in_ego(path: Path, ego_from_lidar: np.ndarray) -> Sweep:

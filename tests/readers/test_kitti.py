@@ -43,9 +43,9 @@ def test_tracking_boxes_project_onto_the_labelled_2d_boxes(readers_root, seq_nam
     cam = seq.cameras["image_02"]
     truth = _label_2d_boxes(label_path)
     ious = []
-    for k, annotations in enumerate(seq.annotations):
+    for k, frame_boxes in enumerate(seq.annotations):
         camera_from_world = invert_transform(seq.frames[k].world_from_ego @ cam.ego_from_camera)
-        for ann in annotations:
+        for ann in frame_boxes:
             corners = transform_points(camera_from_world, ann.box.corners())
             if (corners[:, 2] <= 0.1).any():
                 continue
