@@ -21,7 +21,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "its first position, or a short track moves >= 0.3 m at >= 1 m/s; see docs/data-formats.md).",
         examples=["sot-apps info --tiny", "sot-apps info ../shared/data/pandaset_002 --vehicles-only",
                   "sot-apps info out/pandaset_002_canonical --json > info.json"])
-    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence directory (canonical or PandaSet)")
+    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence: canonical, PandaSet, Argoverse 2 log, nuScenes root (DIR#scene), KITTI tracking (label_02/SSSS.txt or DIR#SSSS), KITTI object / View-of-Delft folder")
     parser.add_argument("--format", choices=FORMATS, default=None, help="force the reader (default: auto-detect)")
     parser.add_argument("--tiny", action="store_true",
                         help="use the built-in tiny synthetic sequence (generated into ~/.cache/sot-apps)")
