@@ -247,6 +247,8 @@ class Tracker:
         values = box.to_array()
         if not np.isfinite(values).all() or min(box.length, box.width, box.height) <= 0:
             raise ValueError(f"init box must be finite with positive size, got {box}")
+        if not frame.has_sweep:
+            raise ValueError(f"cannot start a track at frame {frame.index}: it has no sweep")
         self.rng = np.random.default_rng(c.seed)
         self.first_box = box
         self.box = box
@@ -260,8 +262,6 @@ class Tracker:
         self._previous_pose = previous_pose
         self._last_timestamp_ns = int(frame.timestamp_ns)
         self._nominal_dt_ns: int | None = None  # the frame interval the motion prior is expressed per
-        if not frame.has_sweep:
-            raise ValueError(f"cannot start a track at frame {frame.index}: it has no sweep")
         local, flags = self._local_points(frame, box, max(c.first_search_scale, c.search_scale))
         height = _ground_height(self._ground_points, box.center[:2], box)
         self._ground_offset = None if height is None else box.z - height
