@@ -69,3 +69,20 @@ def test_frames_poses_times_tracks_and_cameras(readers_root):
     assert cam.frames == [] and cam.K[0, 0] > 1000 and (cam.width, cam.height) == (1550, 2048)  # portrait
     # the front camera looks along ego +x (OpenCV z axis forward)
     assert cam.ego_from_camera[:3, 2] @ np.array([1.0, 0.0, 0.0]) > 0.99
+
+
+def test_truncated_sweep_is_named(readers_root, tmp_path, capsys):
+    """A copy of a log with a truncated sweep file: one line naming the file, exit 2."""
+    from sot_apps.cli.main import main
+
+    log = tmp_path / AV2_LOG_B.name
+    log.mkdir()
+    for name in ("annotations.feather", "city_SE3_egovehicle.feather"):
+        (log / name).symlink_to(AV2_LOG_B / name)
+    (log / "sensors" / "lidar").mkdir(parents=True)
+    source = next((AV2_LOG_B / "sensors" / "lidar").glob("*.feather"))
+    bad = log / "sensors" / "lidar" / source.name
+    bad.write_bytes(source.read_bytes()[:5000])
+    assert main(["info", str(log)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(bad) in err[0] and "cannot read feather file" in err[0], err

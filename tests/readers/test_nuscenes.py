@@ -232,3 +232,22 @@ def test_real_demo_box_centres_project_onto_the_camera_boxes(readers_root, tmp_p
             assert np.min(np.linalg.norm(uv - inst["center_2d"], axis=1)) < 0.5
             checked += 1
     assert checked == 84
+
+
+def test_bad_tables_and_point_files_are_named(tmp_path, capsys):
+    from sot_apps.io.tiny import make_tiny_sequence
+
+    tiny = open_sequence(make_tiny_sequence(tmp_path / "tiny"))
+    root = _write_tiny_dataroot(tiny, tmp_path / "nuscenes")
+    pcd = next((root / "samples" / "LIDAR_TOP").glob("*.pcd.bin"))
+    pcd.write_bytes(pcd.read_bytes()[:-7])
+    assert main(["info", f"{root}#scene-0001"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(pcd) in err[0] and "truncated" in err[0], err
+    table = root / "v1.0-mini" / "sample_data.json"
+    rows = json.loads(table.read_text())
+    rows[3]["ego_pose_token"] = "no-such-pose"
+    table.write_text(json.dumps(rows))
+    assert main(["info", f"{root}#scene-0001", "--no-point-stats"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(table) in err[0] and "unknown calibrated_sensor_token or ego_pose_token" in err[0], err
