@@ -134,7 +134,7 @@ def _write_kitti_tracking(tiny, root: Path, lat0: float = 48.98, lon0: float = 8
         lat = math.degrees(2 * math.atan(math.exp((my0 + y) / (scale * er)))) - 90
         yaw = math.atan2(world_from_imu[1, 0], world_from_imu[0, 0])
         lines.append(" ".join(f"{v:.12f}" for v in [lat, lon, z, 0.0, 0.0, yaw] + [0.0] * 24))
-        pts = transform_points(np.eye(4), tiny.sweep(k).xyz.astype(np.float64))
+        pts = tiny.sweep(k).xyz  # ego = velodyne
         data = np.column_stack([pts, rng.uniform(0, 1, len(pts))]).astype("<f4")
         if k != 7:  # frame 7's sweep was dropped
             data.tofile(root / "velodyne" / name / f"{k:06d}.bin")
