@@ -27,6 +27,9 @@ class TrackerConfig:
     search_scale: float = 1.5            # gamma_in
     first_search_scale: float = 3.0      # frame-1 wide search
     first_icp_iterations: int = 50       # ICP-only outer iterations of the frame-1 search
+    first_search: str = "moving"         # "moving": the crop follows the estimate, source = previous points +
+                                         # sub-shape; "finder" (upstream): start-box points (x1.0) against a
+                                         # fixed crop of the start box x first_search_scale (tracker/finder.py)
     crop_scale: float = 1.1              # gamma_aft: previous-frame points for the ICP term
     shape_crop_scale: float = 1.0        # points added to the shape / sub-shape
     # --- shape model
@@ -53,6 +56,14 @@ class TrackerConfig:
     normal_neighbors: int = 8
     normal_radius: float = 0.5
     max_pair_distance: float = 0.0       # > 0: ICP pairs farther than this are dropped (0 = keep all, upstream)
+    association: str = "global"          # "global": one kd-tree over the local points, pairs whose target is
+                                         # outside the crop dropped, subsets drawn once per frame; "crop"
+                                         # (upstream): 1-NN among the crop's points, source and crop resampled
+                                         # (<= max_points, with replacement) every outer iteration
+    ransac_mode: str = "fixed"           # "fixed": the same hypotheses every outer iteration, < ransac_min_inliers
+                                         # inliers drops the shape term; "upstream": the estimate itself is the
+                                         # first hypothesis, new draws every outer iteration, too few inliers
+                                         # keeps all pairs
     # --- motion prior
     alpha: float = 0.5                   # prior <- alpha * prior + (1 - alpha) * delta
     prior_frame: str = "world"           # "world" (paper) or "object": average the motion in the box frame
@@ -66,6 +77,9 @@ class TrackerConfig:
     symmetric_mc: bool = True            # MC on both components; False = upstream's x-only form
     # --- ground removal (GPF, Zermas et al. 2017)
     ground_removal: bool = True
+    ground_scope: str = "local"          # "local": per-cell planes on the tracker's local region (tracker/ground.py);
+                                         # "sweep" (upstream): one plane for the whole sweep in the ego (sensor)
+                                         # frame (tracker/sweep_ground.py)
     gpf_lpr_count: int = 20              # lowest-point representative: mean z of this many lowest points
     gpf_seed_threshold: float = 1.2      # seeds: points lower than LPR + this
     gpf_distance_threshold: float = 0.3  # ground: distance to the plane below this
@@ -120,6 +134,13 @@ class TrackerConfig:
             raise ValueError(f"prior_frame must be 'world' or 'object', not {self.prior_frame!r}")
         if self.mp_reference not in ("prior", "iteration"):
             raise ValueError(f"mp_reference must be 'prior' or 'iteration', not {self.mp_reference!r}")
+        choices = {"association": ("global", "crop"), "ransac_mode": ("fixed", "upstream"),
+                   "first_search": ("moving", "finder"), "ground_scope": ("local", "sweep")}
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {getattr(self, name)!r}")
+        if self.association == "crop" and self.icp_metric != "point":
+            raise ValueError("association='crop' supports icp_metric='point' only")
         for name in ("search_scale", "first_search_scale", "crop_scale", "voxel_size", "keyframe_interval",
                      "max_points", "ransac_max_iterations", "outer_iterations"):
             if not getattr(self, name) > 0:
@@ -133,6 +154,8 @@ _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_itera
                       preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
+                          ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
+                          ransac_score_pairs=1000, min_target_points=10, coast_yaw_decay=1.0,
                           preset="faithful")
 
 PRESETS: dict[str, TrackerConfig] = {
