@@ -16,11 +16,11 @@ import argparse
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
-from tracker.config import get_preset
+from tracker.config import TrackerConfig, get_preset
 from tracker.geometry import Box, wrap_angle
 from tracker.metrics import accuracy, iou_3d_batch, robustness
 from tracker.sotracker import track
@@ -63,11 +63,14 @@ def load_reference(path: str | Path) -> dict[str, dict[int, np.ndarray]]:
 
 
 def compare_with_reference(source, track_id: str, gt_boxes: Sequence[Box], frames: Sequence[int],
-                           reference: dict[int, np.ndarray], preset: str = "faithful",
-                           seed: int = 0) -> ReferenceComparison:
-    """Track ``track_id`` with ``preset`` from ``gt_boxes[0]`` over ``frames`` and compare with ``reference``
-    on the frames the reference holds."""
-    result = track(source, gt_boxes[0], frames[0], frames[-1], get_preset(preset, seed=seed))
+                           reference: dict[int, np.ndarray], preset: str = "faithful", seed: int = 0,
+                           overrides: dict[str, Any] | None = None) -> ReferenceComparison:
+    """Track ``track_id`` with ``preset`` (fields replaced by ``overrides``) from ``gt_boxes[0]`` over
+    ``frames`` and compare with ``reference`` on the frames the reference holds."""
+    config = get_preset(preset, seed=seed)
+    if overrides:
+        config = TrackerConfig.from_dict({**config.to_dict(), **overrides})
+    result = track(source, gt_boxes[0], frames[0], frames[-1], config)
     keep = [i for i, k in enumerate(frames) if i > 0 and k in reference]
     ours = np.array([result.boxes[i].to_array() for i in keep])
     gt = np.array([gt_boxes[i].to_array() for i in keep])
@@ -107,7 +110,18 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--tracks", default=None, help="comma-separated prefixes (default: all in the reference)")
     parser.add_argument("--frames", action="store_true", help="print per-frame rows")
+    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
+                        help="override TrackerConfig fields of the preset")
     args = parser.parse_args(argv)
+    overrides = dict(item.split("=", 1) for item in args.set)
+    for key, value in overrides.items():  # from_dict converts numbers; booleans need an explicit parse
+        if value.lower() in ("true", "false"):
+            overrides[key] = value.lower() == "true"
+        else:
+            try:
+                overrides[key] = float(value)
+            except ValueError:
+                pass
     sequence = open_sequence(args.sequence)
     reference = load_reference(args.reference)
     source = CachedSource(sequence)
@@ -120,7 +134,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         end = min(end, max(ref))
         frames = list(range(start, end + 1))
         rows.append(compare_with_reference(source, prefix, [tracks[tid].box_at(k) for k in frames], frames, ref,
-                                           args.preset, args.seed))
+                                           args.preset, args.seed, overrides))
     print(format_comparison(rows, args.frames))
 
 
