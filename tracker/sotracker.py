@@ -30,7 +30,7 @@ from .ground import GroundParams, ground_mask
 from .motion import MotionPrior
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
-from .sweep_ground import sweep_ground_mask
+from .sweep_ground import cached_sweep_ground_mask
 from .terms import ResidualBlock, apply_motion, motion_consistency_block, motion_prior_block, point_pair_block
 
 __all__ = ["FrameEstimate", "TrackResult", "Tracker", "track", "deskew_points"]
@@ -211,7 +211,7 @@ class Tracker:
             near &= np.isfinite(pts).all(axis=1)
         sweep_ground = c.ground_removal and c.ground_scope == "sweep"
         if sweep_ground:  # upstream: one plane for the whole sweep in the ego (sensor) frame
-            near &= ~sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold, c.gpf_distance_threshold,
+            near &= ~cached_sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold, c.gpf_distance_threshold,
                                        c.gpf_iterations)
         idx = np.flatnonzero(near)
         local = pts[idx].astype(np.float64)
@@ -422,7 +422,9 @@ class Tracker:
                     blocks.append(motion_prior_block(xx, reference, c.weight_mp))
                 return blocks
 
-            result = solve(blocks_at, x, max_iterations=c.solver_iterations, tolerance=0.1 * c.convergence_tolerance)
+            # the LM stops on a step below a tenth of the outer tolerance (at least 1e-8: never a fixed 50 steps)
+            result = solve(blocks_at, x, max_iterations=c.solver_iterations,
+                           tolerance=max(0.1 * c.convergence_tolerance, 1e-8))
             residual = result.x - x
             change = float(np.max(np.abs(residual)))
             x_next = result.x

@@ -15,11 +15,16 @@ the tracker's local region (:mod:`tracker.ground`).
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from .ground import fit_plane
 
-__all__ = ["sweep_ground_mask"]
+__all__ = ["sweep_ground_mask", "cached_sweep_ground_mask"]
+
+# id(points) -> (weak reference to points, parameters, mask); an entry dies with its array
+_CACHE: dict[int, tuple[weakref.ref, tuple, np.ndarray]] = {}
 
 
 def sweep_ground_mask(points: np.ndarray, lpr_count: int = 20, seed_threshold: float = 1.2,
@@ -43,4 +48,20 @@ def sweep_ground_mask(points: np.ndarray, lpr_count: int = 20, seed_threshold: f
         normal, offset = fit_plane(valid[ground])
         ground = valid @ normal + offset < distance_threshold
     mask[finite] = ground
+    return mask
+
+
+def cached_sweep_ground_mask(points: np.ndarray, *params: float) -> np.ndarray:
+    """:func:`sweep_ground_mask` of ``points`` remembered while the array lives (several trackers on the
+    same sweep — an evaluation, a multi-object run — compute it once). Treat the array as read-only."""
+    key = id(points)
+    entry = _CACHE.get(key)
+    if entry is not None and entry[0]() is points and entry[1] == params:
+        return entry[2]
+    mask = sweep_ground_mask(points, *params)
+    try:
+        ref = weakref.ref(points, lambda _, k=key: _CACHE.pop(k, None))
+    except TypeError:  # not weak-referenceable (a view of a foreign buffer): no caching
+        return mask
+    _CACHE[key] = (ref, params, mask)
     return mask
