@@ -51,6 +51,8 @@ class TrackerConfig:
     min_points: int = 10                 # a term with fewer pairs contributes 0
     data_norm_min: int = 0               # > 0: data terms are sums / max(pairs, this) when the crop is sparse
     min_target_points: int = 5           # a search region with fewer points: the frame runs on the prior
+    data_free_frames: str = "prior"      # a frame without data terms: "prior" keeps the prediction (flag
+                                         # prior_only); "motion_terms" (upstream) still minimises MP + MC
     icp_metric: str = "point"            # "point" (paper) or "plane": point-to-plane + plane_point_weight * point
     plane_point_weight: float = 0.1
     normal_neighbors: int = 8
@@ -135,7 +137,8 @@ class TrackerConfig:
         if self.mp_reference not in ("prior", "iteration"):
             raise ValueError(f"mp_reference must be 'prior' or 'iteration', not {self.mp_reference!r}")
         choices = {"association": ("global", "crop"), "ransac_mode": ("fixed", "upstream"),
-                   "first_search": ("moving", "finder"), "ground_scope": ("local", "sweep")}
+                   "first_search": ("moving", "finder"), "ground_scope": ("local", "sweep"),
+                   "data_free_frames": ("prior", "motion_terms")}
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {getattr(self, name)!r}")
@@ -155,7 +158,7 @@ _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_itera
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
-                          ransac_score_pairs=1000, min_target_points=10, coast_yaw_decay=1.0,
+                          ransac_score_pairs=1000, min_target_points=10, coast_yaw_decay=1.0, data_free_frames="motion_terms",
                           preset="faithful")
 
 PRESETS: dict[str, TrackerConfig] = {

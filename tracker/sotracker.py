@@ -377,20 +377,23 @@ class Tracker:
         plane = c.icp_metric == "plane"
         ransac_seed = int(self.rng.integers(2**62))
         accel = _Anderson(c.anderson_depth)
+        # upstream: without data terms the frame still minimises the motion prior + motion consistency
+        motion_terms_only = c.data_free_frames == "motion_terms" and not icp_only
         for it in range(outer):
             info["iterations"] = it + 1
             mask = points_in_box(local, _box_moved(prev, x), scale)
             info["crop"] = int(mask.sum())
-            if info["crop"] < c.min_target_points:  # too few points to register against: no data terms
+            enough = info["crop"] >= c.min_target_points  # too few points to register against: no data terms
+            if not enough and not motion_terms_only:
                 info["icp_pairs"] = info["shape_inliers"] = 0
                 break
             fixed: list = []  # (name, source, target, normals, weight, normaliser floor)
             data_norm = c.data_norm_min  # few pairs: the data terms weigh less against the motion terms
             info["icp_pairs"] = info["shape_inliers"] = 0
             crop = None
-            if per_iteration:
+            if per_iteration and enough:
                 crop = NearestNeighbors(resample(local[mask], c.max_points, self.rng))
-            if c.weight_icp > 0 and len(source) >= c.min_points:
+            if enough and c.weight_icp > 0 and len(source) >= c.min_points:
                 icp_src = resample(source, c.max_points, self.rng) if per_iteration else source
                 src, idx, dist, _, tgt = self._pairs(x, icp_src, target, mask, crop)
                 if c.max_pair_distance > 0:
@@ -400,7 +403,7 @@ class Tracker:
                     normals = self._normals(target, idx) if plane else None
                     fixed.append(("icp", src, tgt, normals, c.weight_icp, data_norm))
                     info["icp_pairs"] = len(src)
-            if len(shape_src) >= c.min_points:
+            if enough and len(shape_src) >= c.min_points:
                 sh_src = resample(shape_src, c.max_points, self.rng) if per_iteration else shape_src
                 src, idx, _, moved, tgt = self._pairs(x, sh_src, target, mask, crop)
                 if c.use_ransac:
@@ -409,7 +412,7 @@ class Tracker:
                     normals = self._normals(target, idx) if plane else None
                     fixed.append(("shape", src, tgt, normals, c.weight_shape, data_norm))
                     info["shape_inliers"] = len(src)
-            if not fixed:
+            if not fixed and not motion_terms_only:
                 break
             use_priors = not icp_only
 
@@ -476,8 +479,10 @@ class Tracker:
                 reference = prior
             x, info = self._estimate(target, x, c.search_scale, c.outer_iterations, False, reference, flags)
             if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
-                flags += ["low_points", "prior_only"]
-                x = np.zeros(4) if first else prior.copy()
+                flags.append("low_points")
+                if c.data_free_frames == "prior":
+                    flags.append("prior_only")
+                    x = np.zeros(4) if first else prior.copy()
         if not np.isfinite(x).all():
             flags.append("prior_only")
             x = prior.copy()
