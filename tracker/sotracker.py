@@ -267,9 +267,9 @@ class Tracker:
         height = _ground_height(self._ground_points, box.center[:2], box)
         self._ground_offset = None if height is None else box.z - height
         self._finish_frame(frame, box, local, keyframe=True)
-        self._start_points = local[points_in_box(local, box, 1.0)]  # the Finder's source (first_search="finder")
         self._started = True
         obj = local[points_in_box(local, box, 1.0)]
+        self._start_points = obj  # the Finder's source (first_search="finder")
         if len(obj) == 0:
             flags.append("no_points")
         est = FrameEstimate(frame.index, box.state, box, len(obj), 1.0, tuple(["init"] + flags),
