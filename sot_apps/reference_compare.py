@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -129,7 +130,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     rows = []
     for prefix in (args.tracks.split(",") if args.tracks else reference):
         tid = sequence.resolve_track_id(prefix)
-        ref = next(v for k, v in reference.items() if tid.startswith(k) or k.startswith(prefix))
+        ref = next((v for k, v in reference.items() if tid.startswith(k)), None)
+        if ref is None:
+            raise InputError(args.reference, f"no reference boxes for track {tid}")
         start, end = annotated_span(tracks[tid].frames)
         end = min(end, max(ref))
         frames = list(range(start, end + 1))
@@ -139,4 +142,8 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except InputError as exc:
+        print(f"error: {exc.one_line()}", file=sys.stderr)
+        sys.exit(2)
