@@ -158,7 +158,8 @@ _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_itera
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
-                          ransac_score_pairs=1000, min_target_points=10, coast_yaw_decay=1.0, data_free_frames="motion_terms",
+                          ransac_score_pairs=1000, min_target_points=10, coast_yaw_decay=1.0,
+                          data_free_frames="motion_terms",
                           preset="faithful")
 
 PRESETS: dict[str, TrackerConfig] = {

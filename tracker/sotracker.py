@@ -211,8 +211,8 @@ class Tracker:
             near &= np.isfinite(pts).all(axis=1)
         sweep_ground = c.ground_removal and c.ground_scope == "sweep"
         if sweep_ground:  # upstream: one plane for the whole sweep in the ego (sensor) frame
-            near &= ~cached_sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold, c.gpf_distance_threshold,
-                                       c.gpf_iterations)
+            near &= ~cached_sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold,
+                                              c.gpf_distance_threshold, c.gpf_iterations)
         idx = np.flatnonzero(near)
         local = pts[idx].astype(np.float64)
         if deskew:
@@ -317,8 +317,9 @@ class Tracker:
         return target.normals[idx]
 
     def _pairs(self, x: np.ndarray, source: np.ndarray, target: _Target, mask: np.ndarray,
-               crop: NearestNeighbors | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """1-NN pairs (moved source -> local points): (source, target index or -1, distance, moved, target point).
+               crop: NearestNeighbors | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """1-NN pairs of the moved source: (source, local-point index or -1, distance, moved, target point).
 
         Without ``crop`` the target is every local point and pairs whose target is outside the crop are
         dropped; with ``crop`` (association="crop") each source point pairs with its nearest crop point."""
