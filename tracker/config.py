@@ -2,7 +2,8 @@
 
 Defaults are the paper's / the authors' implementation's values (see docs/tracker.md for where we
 deviate and why). ``full`` is the complete method tuned for speed (few outer iterations with an
-early stop); ``faithful`` is the same method with the upstream iteration counts.
+early stop); ``faithful`` reproduces the authors' implementation (whole-sweep ground removal, their
+frame-1 Finder, crop association, their RANSAC and iteration counts; docs/tracker.md compares the three).
 """
 
 from __future__ import annotations
