@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sot_apps.errors import InputError
-from sot_apps.reference_compare import compare_with_reference, load_reference
+from sot_apps.evaluation.reference import compare_with_reference, load_reference
 from tracker.config import TrackerConfig, get_preset
 from tracker.finder import finder_icp, resample
 from tracker.geometry import Box

@@ -6,7 +6,7 @@ and the sequence hold, :func:`compare_with_reference` runs a preset from the gro
 records per frame: IoU with the ground truth (ours and the reference's), IoU between ours and the
 reference, and the BEV centre distance and heading difference between them.
 
-``python -m sot_apps.reference_compare SEQUENCE REFERENCE.json [--preset P] [--seed S] [--frames]``
+``python -m sot_apps.evaluation.reference SEQUENCE REFERENCE.json [--preset P] [--seed S] [--frames]``
 prints the per-track summary (and per-frame rows with ``--frames``).
 """
 
@@ -21,12 +21,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from tracker.config import TrackerConfig, get_preset
-from tracker.geometry import Box, wrap_angle
-from tracker.metrics import accuracy, iou_3d_batch, robustness
-from tracker.sotracker import track
+from tracker import Box, TrackerConfig, accuracy, get_preset, iou_3d_batch, robustness, track, wrap_angle
 
-from .errors import InputError
+from ..errors import InputError
 
 __all__ = ["ReferenceComparison", "load_reference", "compare_with_reference", "format_comparison"]
 
@@ -101,8 +98,9 @@ def format_comparison(rows: list[ReferenceComparison], per_frame: bool = False) 
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    from .eval import CachedSource, annotated_span
-    from .io import open_sequence
+    from ..io import open_sequence
+    from ..objects.selection import annotated_span
+    from .tracker import CachedSource
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("sequence")
