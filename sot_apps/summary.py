@@ -56,9 +56,10 @@ class SequenceSummary:
     points_min: int | None
     points_median: float | None
     points_max: int | None
+    missing_sweeps: list[int]
+    empty_sweeps: list[int] | None
     cameras: list[CameraSummary]
     tracks: list[TrackSummary]
-    empty_sweeps: list[int] | None = None   # frames whose sweep has no point (None: sweeps not read)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -68,11 +69,12 @@ def _mean_points_first_frames(seq: Sequence, tracks: dict[str, AnnotatedTrack], 
                               progress: bool) -> dict[str, float]:
     """Mean number of points inside each track's GT box over its first ``first_n`` annotated frames.
 
-    Reads only the frames needed (the union of those first frames), each once.
+    Reads only the frames needed (the union of those first frames), each once; frames without a
+    sweep do not count.
     """
     needed: dict[int, list[str]] = {}
     for tid, track in tracks.items():
-        for k in track.frames[:first_n]:
+        for k in [k for k in track.frames if seq.frames[k].has_sweep][:first_n]:
             needed.setdefault(k, []).append(tid)
     counts: dict[str, list[int]] = {tid: [] for tid in tracks}
     for k in tqdm(sorted(needed), desc="points in boxes", unit="frame", disable=not progress, leave=False):
@@ -120,16 +122,24 @@ def summarize_tracks(seq: Sequence, first_n: int = 10, vehicles_only: bool = Fal
 
 def summarize_sequence(seq: Sequence, point_stats: bool = True, vehicles_only: bool = False,
                        progress: bool = True) -> SequenceSummary:
-    """Everything ``sot-apps info`` prints. ``point_stats`` reads every sweep (with a progress bar)."""
+    """Everything ``sot-apps info`` prints. ``point_stats`` reads every sweep (with a progress bar).
+
+    ``missing_sweeps``: frames without a sweep (from the reader, no sweep read); ``empty_sweeps``:
+    frames whose sweep has zero points (None without ``point_stats``).
+    """
     stamps = seq.timestamps_ns
     span = (int(stamps[-1]) - int(stamps[0])) * 1e-9 if len(stamps) else 0.0
     rate = (len(stamps) - 1) / span if span > 0 else 0.0
-    pmin = pmed = pmax = empty = None
+    pmin = pmed = pmax = None
+    missing = seq.missing_sweeps()
+    empty = None
     if point_stats:
-        counts = np.array([len(seq.sweep(k)) for k in tqdm(range(len(seq)), desc="reading sweeps", unit="frame",
-                                                            disable=not progress, leave=False)])
-        pmin, pmed, pmax = int(counts.min()), float(np.median(counts)), int(counts.max())
-        empty = [int(k) for k in np.flatnonzero(counts == 0)]
+        with_sweep = [k for k in range(len(seq)) if seq.frames[k].has_sweep]
+        counts = np.array([len(seq.sweep(k)) for k in tqdm(with_sweep, desc="reading sweeps", unit="frame",
+                                                            disable=not progress, leave=False)], dtype=np.int64)
+        empty = [k for k, n in zip(with_sweep, counts) if n == 0]
+        if len(counts):
+            pmin, pmed, pmax = int(counts.min()), float(np.median(counts)), int(counts.max())
     cameras = []
     for name, cam in seq.cameras.items():
         offsets = [(cf.timestamp_ns - seq.frames[k].timestamp_ns) * 1e-6 for k, cf in enumerate(cam.frames)]
@@ -137,5 +147,6 @@ def summarize_sequence(seq: Sequence, point_stats: bool = True, vehicles_only: b
                                      mean_offset_to_lidar_ms=float(np.mean(offsets)) if offsets else 0.0))
     tracks = summarize_tracks(seq, vehicles_only=vehicles_only, progress=progress)
     return SequenceSummary(id=seq.id, format=seq.format, root=str(seq.root), num_frames=len(seq), time_span_s=span,
-                           rate_hz=rate, points_min=pmin, points_median=pmed, points_max=pmax, cameras=cameras,
-                           tracks=tracks, empty_sweeps=empty)
+                           rate_hz=rate, points_min=pmin, points_median=pmed, points_max=pmax,
+                           missing_sweeps=missing, empty_sweeps=empty, cameras=cameras,
+                           tracks=tracks)

@@ -83,11 +83,17 @@ def resolve_span(seq: Sequence, start: int, end: int | None) -> tuple[int, int]:
 
 def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None = None,
                    config: TrackerConfig | None = None, progress: bool = True) -> TrackResult:
-    """Track ``init_box`` (world frame at ``start``) through frame ``end`` (inclusive)."""
+    """Track ``init_box`` (world frame at ``start``) through frame ``end`` (inclusive).
+
+    Frames without a sweep are passed to the tracker as such (``LidarFrame.has_sweep`` False): it
+    predicts through them with the elapsed time and flags them ``no_sweep``.
+    """
     config = config or TrackerConfig()
     start, end = resolve_span(seq, start, end)
     if not np.isfinite(init_box.to_array()).all() or min(init_box.length, init_box.width, init_box.height) <= 0:
         raise InputError(None, f"init box must be finite with a positive size, got {init_box}")
+    if not seq.frames[start].has_sweep:
+        raise InputError(seq.root, f"start frame {start} has no sweep (missing sweeps: {seq.missing_sweeps()}); start at a frame with one")
     wrap = None
     if progress:
         from tqdm import tqdm
@@ -105,6 +111,8 @@ def first_box_with_points(seq: Sequence, annotated: list[tuple[int, Box]] | tupl
 
     best = (0, annotated[0][0])
     for k, box in annotated[:-1]:
+        if not seq.frames[k].has_sweep:  # a frame without a sweep cannot start a track
+            continue
         n = Tracker(config).start(seq.lidar_frame(k), box).num_points
         if n >= min_points:
             return k, box

@@ -9,8 +9,8 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, make_transform, points_in_box, rotation_z, transform_points, wrap_angle
 from .ground import GroundParams, fit_plane, ground_mask, remove_ground
 from .metrics import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
-                      PooledMetrics, TrackletScores, centre_errors_batch, chamfer_distance, difficulty, iou_3d_batch,
-                      pool_metrics, score_tracklet, tracklet_metrics, voxel_downsample_centres)
+                      PooledMetrics, TrackletScores, accuracy, centre_errors_batch, chamfer_distance, difficulty, iou_3d_batch,
+                      pool_metrics, robustness, score_tracklet, tracklet_metrics, voxel_downsample_centres)
 from .motion import MotionPrior
 from .offline import refine_offline
 from .pseudo_gt import mean_points_in_boxes, pseudo_gt_shape
@@ -29,5 +29,5 @@ __all__ = [
     "refine_offline", "mean_points_in_boxes", "pseudo_gt_shape", "voxel_downsample_centres", "chamfer_distance",
     "DIFFICULTIES", "DIFFICULTY_THRESHOLDS", "PRECISION_THRESHOLDS", "ROB_THRESHOLDS", "SUCCESS_THRESHOLDS",
     "PooledMetrics", "TrackletScores", "centre_errors_batch", "iou_3d_batch", "difficulty", "pool_metrics",
-    "score_tracklet", "tracklet_metrics",
+    "score_tracklet", "tracklet_metrics", "accuracy", "robustness",
 ]

@@ -68,11 +68,12 @@ class RansacResult:
 
 def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, *, max_iterations: int = 200,
                     confidence: float = 0.99, sample_size: int = 3, threshold: float = 0.2,
-                    batch_size: int = 50, max_score_pairs: int = 150) -> RansacResult:
+                    batch_size: int = 50, max_score_pairs: int = 150, identity_first: bool = False) -> RansacResult:
     """RANSAC for a 2D rigid transform between paired (N, 2) points ``src`` -> ``dst``.
 
     Inlier: BEV residual <= ``threshold``. Hypotheses are scored on at most ``max_score_pairs`` random
-    pairs (for speed); the best one is refitted on its inliers among all pairs once.
+    pairs (for speed); the best one is refitted on its inliers among all pairs once. With
+    ``identity_first`` the identity is the starting best hypothesis (a sample must beat it; upstream).
     """
     src = np.asarray(src, dtype=np.float64)[:, :2]
     dst = np.asarray(dst, dtype=np.float64)[:, :2]
@@ -85,6 +86,8 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
         score_src, score_dst = src[pick], dst[pick]
     m = len(score_src)
     best_count, best_angle, best_t = -1, 0.0, np.zeros(2)
+    if identity_first:
+        best_count = int((((score_src - score_dst) ** 2).sum(axis=1) <= threshold * threshold).sum())
     done, needed = 0, max_iterations
     thr2 = threshold * threshold
     while done < min(needed, max_iterations):

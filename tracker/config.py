@@ -2,7 +2,8 @@
 
 Defaults are the paper's / the authors' implementation's values (see docs/tracker.md for where we
 deviate and why). ``full`` is the complete method tuned for speed (few outer iterations with an
-early stop); ``faithful`` is the same method with the upstream iteration counts.
+early stop); ``faithful`` reproduces the authors' implementation (whole-sweep ground removal, their
+frame-1 Finder, crop association, their RANSAC and iteration counts; docs/tracker.md compares the three).
 """
 
 from __future__ import annotations
@@ -29,6 +30,9 @@ class TrackerConfig:
     search_scale: float = 1.5            # gamma_in
     first_search_scale: float = 3.0      # frame-1 wide search
     first_icp_iterations: int = 50       # ICP-only outer iterations of the frame-1 search
+    first_search: str = "moving"         # "moving": the crop follows the estimate, source = previous points +
+                                         # sub-shape; "finder" (upstream): start-box points (x1.0) against a
+                                         # fixed crop of the start box x first_search_scale (tracker/finder.py)
     crop_scale: float = 1.1              # gamma_aft: previous-frame points for the ICP term
     shape_crop_scale: float = 1.0        # points added to the shape / sub-shape
     # --- shape model
@@ -50,11 +54,21 @@ class TrackerConfig:
     min_points: int = 10                 # a term with fewer pairs contributes 0
     data_norm_min: int = 0               # > 0: data terms are sums / max(pairs, this) when the crop is sparse
     min_target_points: int = 5           # a search region with fewer points: the frame runs on the prior
+    data_free_frames: str = "prior"      # a frame without data terms: "prior" keeps the prediction (flag
+                                         # prior_only); "motion_terms" (upstream) still minimises MP + MC
     icp_metric: str = "point"            # "point" (paper) or "plane": point-to-plane + plane_point_weight * point
     plane_point_weight: float = 0.1
     normal_neighbors: int = 8
     normal_radius: float = 0.5
     max_pair_distance: float = 0.0       # > 0: ICP pairs farther than this are dropped (0 = keep all, upstream)
+    association: str = "global"          # "global": one kd-tree over the local points, pairs whose target is
+                                         # outside the crop dropped, subsets drawn once per frame; "crop"
+                                         # (upstream): 1-NN among the crop's points, source and crop resampled
+                                         # (<= max_points, with replacement) every outer iteration
+    ransac_mode: str = "fixed"           # "fixed": the same hypotheses every outer iteration, < ransac_min_inliers
+                                         # inliers drops the shape term; "upstream": the estimate itself is the
+                                         # first hypothesis, new draws every outer iteration, too few inliers
+                                         # keeps all pairs
     # --- motion prior
     alpha: float = 0.5                   # prior <- alpha * prior + (1 - alpha) * delta
     prior_frame: str = "world"           # "world" (paper) or "object": average the motion in the box frame
@@ -68,6 +82,9 @@ class TrackerConfig:
     symmetric_mc: bool = True            # MC on both components; False = upstream's x-only form
     # --- ground removal (GPF, Zermas et al. 2017)
     ground_removal: bool = True
+    ground_scope: str = "local"          # "local": per-cell planes on the tracker's local region (tracker/ground.py);
+                                         # "sweep" (upstream): one plane for the whole sweep in the ego (sensor)
+                                         # frame (tracker/sweep_ground.py)
     gpf_lpr_count: int = 20              # lowest-point representative: mean z of this many lowest points
     gpf_seed_threshold: float = 1.2      # seeds: points lower than LPR + this
     gpf_distance_threshold: float = 0.3  # ground: distance to the plane below this
@@ -128,6 +145,14 @@ class TrackerConfig:
             raise ValueError(f"prior_frame must be 'world' or 'object', not {self.prior_frame!r}")
         if self.mp_reference not in ("prior", "iteration"):
             raise ValueError(f"mp_reference must be 'prior' or 'iteration', not {self.mp_reference!r}")
+        choices = {"association": ("global", "crop"), "ransac_mode": ("fixed", "upstream"),
+                   "first_search": ("moving", "finder"), "ground_scope": ("local", "sweep"),
+                   "data_free_frames": ("prior", "motion_terms")}
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {getattr(self, name)!r}")
+        if self.association == "crop" and self.icp_metric != "point":
+            raise ValueError("association='crop' supports icp_metric='point' only")
         for name in ("search_scale", "first_search_scale", "crop_scale", "voxel_size", "keyframe_interval",
                      "max_points", "ransac_max_iterations", "outer_iterations"):
             if not getattr(self, name) > 0:
@@ -141,6 +166,9 @@ _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_itera
                       preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
+                          ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
+                          ransac_score_pairs=1000, min_target_points=10, coast_yaw_decay=1.0,
+                          data_free_frames="motion_terms",
                           preset="faithful")
 
 PRESETS: dict[str, TrackerConfig] = {

@@ -23,12 +23,14 @@ import numpy as np
 
 from .association import NearestNeighbors, random_subset, ransac_rigid_2d
 from .config import TrackerConfig
+from .finder import finder_icp, resample
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
 from .motion import MotionPrior
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
+from .sweep_ground import cached_sweep_ground_mask
 from .terms import ResidualBlock, apply_motion, motion_consistency_block, motion_prior_block, point_pair_block
 
 __all__ = ["FrameEstimate", "TrackResult", "Tracker", "track", "deskew_points"]
@@ -40,7 +42,8 @@ class FrameEstimate:
 
     ``num_points``: object points (ground removed) in the estimated box; ``points``: those points (N, 3);
     ``quality``: 0..1 (share of those points that the registration explains, scaled down when sparse);
-    ``flags``: e.g. "init", "no_points", "prior_only", "low_points", "nan_points", "no_shape_inliers".
+    ``flags``: e.g. "init", "no_points", "prior_only", "low_points", "nan_points", "no_shape_inliers",
+    "no_sweep" (the frame has no sweep: a prediction only, see :meth:`Tracker.step`).
     """
 
     frame: int
@@ -189,6 +192,7 @@ class Tracker:
         """Non-ground world points near ``box`` (BEV radius of the box scaled by ``scale`` plus a margin)."""
         c = self.config
         flags: list[str] = []
+        self._ground_points = np.zeros((0, 3))
         pts = np.asarray(frame.points_ego)
         if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
             return np.zeros((0, 3)), flags
@@ -205,6 +209,10 @@ class Tracker:
         if not np.isfinite(pts).all():
             flags.append("nan_points")
             near &= np.isfinite(pts).all(axis=1)
+        sweep_ground = c.ground_removal and c.ground_scope == "sweep"
+        if sweep_ground:  # upstream: one plane for the whole sweep in the ego (sensor) frame
+            near &= ~cached_sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold,
+                                              c.gpf_distance_threshold, c.gpf_iterations)
         idx = np.flatnonzero(near)
         local = pts[idx].astype(np.float64)
         if deskew:
@@ -220,8 +228,7 @@ class Tracker:
         v = np.abs(d @ np.array([-sa, ca]))
         gscale = scale + 0.5
         world = world[(u <= 0.5 * box.length * gscale + c.gpf_margin) & (v <= 0.5 * box.width * gscale + c.gpf_margin)]
-        self._ground_points = np.zeros((0, 3))
-        if c.ground_removal and len(world) >= 3:
+        if c.ground_removal and not sweep_ground and len(world) >= 3:
             is_ground = ground_mask(world, self.ground_params)
             self._ground_points = world[is_ground]
             world = world[~is_ground]
@@ -244,6 +251,8 @@ class Tracker:
         values = box.to_array()
         if not np.isfinite(values).all() or min(box.length, box.width, box.height) <= 0:
             raise ValueError(f"init box must be finite with positive size, got {box}")
+        if not frame.has_sweep:
+            raise ValueError(f"cannot start a track at frame {frame.index}: it has no sweep")
         self.rng = np.random.default_rng(c.seed)
         self.first_box = box
         self.box = box
@@ -255,12 +264,15 @@ class Tracker:
         self._shape_nn: NearestNeighbors | None = None
         self._shape_nn_size = -1
         self._previous_pose = previous_pose
+        self._last_timestamp_ns = int(frame.timestamp_ns)
+        self._nominal_dt_ns: int | None = None  # the frame interval the motion prior is expressed per
         local, flags = self._local_points(frame, box, max(c.first_search_scale, c.search_scale))
         height = _ground_height(self._ground_points, box.center[:2], box)
         self._ground_offset = None if height is None else box.z - height
         self._finish_frame(frame, box, local, keyframe=True)
         self._started = True
         obj = local[points_in_box(local, box, 1.0)]
+        self._start_points = obj  # the Finder's source (first_search="finder")
         if len(obj) == 0:
             flags.append("no_points")
         est = FrameEstimate(frame.index, box.state, box, len(obj), 1.0, tuple(["init"] + flags),
@@ -307,13 +319,41 @@ class Tracker:
             target.has_normal[missing] = True
         return target.normals[idx]
 
-    def _pairs(self, x: np.ndarray, source: np.ndarray, target: _Target, mask: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """1-NN pairs (moved source -> local points); pairs whose target is outside the crop are dropped."""
+    def _pairs(self, x: np.ndarray, source: np.ndarray, target: _Target, mask: np.ndarray,
+               crop: NearestNeighbors | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """1-NN pairs of the moved source: (source, local-point index or -1, distance, moved, target point).
+
+        Without ``crop`` the target is every local point and pairs whose target is outside the crop are
+        dropped; with ``crop`` (association="crop") each source point pairs with its nearest crop point."""
         moved = apply_motion(x, source, self.box.center)
+        if crop is not None:
+            dist, idx = crop.query(moved)
+            return source, np.full(len(source), -1), dist, moved, crop.target[idx]
         dist, idx = target.nn.query(moved)
         keep = mask[idx]
-        return source[keep], idx[keep], dist[keep], moved[keep]
+        idx = idx[keep]
+        return source[keep], idx, dist[keep], moved[keep], target.nn.target[idx]
+
+    def _ransac_inliers(self, src: np.ndarray, idx: np.ndarray, tgt: np.ndarray, moved: np.ndarray,
+                        seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The shape pairs RANSAC keeps. ``ransac_mode="fixed"``: the same hypotheses (``seed``) every outer
+        iteration so the loop can settle; too few inliers: no pairs. ``"upstream"``: new draws each call,
+        the current estimate (identity on ``moved``) is the first hypothesis; too few inliers: all pairs."""
+        c = self.config
+        upstream = c.ransac_mode == "upstream"
+        keep = np.zeros(len(src), dtype=bool)
+        if len(src) >= c.ransac_min_inliers:
+            rng = self.rng if upstream else np.random.default_rng(seed)
+            keep = ransac_rigid_2d(moved[:, :2], tgt[:, :2], rng, max_iterations=c.ransac_max_iterations,
+                                   confidence=c.ransac_confidence, sample_size=c.ransac_sample_size,
+                                   threshold=c.ransac_inlier_threshold, max_score_pairs=c.ransac_score_pairs,
+                                   identity_first=upstream).inliers
+        if keep.sum() >= c.ransac_min_inliers:
+            return src[keep], idx[keep], tgt[keep]
+        if upstream:
+            return src, idx, tgt
+        return src[:0], idx[:0], tgt[:0]
 
     def _estimate(self, target: _Target, x0: np.ndarray, scale: float, outer: int, icp_only: bool,
                   mp_reference: np.ndarray | None, flags: list[str]) -> tuple[np.ndarray, dict]:
@@ -326,53 +366,57 @@ class Tracker:
         sub = self.subshape.points
         if len(sub):
             source = np.vstack([source, to_world_frame(sub, prev)])
-        source = random_subset(source, c.max_points, self.rng)
+        per_iteration = c.association == "crop"  # upstream: fresh subsets (with replacement) every outer iteration
+        if not per_iteration:
+            source = random_subset(source, c.max_points, self.rng)
         shape_src = np.zeros((0, 3))
         if not icp_only and c.use_shape and c.weight_shape > 0:
             model = self.shape.points if c.shape_update else self._first_shape
-            shape_src = random_subset(to_world_frame(model, prev), c.max_points, self.rng)
+            shape_src = to_world_frame(model, prev)
+            if not per_iteration:
+                shape_src = random_subset(shape_src, c.max_points, self.rng)
         x = np.asarray(x0, dtype=np.float64).copy()
         reference = None if mp_reference is None else mp_reference.copy()
         info = {"crop": 0, "icp_pairs": 0, "shape_inliers": 0, "iterations": 0}
         plane = c.icp_metric == "plane"
         ransac_seed = int(self.rng.integers(2**62))
         accel = _Anderson(c.anderson_depth)
+        # upstream: without data terms the frame still minimises the motion prior + motion consistency
+        motion_terms_only = c.data_free_frames == "motion_terms" and not icp_only
         for it in range(outer):
             info["iterations"] = it + 1
             mask = points_in_box(local, _box_moved(prev, x), scale)
             info["crop"] = int(mask.sum())
-            if info["crop"] < c.min_target_points:  # too few points to register against: no data terms
+            enough = info["crop"] >= c.min_target_points  # too few points to register against: no data terms
+            if not enough and not motion_terms_only:
                 info["icp_pairs"] = info["shape_inliers"] = 0
                 break
             fixed: list = []  # (name, source, target, normals, weight, normaliser floor)
             data_norm = c.data_norm_min  # few pairs: the data terms weigh less against the motion terms
             info["icp_pairs"] = info["shape_inliers"] = 0
-            if c.weight_icp > 0 and len(source) >= c.min_points:
-                src, idx, dist, _ = self._pairs(x, source, target, mask)
+            crop = None
+            if per_iteration and enough:
+                crop = NearestNeighbors(resample(local[mask], c.max_points, self.rng))
+            if enough and c.weight_icp > 0 and len(source) >= c.min_points:
+                icp_src = resample(source, c.max_points, self.rng) if per_iteration else source
+                src, idx, dist, _, tgt = self._pairs(x, icp_src, target, mask, crop)
                 if c.max_pair_distance > 0:
                     keep = dist <= c.max_pair_distance
-                    src, idx = src[keep], idx[keep]
+                    src, idx, tgt = src[keep], idx[keep], tgt[keep]
                 if len(src) >= c.min_points:
                     normals = self._normals(target, idx) if plane else None
-                    fixed.append(("icp", src, local[idx], normals, c.weight_icp, data_norm))
+                    fixed.append(("icp", src, tgt, normals, c.weight_icp, data_norm))
                     info["icp_pairs"] = len(src)
-            if len(shape_src) >= c.min_points:
-                src, idx, _, moved = self._pairs(x, shape_src, target, mask)
+            if enough and len(shape_src) >= c.min_points:
+                sh_src = resample(shape_src, c.max_points, self.rng) if per_iteration else shape_src
+                src, idx, _, moved, tgt = self._pairs(x, sh_src, target, mask, crop)
                 if c.use_ransac:
-                    keep = np.zeros(len(src), dtype=bool)
-                    if len(src) >= c.ransac_min_inliers:
-                        # the same hypotheses every outer iteration: the loop can settle
-                        keep = ransac_rigid_2d(moved[:, :2], local[idx, :2], np.random.default_rng(ransac_seed),
-                                               max_iterations=c.ransac_max_iterations, confidence=c.ransac_confidence,
-                                               sample_size=c.ransac_sample_size,
-                                               threshold=c.ransac_inlier_threshold,
-                                               max_score_pairs=c.ransac_score_pairs).inliers
-                    src, idx = (src[keep], idx[keep]) if keep.sum() >= c.ransac_min_inliers else (src[:0], idx[:0])
+                    src, idx, tgt = self._ransac_inliers(src, idx, tgt, moved, ransac_seed)
                 if len(src) >= c.min_points:
                     normals = self._normals(target, idx) if plane else None
-                    fixed.append(("shape", src, local[idx], normals, c.weight_shape, data_norm))
+                    fixed.append(("shape", src, tgt, normals, c.weight_shape, data_norm))
                     info["shape_inliers"] = len(src)
-            if not fixed:
+            if not fixed and not motion_terms_only:
                 break
             use_priors = not icp_only
 
@@ -385,7 +429,9 @@ class Tracker:
                     blocks.append(motion_prior_block(xx, reference, c.weight_mp))
                 return blocks
 
-            result = solve(blocks_at, x, max_iterations=c.solver_iterations, tolerance=0.1 * c.convergence_tolerance)
+            # the LM stops on a step below a tenth of the outer tolerance (at least 1e-8: never a fixed 50 steps)
+            result = solve(blocks_at, x, max_iterations=c.solver_iterations,
+                           tolerance=max(0.1 * c.convergence_tolerance, 1e-8))
             residual = result.x - x
             change = float(np.max(np.abs(residual)))
             x_next = result.x
@@ -401,18 +447,31 @@ class Tracker:
         return x, info
 
     def step(self, frame: LidarFrame) -> FrameEstimate:
-        """Estimate the object's state in ``frame`` (the frame after the previous call)."""
+        """Estimate the object's state in ``frame`` (the frame after the previous call).
+
+        The motion prior is scaled by the elapsed time over the nominal frame interval (the first
+        step's). A frame without a sweep (``frame.has_sweep`` False) is a prediction only, flagged
+        ``no_sweep``.
+        """
         if not self._started:
             raise RuntimeError("Tracker.step called before Tracker.start")
         t0 = time.perf_counter()
         c = self.config
+        prev = self.box
+        dt_ns = int(frame.timestamp_ns) - self._last_timestamp_ns
+        self._last_timestamp_ns = int(frame.timestamp_ns)
+        if self._nominal_dt_ns is None and dt_ns > 0:
+            self._nominal_dt_ns = dt_ns
+        # the prior is a motion per nominal frame interval: scale it by the elapsed time
+        dt_scale = dt_ns / self._nominal_dt_ns if self._nominal_dt_ns and dt_ns > 0 else 1.0
+        if not frame.has_sweep:
+            return self._predict_only(frame, prev, dt_scale, t0)
         self.steps += 1
         flags: list[str] = []
-        prev = self.box
         first = self.steps == 1
         if first:
             self._first_shape = self.shape.points.copy()
-        prior = self.prior.predict(prev.heading)
+        prior = self.prior.predict(prev.heading) * dt_scale
         # coasting (no data) keeps the velocity but lets the turn rate die out
         prior[3] *= c.coast_yaw_decay ** self._coasting
         search_scale = c.first_search_scale if first else c.search_scale
@@ -425,15 +484,22 @@ class Tracker:
             flags += ["no_points", "prior_only"]
         else:
             target = _Target(local)
-            if first:
+            if first and c.first_search == "finder":
+                x = finder_icp(self._start_points, local, prev, self.rng, scale=c.first_search_scale,
+                               iterations=c.first_icp_iterations, max_points=c.max_points, min_points=c.min_points,
+                               solver_iterations=c.solver_iterations)
+                reference = x.copy()
+            elif first:
                 x, info = self._estimate(target, x, c.first_search_scale, c.first_icp_iterations, True, None, flags)
                 reference = x.copy()
             else:
                 reference = prior
             x, info = self._estimate(target, x, c.search_scale, c.outer_iterations, False, reference, flags)
             if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
-                flags += ["low_points", "prior_only"]
-                x = np.zeros(4) if first else prior.copy()
+                flags.append("low_points")
+                if c.data_free_frames == "prior":
+                    flags.append("prior_only")
+                    x = np.zeros(4) if first else prior.copy()
         if not np.isfinite(x).all():
             flags.append("prior_only")
             x = prior.copy()
@@ -468,10 +534,26 @@ class Tracker:
             self._coasting += 1  # the prior is not updated with its own prediction
         else:
             self._coasting = 0
-            self.prior.update(x, prev.heading)
+            self.prior.update(x / dt_scale, prev.heading)
         self.box = box
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)
+
+    def _predict_only(self, frame: LidarFrame, prev: Box, dt_scale: float, t0: float) -> FrameEstimate:
+        """A frame without a sweep: move the box by the prior over the elapsed time, measure nothing.
+
+        The previous object points move with the box (they seed the next frame's registration); the
+        shape, sub-shape and motion prior are left as they are. Flags: ``no_sweep``, ``prior_only``.
+        """
+        prior = self.prior.predict(prev.heading) * dt_scale
+        prior[3] *= self.config.coast_yaw_decay ** self._coasting
+        box = _box_moved(prev, prior)
+        self.prev_points = to_world_frame(to_object_frame(self.prev_points, prev), box)
+        self._previous_pose = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+        self._coasting += 1
+        self.box = box
+        return FrameEstimate(frame.index, box.state, box, 0, 0.0, ("no_sweep", "prior_only"),
+                             (time.perf_counter() - t0) * 1e3, np.zeros((0, 3)))
 
     def _with_z(self, x: np.ndarray, prev: Box) -> np.ndarray:
         """The motion with dz set by ``z_mode`` ("ground": keep the start height above the local road)."""

@@ -22,7 +22,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "its first position, or a short track moves >= 0.3 m at >= 1 m/s; see docs/data-formats.md).",
         examples=["sot-apps info --tiny", "sot-apps info ../shared/data/pandaset_002 --vehicles-only",
                   "sot-apps info out/pandaset_002 --json > info.json"])
-    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence: a directory (canonical, PandaSet, Waymo v2) or a file (Waymo v1 .tfrecord, Waymo v2 component .parquet)")
+    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence: canonical or PandaSet directory, Waymo v1 .tfrecord or v2 directory/component .parquet, Argoverse 2 log, nuScenes root (DIR#scene), KITTI tracking (label_02/SSSS.txt or DIR#SSSS), KITTI object / View-of-Delft folder")
     parser.add_argument("--format", choices=FORMATS, default=None, help="force the reader (default: auto-detect)")
     parser.add_argument("--tiny", action="store_true",
                         help="use the built-in tiny synthetic sequence (generated into ~/.cache/sot-apps)")
@@ -61,6 +61,19 @@ def _table(headers: list[str], rows: list[list[str]], right: set[int]) -> list[s
     return [line(headers)] + [line(r) for r in rows]
 
 
+def _frame_list(frames: list[int]) -> str:
+    """``[3, 4, 5, 9]`` -> ``"3-5, 9"`` (``"none"`` when empty)."""
+    if not frames:
+        return "none"
+    runs: list[list[int]] = []
+    for k in frames:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
+
+
 def format_summary(s: SequenceSummary) -> str:
     out = [f"sequence  {s.id}  ({s.format}: {s.root})",
            f"frames    {s.num_frames}, time span {s.time_span_s:.3f} s ({s.rate_hz:.2f} Hz)"]
@@ -69,10 +82,8 @@ def format_summary(s: SequenceSummary) -> str:
         if s.points_max == 0:
             out.append("          no points in any frame: the source holds no lidar data (e.g. a Waymo file without "
                        "range images)")
-        elif s.empty_sweeps:
-            shown = ", ".join(map(str, s.empty_sweeps[:10])) + (", ..." if len(s.empty_sweeps) > 10 else "")
-            out.append(f"          empty sweeps: {len(s.empty_sweeps)} (frame{'s' if len(s.empty_sweeps) > 1 else ''} "
-                       f"{shown}); trackers go through them on the motion prior (frames flagged no_points)")
+    out.append(f"sweeps    {s.num_frames - len(s.missing_sweeps)} of {s.num_frames} frames; missing: "
+               f"{_frame_list(s.missing_sweeps)}" + ("" if s.empty_sweeps is None else f"; empty: {_frame_list(s.empty_sweeps)}"))
     if s.cameras:
         out += ["", "cameras"]
         out += ["  " + r for r in _table(

@@ -214,7 +214,11 @@ def annotate_camera(seq: Sequence, camera_name: str, objects: list[TrackedObject
         result = compute_pair(setup, flow_objects, options.mode, ray_cache)
         elapsed = (time.perf_counter() - start) * 1e3
         write_pair_outputs(root, k, result, camera.frames[k].image_path, options.write_vis)
-        write_json(record_path, _pair_record(k, camera, result, elapsed))
+        record = _pair_record(k, camera, result, elapsed)
+        missing = [j for j in (k, k + 1) if j < len(seq.frames) and not seq.frames[j].has_sweep]
+        if missing:  # no sweep: no lidar occluders at that frame (the flow itself comes from the object states)
+            record["no_lidar_sweep"] = missing
+        write_json(record_path, record)
     return write_stats(root, seq.id, camera_name, options.mode, source, mapping)
 
 

@@ -174,7 +174,7 @@ class _Writer:
         self._log(self.tf, "/tf", m.FrameTransforms(transforms=transforms), t_ns)
         deletion = m.SceneEntityDeletion(timestamp=ts, type=m.SceneEntityDeletionType.All, id="")
         self._log(self.markers, "/markers/objects", m.SceneUpdate(deletions=[deletion], entities=entities), t_ns)
-        if with_points:
+        if with_points and self.sequence.frames[frame].has_sweep:  # a frame without a sweep logs no cloud
             if self.points is None:
                 from foxglove import channels
 

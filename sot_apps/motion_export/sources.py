@@ -101,8 +101,9 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
 def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20, voxel: float = 0.05,
                     scale: float = 1.0) -> np.ndarray:
     """Object-frame points of ``track``: points inside its valid boxes (up to ``max_frames`` frames,
-    evenly spaced) moved into the object frame and voxel-downsampled."""
-    idx = np.flatnonzero(track.valid)
+    evenly spaced) moved into the object frame and voxel-downsampled. Frames without a sweep are skipped."""
+    has_sweep = np.array([sequence.frames[int(k)].has_sweep for k in track.frames], dtype=bool)
+    idx = np.flatnonzero(np.asarray(track.valid, dtype=bool) & has_sweep)
     if len(idx) == 0:
         return np.zeros((0, 3))
     pick = idx[np.unique(np.linspace(0, len(idx) - 1, min(max_frames, len(idx))).round().astype(int))]

@@ -48,6 +48,8 @@ def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> 
             start_frame, init_box = first_box_with_points(seq, plan.annotated, config, min_points)
         except TrackingFailed as exc:
             raise TrackingFailed(f"{plan.key}: {exc}") from None
+    if not seq.frames[start_frame].has_sweep:
+        raise TrackingFailed(f"{plan.key}: the start frame {start_frame} has no sweep; nothing to track")
     end_frame = plan.end if stage.max_frames is None else min(plan.end, start_frame + stage.max_frames)
     start = time.perf_counter()
     result = track(seq, init_box, start_frame, end_frame, config)

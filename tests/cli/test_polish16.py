@@ -121,7 +121,7 @@ def test_info_reports_empty_sweeps(tmp_path, tiny_copy, capsys):
     np.savez(points, **arrays)
     assert main(["info", str(tiny_copy)]) == 0
     out = capsys.readouterr().out
-    assert "empty sweeps: 1 (frame 2)" in out
+    assert "empty: 2" in out
 
 
 def test_convert_says_what_it_is_doing_before_the_long_part(tmp_path, tiny_dir, capsys):

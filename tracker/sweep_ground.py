@@ -1,0 +1,67 @@
+"""Ground removal on a whole sweep with ONE plane, as the authors' preprocessing does it.
+
+The authors' implementation (LiDAR_SOT, ``ground_removal.get_ground``) removes the ground once per sweep,
+before tracking, in the sensor frame: GPF (Zermas et al. 2017) with a single plane for the whole sweep —
+LPR = mean height of the ``lpr_count`` lowest points, seeds below LPR + ``seed_threshold``, then
+``iterations`` rounds of plane fit + "ground = signed height above the plane below ``distance_threshold``".
+The reference boxes in ``../shared/data/upstream_lidar_sot`` were made with one change, kept here: the LPR
+ignores the lowest ``ignore_lowest`` share of the heights (PandaSet sweeps hold sub-ground multipath returns
+metres below the road). The plane's normal points up (upstream takes the SVD's sign; on the PandaSet sweeps
+that is up: 16–20k of ~106k points are removed).
+
+Used by the ``faithful`` preset (``TrackerConfig.ground_scope="sweep"``); the other presets fit planes on
+the tracker's local region (:mod:`tracker.ground`).
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+
+from .ground import fit_plane
+
+__all__ = ["sweep_ground_mask", "cached_sweep_ground_mask"]
+
+# id(points) -> (weak reference to points, parameters, mask); an entry dies with its array
+_CACHE: dict[int, tuple[weakref.ref, tuple, np.ndarray]] = {}
+
+
+def sweep_ground_mask(points: np.ndarray, lpr_count: int = 20, seed_threshold: float = 1.2,
+                      distance_threshold: float = 0.3, iterations: int = 10,
+                      ignore_lowest: float = 0.001) -> np.ndarray:
+    """Boolean ground mask of the (N, 3) sweep ``points`` (sensor frame, z up); non-finite points are ground."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    finite = np.isfinite(pts).all(axis=1)
+    mask = ~finite
+    valid = pts[finite]
+    if len(valid) < 3:
+        return np.ones(len(pts), dtype=bool)
+    z = valid[:, 2]
+    skip = int(ignore_lowest * len(z))
+    count = max(1, min(lpr_count, len(z) - skip))
+    lowest = np.sort(np.partition(z, skip + count - 1)[:skip + count])[skip:]
+    ground = z < lowest.mean() + seed_threshold
+    for _ in range(iterations):
+        if ground.sum() < 3:
+            break
+        normal, offset = fit_plane(valid[ground])
+        ground = valid @ normal + offset < distance_threshold
+    mask[finite] = ground
+    return mask
+
+
+def cached_sweep_ground_mask(points: np.ndarray, *params: float) -> np.ndarray:
+    """:func:`sweep_ground_mask` of ``points`` remembered while the array lives (several trackers on the
+    same sweep — an evaluation, a multi-object run — compute it once). Treat the array as read-only."""
+    key = id(points)
+    entry = _CACHE.get(key)
+    if entry is not None and entry[0]() is points and entry[1] == params:
+        return entry[2]
+    mask = sweep_ground_mask(points, *params)
+    try:
+        ref = weakref.ref(points, lambda _, k=key: _CACHE.pop(k, None))
+    except TypeError:  # not weak-referenceable (a view of a foreign buffer): no caching
+        return mask
+    _CACHE[key] = (ref, params, mask)
+    return mask
