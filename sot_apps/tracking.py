@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from tracker.config import TrackerConfig
+from tracker.detection import Detections
 from tracker.geometry import Box, points_in_box
 from tracker.sotracker import TrackResult, track
 
@@ -48,8 +49,10 @@ def resolve_span(seq: Sequence, start: int, end: int | None) -> tuple[int, int]:
 
 
 def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None = None,
-                   config: TrackerConfig | None = None, progress: bool = True) -> TrackResult:
-    """Track ``init_box`` (world frame at ``start``) through frame ``end`` (inclusive)."""
+                   config: TrackerConfig | None = None, progress: bool = True,
+                   detections: Detections | None = None) -> TrackResult:
+    """Track ``init_box`` (world frame at ``start``) through frame ``end`` (inclusive); ``detections``
+    feed the Detection term / the Det baseline."""
     config = config or TrackerConfig()
     start, end = resolve_span(seq, start, end)
     if not np.isfinite(init_box.to_array()).all() or min(init_box.length, init_box.width, init_box.height) <= 0:
@@ -60,7 +63,7 @@ def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None
 
         def wrap(frames):
             return tqdm(frames, desc="track", unit="frame", leave=False)
-    return track(seq, init_box, start, end, config, progress=wrap)
+    return track(seq, init_box, start, end, config, progress=wrap, detections=detections)
 
 
 def track_result_to_trackfile(seq: Sequence, result: TrackResult, object_id: str, init_box: Box,

@@ -11,7 +11,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["TrackerConfig", "PRESETS", "get_preset", "preset_names"]
+__all__ = ["TrackerConfig", "PRESETS", "DETECTION_PRESETS", "get_preset", "preset_names"]
 
 
 @dataclass(frozen=True)
@@ -134,7 +134,7 @@ class TrackerConfig:
                 raise ValueError(f"{name} must be positive")
 
 
-DET_WEIGHT = 1.0  # Detection-term weight of det_sot (as ICP / Shape; chosen in docs/detection.md)
+DET_WEIGHT = 0.1  # Detection-term weight of det_sot: (sigma_ICP / sigma_Det)^2, docs/detection.md
 
 _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
                       anderson_depth=3, symmetric_mc=False, prior_frame="object", alpha=0.6, max_yaw_change=0.03,
@@ -159,6 +159,10 @@ PRESETS: dict[str, TrackerConfig] = {
     # the paper's Det row: detections + a constant-velocity Kalman filter, no point registration
     "det": _FULL.replace(method="det", preset="det"),
 }
+
+
+# presets that need per-frame detections (track(..., detections=...))
+DETECTION_PRESETS: tuple[str, ...] = ("det_sot", "det")
 
 
 def preset_names() -> list[str]:

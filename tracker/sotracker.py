@@ -446,6 +446,8 @@ class Tracker:
         local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale))
         flags += point_flags
         x = prior.copy()
+        if first and det_target is not None:
+            x = det_target.copy()  # no motion known yet: the detection is the better start of the frame-1 search
         info: dict = {"crop": 0}
         if len(local) == 0 or not points_in_box(local, reach_box, search_scale).any():
             flags += ["no_points", "prior_only"]

@@ -9,6 +9,9 @@ CenterPoint-class on KITTI, nuScenes, Waymo):
 - centre error grows with range and sparsity: sigma = (base + per_metre * range) * (1 + sparse_points /
   (n + sparse_points)), larger along the length than across (extent ambiguity of a partial view);
 - heading error (Gaussian) plus occasional flips by pi; size error multiplicative (log-normal);
+- errors are correlated over time for the same object (AR(1) with ``correlation`` per frame): a learned
+  detector sees nearly the same partial view in consecutive sweeps and repeats its bias, so averaging
+  detections over a few frames does not remove it;
 - scores: true positives high and rising with support, false positives mostly below 0.5;
 - false positives: Poisson per frame, half next to real objects (duplicates / split clutter), half anywhere
   in range.
@@ -20,12 +23,13 @@ from dataclasses import dataclass, replace
 from typing import Iterable
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from tracker.detection import FrameDetections
 from tracker.geometry import wrap_angle
 
-__all__ = ["DetectionNoise", "NOISE_PROFILES", "count_points_in_boxes", "simulate_frame", "simulate_detections"]
+from ..evaluation.detection import count_points_in_boxes
+
+__all__ = ["DetectionNoise", "NOISE_PROFILES", "simulate_frame", "simulate_detections"]
 
 
 @dataclass(frozen=True)
@@ -34,14 +38,15 @@ class DetectionNoise:
 
     recall_max: float = 0.95
     support_points: float = 8.0          # P(detect) reaches 63 % of recall_max at this many points
-    sigma_along: float = 0.10            # centre noise along the length at range 0 with many points
-    sigma_across: float = 0.06
+    sigma_along: float = 0.15            # centre noise along the length at range 0 with many points
+    sigma_across: float = 0.08
     sigma_z: float = 0.05
-    sigma_per_metre: float = 0.003       # added to every centre sigma per metre of range
+    sigma_per_metre: float = 0.004       # added to every centre sigma per metre of range
     sparse_points: float = 10.0          # sigmas double for an empty box, x1.5 at this many points
-    sigma_heading: float = 0.04
+    sigma_heading: float = 0.05
     flip_probability: float = 0.03       # heading off by pi
-    sigma_log_size: float = 0.05
+    sigma_log_size: float = 0.08
+    correlation: float = 0.7             # AR(1) coefficient of an object's errors from frame to frame
     tp_score_base: float = 0.55
     tp_score_gain: float = 0.40          # score = base + gain * (1 - exp(-n / 30)) + N(0, score_noise)
     score_noise: float = 0.08
@@ -62,46 +67,34 @@ NOISE_PROFILES["noisy"] = replace(NOISE_PROFILES["learned"], recall_max=0.85, si
                                   sigma_heading=0.08, flip_probability=0.06, false_positives_per_frame=5.0)
 
 
-def count_points_in_boxes(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """Number of ``points`` (N, 3) inside each upright box of ``boxes`` (M, 7)."""
-    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
-    counts = np.zeros(len(boxes), dtype=np.int64)
-    if len(points) == 0 or len(boxes) == 0:
-        return counts
-    tree = cKDTree(points[:, :2])
-    radii = 0.5 * np.hypot(boxes[:, 4], boxes[:, 5])
-    for i, (box, near) in enumerate(zip(boxes, tree.query_ball_point(boxes[:, :2], radii))):
-        p = points[near]
-        d = p - box[:3]
-        c, s = np.cos(box[3]), np.sin(box[3])
-        inside = ((np.abs(c * d[:, 0] + s * d[:, 1]) <= box[4] / 2) & (np.abs(-s * d[:, 0] + c * d[:, 1]) <= box[5] / 2)
-                  & (np.abs(d[:, 2]) <= box[6] / 2))
-        counts[i] = int(inside.sum())
-    return counts
-
-
 def simulate_frame(gt_boxes: np.ndarray, gt_points: np.ndarray, ego_xyz: np.ndarray, noise: DetectionNoise,
-                   rng: np.random.Generator, labels: tuple[str, ...] = ()) -> FrameDetections:
-    """One frame's simulated detections from its ground-truth boxes (M, 7) and their point counts (M,)."""
+                   rng: np.random.Generator, labels: tuple[str, ...] = (),
+                   unit_errors: np.ndarray | None = None) -> FrameDetections:
+    """One frame's simulated detections from its ground-truth boxes (M, 7) and their point counts (M,).
+
+    ``unit_errors``: (M, 7) standard-normal errors (along, across, z, heading, log l, log w, log h) of the
+    boxes (default: drawn independently), scaled here by the profile's sigmas."""
     gt = np.asarray(gt_boxes, dtype=np.float64).reshape(-1, 7)
+    if unit_errors is None:
+        unit_errors = rng.standard_normal((len(gt), 7))
     n = np.asarray(gt_points, dtype=np.float64).reshape(-1)
     rng_draws = rng.random(len(gt))
     support = noise.recall_max * (1.0 - np.exp(-n / noise.support_points)) if noise.support_points > 0 else \
         np.full(len(gt), noise.recall_max)
     dist = np.hypot(gt[:, 0] - ego_xyz[0], gt[:, 1] - ego_xyz[1])
     keep = (rng_draws < support) & (n > 0) & (dist <= noise.max_range)
-    g, npts, r = gt[keep], n[keep], dist[keep]
+    g, npts, r, e = gt[keep], n[keep], dist[keep], unit_errors[keep]
     sparse = 1.0 + noise.sparse_points / (npts + noise.sparse_points) if noise.sparse_points > 0 else np.ones(len(g))
-    along = (noise.sigma_along + noise.sigma_per_metre * r) * sparse * rng.standard_normal(len(g))
-    across = (noise.sigma_across + noise.sigma_per_metre * r) * sparse * rng.standard_normal(len(g))
+    along = (noise.sigma_along + noise.sigma_per_metre * r) * sparse * e[:, 0]
+    across = (noise.sigma_across + noise.sigma_per_metre * r) * sparse * e[:, 1]
     c, s = np.cos(g[:, 3]), np.sin(g[:, 3])
     boxes = g.copy()
     boxes[:, 0] += c * along - s * across
     boxes[:, 1] += s * along + c * across
-    boxes[:, 2] += (noise.sigma_z + noise.sigma_per_metre * r) * sparse * rng.standard_normal(len(g))
+    boxes[:, 2] += (noise.sigma_z + noise.sigma_per_metre * r) * sparse * e[:, 2]
     flips = rng.random(len(g)) < noise.flip_probability
-    boxes[:, 3] = wrap_angle(g[:, 3] + noise.sigma_heading * sparse * rng.standard_normal(len(g)) + np.pi * flips)
-    boxes[:, 4:7] = g[:, 4:7] * np.exp(noise.sigma_log_size * rng.standard_normal((len(g), 3)))
+    boxes[:, 3] = wrap_angle(g[:, 3] + noise.sigma_heading * sparse * e[:, 3] + np.pi * flips)
+    boxes[:, 4:7] = g[:, 4:7] * np.exp(noise.sigma_log_size * e[:, 4:7])
     scores = (noise.tp_score_base + noise.tp_score_gain * (1.0 - np.exp(-npts / 30.0))
               + noise.score_noise * rng.standard_normal(len(g)))
     kept_labels = tuple(lbl for lbl, k in zip(labels, keep) if k) if labels else ()
@@ -134,6 +127,8 @@ def simulate_detections(sequence, noise: DetectionNoise | str = "learned", seed:
     rng = np.random.default_rng(seed)
     wanted = None if labels is None else {lbl.lower() for lbl in labels}
     out: dict[int, FrameDetections] = {}
+    state: dict[str, np.ndarray] = {}   # per object: its current (AR(1)) standard-normal errors
+    rho = profile.correlation
     frames = range(len(sequence))
     for k in (progress(frames) if progress else frames):
         anns = [a for a in (sequence.annotations[k] if sequence.annotations else [])
@@ -141,5 +136,9 @@ def simulate_detections(sequence, noise: DetectionNoise | str = "learned", seed:
         gt = np.array([a.box.to_array() for a in anns]).reshape(-1, 7)
         counts = count_points_in_boxes(sequence.points_world(k), gt)
         ego = np.asarray(sequence.frames[k].world_from_ego)[:3, 3]
-        out[k] = simulate_frame(gt, counts, ego, profile, rng, tuple(a.label for a in anns))
+        fresh = rng.standard_normal((len(anns), 7))
+        errors = np.array([rho * state[a.track_id] + np.sqrt(1.0 - rho * rho) * f if a.track_id in state else f
+                           for a, f in zip(anns, fresh)]).reshape(-1, 7)
+        state = {a.track_id: err for a, err in zip(anns, errors)}
+        out[k] = simulate_frame(gt, counts, ego, profile, rng, tuple(a.label for a in anns), errors)
     return out
