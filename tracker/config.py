@@ -134,7 +134,7 @@ class TrackerConfig:
                 raise ValueError(f"{name} must be positive")
 
 
-DET_WEIGHT = 0.1  # Detection-term weight of det_sot: (sigma_ICP / sigma_Det)^2, docs/detection.md
+DET_WEIGHT = 0.03  # Detection-term weight of det_sot: ~ (sigma_ICP / sigma_Det)^2, docs/detection.md
 
 _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
                       anderson_depth=3, symmetric_mc=False, prior_frame="object", alpha=0.6, max_yaw_change=0.03,
