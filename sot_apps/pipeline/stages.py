@@ -51,7 +51,12 @@ def track_object(out: str, plan: ObjectPlan, stage: dict, digest: str) -> dict:
         start_frame, init_box = _first_box_with_points(seq, plan, config, min_points)
     end_frame = plan.end if stage.get("max_frames") is None else min(plan.end, start_frame + int(stage["max_frames"]))
     start = time.perf_counter()
-    result = track(seq, init_box, start_frame, end_frame, config)
+    detections = None
+    if plan.detections:
+        from ..io.detections import read_sequence_detections
+
+        detections = read_sequence_detections(plan.detections, seq)
+    result = track(seq, init_box, start_frame, end_frame, config, detections=detections)
     seconds = time.perf_counter() - start
     first = result.estimates[0]
     if first.num_points < min_points:
