@@ -242,10 +242,13 @@ class Tracker:
         return world, flags
 
     # ------------------------------------------------------------------ API
-    def start(self, frame: LidarFrame, box: Box, previous_pose: tuple[int, np.ndarray] | None = None) -> FrameEstimate:
+    def start(self, frame: LidarFrame, box: Box, previous_pose: tuple[int, np.ndarray] | None = None,
+              initial_motion: np.ndarray | None = None) -> FrameEstimate:
         """Begin a track at ``frame`` with the (world-frame) ``box``.
 
         ``previous_pose``: (timestamp_ns, world_from_ego) of the frame before, used only to de-skew.
+        ``initial_motion``: a known per-frame motion [dx, dy, dz, dtheta] (world frame), e.g. from associated
+        detections: the motion prior starts from it instead of zero (frame 1's search starts there).
         """
         t0 = time.perf_counter()
         c = self.config
@@ -256,6 +259,8 @@ class Tracker:
         self.first_box = box
         self.box = box
         self.prior = MotionPrior(c.alpha, c.prior_frame)
+        if initial_motion is not None:
+            self.prior.update(np.asarray(initial_motion, dtype=np.float64), box.heading)
         self.shape = ShapeModel(c.voxel_size)
         self.subshape = SubShape(c.subshape_frames if c.use_subshape else 0, c.voxel_size)
         self.steps = 0
@@ -446,8 +451,6 @@ class Tracker:
         local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale))
         flags += point_flags
         x = prior.copy()
-        if first and det_target is not None:
-            x = det_target.copy()  # no motion known yet: the detection is the better start of the frame-1 search
         info: dict = {"crop": 0}
         if len(local) == 0 or not points_in_box(local, reach_box, search_scale).any():
             flags += ["no_points", "prior_only"]
@@ -536,12 +539,13 @@ class Tracker:
 
 
 def track(source: FrameSource, init_box: Box, start: int = 0, end: int | None = None,
-          config: TrackerConfig | None = None, progress=None, detections: Detections | None = None) -> TrackResult:
+          config: TrackerConfig | None = None, progress=None, detections: Detections | None = None,
+          initial_motion: np.ndarray | None = None) -> TrackResult:
     """Track from ``init_box`` (world frame, at frame ``start``) through frame ``end`` (inclusive, default: last).
 
     ``progress``: optional callable(iterable) -> iterable (e.g. tqdm) wrapping the frame loop.
     ``detections``: per-frame detections for the Detection term (``weight_det > 0``) or the ``det`` baseline
-    (``method="det"``, :mod:`tracker.det_baseline`).
+    (``method="det"``, :mod:`tracker.det_baseline`). ``initial_motion``: see :meth:`Tracker.start`.
     """
     config = config or TrackerConfig()
     n = len(source)
@@ -557,7 +561,7 @@ def track(source: FrameSource, init_box: Box, start: int = 0, end: int | None = 
     if config.deskew and start > 0:
         prev = source.lidar_frame(start - 1)
         previous_pose = (int(prev.timestamp_ns), np.asarray(prev.world_from_ego, dtype=np.float64))
-    estimates = [tracker.start(source.lidar_frame(start), init_box, previous_pose)]
+    estimates = [tracker.start(source.lidar_frame(start), init_box, previous_pose, initial_motion)]
     frames = range(start + 1, end + 1)
     for k in (progress(frames) if progress else frames):
         estimates.append(tracker.step(source.lidar_frame(k), None if detections is None else detections.get(k)))

@@ -148,6 +148,18 @@ def _merge(backward: TrackResult | None, forward: TrackResult) -> TrackResult:
     return TrackResult(estimates, forward.size, forward.shape, forward.config)
 
 
+def _detection_velocity(detection_track: DetectionTrack, frame: int, window: int = 5) -> np.ndarray:
+    """Per-frame motion [dx, dy, dz, 0] near ``frame`` from the track's detections: a least-squares line through
+    the detection centres of the ``window`` frames either side (zero with fewer than 2 detections)."""
+    near = [k for k in detection_track.frames if abs(k - frame) <= window]
+    if len(near) < 2:
+        return np.zeros(4)
+    t = np.array(near, dtype=np.float64)
+    centres = np.array([detection_track.boxes[k][:3] for k in near])
+    slope = np.polyfit(t - t.mean(), centres, 1)[0]
+    return np.array([slope[0], slope[1], slope[2], 0.0])
+
+
 def label_track(source: FrameSource, detection_track: DetectionTrack, config: TrackerConfig | None = None,
                 offline: bool = True) -> AutoLabel:
     """SOT forward and backward from the track's most reliable detection, then the offline refinement."""
@@ -157,14 +169,16 @@ def label_track(source: FrameSource, detection_track: DetectionTrack, config: Tr
     sizes = np.array([detection_track.boxes[k][4:7] for k in frames])
     seed = Box(*detection_track.boxes[seed_frame][:4], *np.median(sizes, axis=0))
     own = {k: FrameDetections(b[None], np.array([detection_track.scores[k]])) for k, b in detection_track.boxes.items()}
-    forward = track(source, seed, seed_frame, frames[-1], config, detections=own)
+    velocity = _detection_velocity(detection_track, seed_frame)
+    forward = track(source, seed, seed_frame, frames[-1], config, detections=own, initial_motion=velocity)
     backward = None
     if seed_frame > frames[0]:
         last = seed_frame
         flipped = {last - k: d for k, d in own.items() if k <= seed_frame}
         # backward in time the vehicle drives in reverse; turned by pi it drives forward again, as the
         # motion-consistency term expects
-        backward = track(_Reversed(source, last), _turned(seed), 0, last - frames[0], config, detections=flipped)
+        backward = track(_Reversed(source, last), _turned(seed), 0, last - frames[0], config, detections=flipped,
+                         initial_motion=-velocity)
     result = _merge(backward, forward)
     if offline and len(result.estimates) > 2:
         from tracker.offline import refine_offline

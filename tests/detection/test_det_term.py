@@ -56,9 +56,13 @@ def test_detection_term_pulls_an_ambiguous_track_onto_the_detections():
     truth = np.array([truth_x(k) for k in range(FRAMES)])
     err_plain = np.abs(xs(plain) - truth)[1:]
     err_det = np.abs(xs(with_det) - truth)[1:]
-    assert err_plain[-1] > 2.0                 # without detections the track cannot follow the slide
-    assert np.all(err_det < 0.2)               # with them it stays on the detections
+    assert err_plain[-1] > 5.0                 # without detections the track cannot follow the slide
+    # det_sot's small weight (docs/detection.md) competes with the motion prior: the pull takes a few frames
+    assert err_det.max() < 2.0 and err_det[-1] < 0.1
     assert all("det" in e.flags for e in with_det.estimates[1:])
+    # a weight above the motion prior's holds the track on the detections from the first frame
+    strong = track(source, START, config=get_preset("det_sot", weight_det=1.0), detections=detections())
+    assert np.all(np.abs(xs(strong) - truth)[1:] < 0.1)
 
 
 def test_detections_below_the_score_or_iou_threshold_have_no_effect():
