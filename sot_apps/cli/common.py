@@ -44,3 +44,21 @@ def load_detections(args: argparse.Namespace, sequence: Sequence):
     from ..io.detections import read_sequence_detections
 
     return read_sequence_detections(args.detections, sequence, args.detections_format, args.kitti_calib)
+
+
+def check_profile(profile: str) -> None:
+    """An unknown simulated-detection profile is an InputError."""
+    from ..detection.simulate import NOISE_PROFILES
+    from ..errors import InputError
+
+    if profile not in NOISE_PROFILES:
+        raise InputError(None, f"unknown detection profile {profile!r}; known: {', '.join(NOISE_PROFILES)}")
+
+
+def simulated_detections(sequence: Sequence, profile: str, seed: int, progress=None):
+    """Simulated vehicle detections (docs/detection.md) of ``sequence``."""
+    from ..detection.simulate import simulate_detections
+    from ..eval import DEFAULT_VEHICLE_LABELS
+
+    check_profile(profile)
+    return simulate_detections(sequence, profile, seed, DEFAULT_VEHICLE_LABELS, progress)

@@ -6,7 +6,8 @@ import argparse
 import sys
 
 from ..errors import InputError
-from .common import add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence
+from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
+                     simulated_detections)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -45,11 +46,7 @@ def run(args: argparse.Namespace) -> int:
     progress = lambda frames: tqdm(frames, desc="detect", unit="frame", file=sys.stderr, leave=False)  # noqa: E731
     detections = load_detections(args, sequence)
     if detections is None and args.simulate:
-        from ..detection.simulate import NOISE_PROFILES, simulate_detections
-
-        if args.simulate not in NOISE_PROFILES:
-            raise InputError(None, f"unknown profile {args.simulate!r}; known: {', '.join(NOISE_PROFILES)}")
-        detections = simulate_detections(sequence, args.simulate, args.seed, DEFAULT_VEHICLE_LABELS, progress)
+        detections = simulated_detections(sequence, args.simulate, args.seed, progress)
     elif detections is None:
         from ..detection.detector import detect_sequence
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence
+from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
+                     check_profile, simulated_detections)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -54,14 +55,8 @@ def run(args: argparse.Namespace) -> int:
     sequence = load_sequence(args)
     detections = load_detections(args, sequence)
     if args.simulate_detections:
-        from ..detection.simulate import NOISE_PROFILES, simulate_detections
-        from ..eval import DEFAULT_VEHICLE_LABELS
-
-        if args.simulate_detections not in NOISE_PROFILES:
-            raise InputError(None, f"unknown detection profile {args.simulate_detections!r}; known: "
-                                   f"{', '.join(NOISE_PROFILES)}")
-        detections = lambda seed: simulate_detections(sequence, args.simulate_detections, seed,  # noqa: E731
-                                                      DEFAULT_VEHICLE_LABELS)
+        check_profile(args.simulate_detections)
+        detections = lambda seed: simulated_detections(sequence, args.simulate_detections, seed)  # noqa: E731
     ids = [t.strip() for t in args.tracks.split(",") if t.strip()] if args.tracks else None
     if args.tracks is not None and not ids:
         raise InputError(None, "--tracks is empty")
