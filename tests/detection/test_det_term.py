@@ -100,3 +100,29 @@ def test_det_baseline_follows_detections_with_fixed_size_and_coasts_through_miss
     assert np.all(np.abs(xs(result) - truth) < 0.15)
     assert all(np.allclose(b.size, START.size) for b in result.boxes)
     assert "prior_only" in result.estimates[5].flags and "det" in result.estimates[7].flags
+
+
+class GapSource(WallSource):
+    """The wall scene with frames 5..7 empty (no points at all)."""
+
+    def lidar_frame(self, index: int) -> LidarFrame:
+        frame = super().lidar_frame(index)
+        if 5 <= index <= 7:
+            return LidarFrame(index=index, timestamp_ns=frame.timestamp_ns, points_ego=np.zeros((0, 3)),
+                              world_from_ego=np.eye(4))
+        return frame
+
+
+def test_a_frame_without_points_minimises_prior_plus_detection():
+    """No points: the loss is MP + Det, minimised by the weighted mean of the two motions (flag det_only)."""
+    source = GapSource()
+    dets = detections(offset=0.0)
+    dets[6] = FrameDetections(dets[6].boxes + np.array([0.6, 0, 0, 0, 0, 0, 0]), dets[6].scores)  # a jump
+    config = get_preset("det_sot", weight_det=0.1)
+    coasting = track(source, START, config=get_preset("full"))
+    result = track(source, START, config=config, detections=dets)
+    assert "det_only" in result.estimates[6].flags and "prior_only" not in result.estimates[6].flags
+    assert "prior_only" in coasting.estimates[6].flags
+    step_prior = result.boxes[5].x - result.boxes[4].x       # the motion the prior predicts (constant here)
+    expected = result.boxes[5].x + (0.1 * step_prior + 0.1 * (dets[6].boxes[0, 0] - result.boxes[5].x)) / 0.2
+    assert abs(result.boxes[6].x - expected) < 0.15
