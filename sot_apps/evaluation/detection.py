@@ -142,29 +142,34 @@ def ap_table(detections: Mapping[int, FrameDetections], truth: Mapping[int, Grou
 
 
 def identity_coverage(tracks: Mapping[str, Mapping[int, np.ndarray]], truth: Mapping[int, GroundTruthFrame],
-                      iou_threshold: float = 0.5, min_points: int = 1) -> dict[str, float]:
+                      iou_threshold: float = 0.5, min_points: int = 1, max_range: float = np.inf) -> dict[str, float]:
     """Share of ground-truth frames covered by ONE track: for every ground-truth object, the predicted track
     that overlaps it (BEV IoU >= threshold) in the most frames is its track; the measure is the number of
-    frames that track covers over all ground-truth frames (with >= ``min_points`` points). 1 = every object
+    frames that track covers over all ground-truth frames (with >= ``min_points`` points, within ``max_range``
+    of the ego). 1 = every object
     is followed by a single track in every frame; fragmentation and misses lower it."""
-    gt_frames: dict[str, list[tuple[int, np.ndarray]]] = {}
+    names = list(tracks)
+    hits: dict[str, dict[str, int]] = {}    # ground-truth id -> track name -> frames covered
+    counts: dict[str, int] = {}
     for k, gt in truth.items():
-        for tid, box, n in zip(gt.track_ids, gt.boxes, gt.points):
-            if n >= min_points:
-                gt_frames.setdefault(tid, []).append((k, box))
-    total = sum(len(v) for v in gt_frames.values())
+        near = np.hypot(gt.boxes[:, 0] - gt.ego_xy[0], gt.boxes[:, 1] - gt.ego_xy[1]) < max_range
+        keep = np.flatnonzero((gt.points >= min_points) & near)
+        if len(keep) == 0:
+            continue
+        present = [n for n in names if k in tracks[n]]
+        boxes = np.array([tracks[n][k] for n in present]).reshape(-1, 7)
+        iou = _pairwise_iou(gt.boxes[keep], boxes, "bev")      # (ground truth, tracks)
+        for row, j in enumerate(keep):
+            tid = gt.track_ids[j]
+            counts[tid] = counts.get(tid, 0) + 1
+            per = hits.setdefault(tid, {})
+            for col in np.flatnonzero(iou[row] >= iou_threshold):
+                per[present[col]] = per.get(present[col], 0) + 1
+    total = sum(counts.values())
     if total == 0:
         return {"coverage": float("nan"), "gt_frames": 0, "objects": 0}
-    covered = 0
-    for frames in gt_frames.values():
-        hits: dict[str, int] = {}
-        for k, box in frames:
-            for name, boxes in tracks.items():
-                b = boxes.get(k)
-                if b is not None and iou_bev_batch(b[None], box[None])[0] >= iou_threshold:
-                    hits[name] = hits.get(name, 0) + 1
-        covered += max(hits.values(), default=0)
-    return {"coverage": covered / total, "gt_frames": total, "objects": len(gt_frames)}
+    covered = sum(max(per.values(), default=0) for per in hits.values())
+    return {"coverage": covered / total, "gt_frames": total, "objects": len(counts)}
 
 
 def format_ap_table(rows: list[dict]) -> str:
@@ -194,7 +199,8 @@ def autolabel_quality(candidates: Mapping[str, tuple[Mapping[int, FrameDetection
             for thr in config.iou_thresholds:
                 row[f"{kind}_ap_{thr:g}"] = average_precision(boxes, truth, thr, kind, band, config.min_points,
                                                               config.recall_points)["ap"]
-        row["coverage"] = identity_coverage(tracks, truth)["coverage"] if tracks is not None else float("nan")
+        row["coverage"] = (identity_coverage(tracks, truth, 0.5, config.min_points, band[1])["coverage"]
+                           if tracks is not None else float("nan"))
         rows.append(row)
     return rows
 
