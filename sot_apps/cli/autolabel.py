@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     for fmt, path in paths.items():
         print(f"wrote {fmt}: {path}")
     if args.evaluate:
-        from ..detection.autolabel import labels_as_detections
+        from ..detection.autolabel import labels_as_detections, tracks_as_detections
         from ..evaluation.detection import autolabel_quality, format_quality_table, ground_truth_frames
 
         if not sequence.annotations:
@@ -71,8 +71,7 @@ def run(args: argparse.Namespace) -> int:
         truth = ground_truth_frames(sequence, DEFAULT_VEHICLE_LABELS)
         rows = autolabel_quality(
             {"raw detections": (detections, None),
-             "detection tracks (CV Kalman)": ({k: v for k, v in _track_dets(det_tracks).items()},
-                                              {t.track_id: t.boxes for t in det_tracks}),
+             "detection tracks (CV Kalman)": (tracks_as_detections(det_tracks), {t.track_id: t.boxes for t in det_tracks}),
              "auto-labels": (labels_as_detections(labels),
                              {lbl.track_id: {k: b.to_array() for k, b in lbl.boxes.items()} for lbl in labels})},
             truth)
@@ -81,15 +80,3 @@ def run(args: argparse.Namespace) -> int:
             write_json(args.json, rows)
     return 0
 
-
-def _track_dets(det_tracks):
-    """The associated detections (those kept in a detection track) per frame, with their scores."""
-    import numpy as np
-
-    from tracker.detection import FrameDetections
-
-    per_frame: dict = {}
-    for t in det_tracks:
-        for k, b in t.boxes.items():
-            per_frame.setdefault(k, []).append((b, t.scores[k]))
-    return {k: FrameDetections(np.array([b for b, _ in v]), np.array([s for _, s in v])) for k, v in per_frame.items()}

@@ -32,7 +32,8 @@ from tracker.metrics import iou_bev_batch
 from tracker.sotracker import TrackResult, track
 
 __all__ = ["AssociationConfig", "DetectionTrack", "AutoLabel", "associate_tracks", "label_track", "anchor_to_detections",
-           "autolabel", "labels_as_detections", "write_autolabels"]
+           "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",
+           "write_autolabels"]
 
 
 @dataclass(frozen=True)
@@ -223,14 +224,23 @@ def autolabel(source: FrameSource, detections: dict[int, FrameDetections], confi
     return labels, tracks
 
 
-def labels_as_detections(labels: list[AutoLabel]) -> dict[int, FrameDetections]:
-    """The auto-label boxes per frame, each scored with its track's score (for AP)."""
+def per_frame_detections(entries) -> dict[int, FrameDetections]:
+    """(frame, box (7,), score) triples grouped into FrameDetections per frame."""
     per_frame: dict[int, list[tuple[np.ndarray, float]]] = {}
-    for label in labels:
-        for k, box in label.boxes.items():
-            per_frame.setdefault(k, []).append((box.to_array(), label.score))
+    for k, box, score in entries:
+        per_frame.setdefault(k, []).append((np.asarray(box, dtype=np.float64), float(score)))
     return {k: FrameDetections(np.array([b for b, _ in items]), np.array([s for _, s in items]))
             for k, items in per_frame.items()}
+
+
+def labels_as_detections(labels: list[AutoLabel]) -> dict[int, FrameDetections]:
+    """The auto-label boxes per frame, each scored with its track's score (for AP)."""
+    return per_frame_detections((k, box.to_array(), label.score) for label in labels for k, box in label.boxes.items())
+
+
+def tracks_as_detections(tracks: list[DetectionTrack]) -> dict[int, FrameDetections]:
+    """The detections kept in detection tracks, per frame, with their own scores."""
+    return per_frame_detections((k, box, t.scores[k]) for t in tracks for k, box in t.boxes.items())
 
 
 def write_autolabels(out_dir, sequence, labels: list[AutoLabel], category: str = "Car",
