@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {fmt}: {path}")
     if args.evaluate:
         from ..detection.autolabel import labels_as_detections, tracks_as_detections
-        from ..evaluation.detection import autolabel_quality, format_quality_table, ground_truth_frames
+        from ..evaluation.detection import autolabel_quality, format_quality_table, ground_truth_frames, rows_for_json
 
         if not sequence.annotations:
             raise InputError(sequence.root, "--evaluate needs annotations")
@@ -77,6 +77,6 @@ def run(args: argparse.Namespace) -> int:
             truth)
         print(format_quality_table(rows))
         if args.json:
-            write_json(args.json, rows)
+            write_json(args.json, rows_for_json(rows))
     return 0
 

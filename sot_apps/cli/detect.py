@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         path = write_detections(args.out, detections, sequence.id)
         print(f"wrote {path}: {sum(len(d) for d in detections.values())} boxes in {len(detections)} frames")
     if args.evaluate:
-        from ..evaluation.detection import ap_table, format_ap_table, ground_truth_frames
+        from ..evaluation.detection import ap_table, format_ap_table, ground_truth_frames, rows_for_json
 
         if not sequence.annotations:
             raise InputError(sequence.root, "--evaluate needs annotations")
@@ -63,5 +63,5 @@ def run(args: argparse.Namespace) -> int:
         rows = ap_table(detections, truth, kinds=("bev", "3d") if args.three_d else ("bev",))
         print(format_ap_table(rows))
         if args.json:
-            write_json(args.json, rows)
+            write_json(args.json, rows_for_json(rows))
     return 0

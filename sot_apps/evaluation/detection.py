@@ -214,3 +214,8 @@ def format_quality_table(rows: list[dict]) -> str:
         cov = "—" if not np.isfinite(r["coverage"]) else f"{100 * r['coverage']:.1f} %"
         lines.append(f"| {r['name']} | " + " | ".join(f"{100 * r[k]:.1f}" for k in keys) + f" | {cov} |")
     return "\n".join(lines)
+
+
+def rows_for_json(rows: list[dict]) -> list[dict]:
+    """``rows`` with NaN (no ground truth, no tracks) as None, for JSON."""
+    return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()} for r in rows]
