@@ -136,6 +136,13 @@ def _parse_kitti_lines(path: Path, text: str, has_frame: bool, frame: int | None
     return rows
 
 
+def _text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot read as text ({exc})") from exc
+
+
 def _read_kitti(path: Path, world_from_lidar: Seq[np.ndarray], rect_from_lidar: np.ndarray) -> dict[int, FrameDetections]:
     rows: list[tuple[int, str, list[float]]] = []
     if path.is_dir():
@@ -145,9 +152,9 @@ def _read_kitti(path: Path, world_from_lidar: Seq[np.ndarray], rect_from_lidar: 
         for f in files:
             if not f.stem.isdigit():
                 raise InputError(f, "KITTI object file names are frame numbers (000012.txt)")
-            rows += _parse_kitti_lines(f, f.read_text(), False, int(f.stem))
+            rows += _parse_kitti_lines(f, _text(f), False, int(f.stem))
     else:
-        rows = _parse_kitti_lines(path, path.read_text(), True, None)
+        rows = _parse_kitti_lines(path, _text(path), True, None)
     by_frame: dict[int, list[tuple[str, list[float]]]] = {}
     for k, label, numbers in rows:
         by_frame.setdefault(k, []).append((label, numbers))
@@ -156,6 +163,8 @@ def _read_kitti(path: Path, world_from_lidar: Seq[np.ndarray], rect_from_lidar: 
         _check_frame(path, k, len(world_from_lidar))
         vals = np.array([n[:14] for _, n in items])  # trunc occ alpha (bbox x4) h w l x y z rotation_y
         scores = np.array([n[14] if len(n) > 14 else 1.0 for _, n in items])
+        if np.any(vals[:, 7:10] <= 0) or not np.isfinite(vals).all():
+            raise InputError(path, f"frame {k}: box sizes must be positive and values finite")
         boxes = kitti_to_lidar_boxes(vals[:, 7:10], vals[:, 10:13], vals[:, 13], rect_from_lidar)
         out[k] = boxes_to_frame(_lidar_to_world(boxes, world_from_lidar[k]), scores, tuple(lbl for lbl, _ in items))
     return out
