@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from tracker import Box, TrackResult, TrackerConfig, points_in_box, track
+from tracker import Box, Detections, TrackResult, TrackerConfig, points_in_box, track
 
 from .errors import InputError
 from .io.sequence import Sequence
@@ -56,8 +56,10 @@ def resolve_span(seq: Sequence, start: int, end: int | None) -> tuple[int, int]:
 
 
 def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None = None,
-                   config: TrackerConfig | None = None, progress: bool = True) -> TrackResult:
-    """Track ``init_box`` (world frame at ``start``) through frame ``end`` (inclusive).
+                   config: TrackerConfig | None = None, progress: bool = True,
+                   detections: Detections | None = None) -> TrackResult:
+    """Track ``init_box`` (world frame at ``start``) through frame ``end`` (inclusive); ``detections``
+    feed the Detection term / the Det baseline.
 
     Frames without a sweep are passed to the tracker as such (``LidarFrame.has_sweep`` False): it
     predicts through them with the elapsed time and flags them ``no_sweep``.
@@ -74,7 +76,7 @@ def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None
 
         def wrap(frames):
             return tqdm(frames, desc="track", unit="frame", leave=False)
-    return track(seq, init_box, start, end, config, progress=wrap)
+    return track(seq, init_box, start, end, config, progress=wrap, detections=detections)
 
 
 def first_box_with_points(seq: Sequence, annotated: list[tuple[int, Box]] | tuple[tuple[int, Box], ...],

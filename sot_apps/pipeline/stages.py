@@ -52,7 +52,12 @@ def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> 
         raise TrackingFailed(f"{plan.key}: the start frame {start_frame} has no sweep; nothing to track")
     end_frame = plan.end if stage.max_frames is None else min(plan.end, start_frame + stage.max_frames)
     start = time.perf_counter()
-    result = track(seq, init_box, start_frame, end_frame, config)
+    detections = None
+    if plan.detections:
+        from ..io.detections import read_sequence_detections
+
+        detections = read_sequence_detections(plan.detections, seq)
+    result = track(seq, init_box, start_frame, end_frame, config, detections=detections)
     seconds = time.perf_counter() - start
     first = result.estimates[0]
     if first.num_points < min_points:
