@@ -26,7 +26,7 @@ from ..flow.annotate import FlowOptions, build_pair, compute_pair
 from ..flow.dense import RayCache
 from ..objects.meshes import Mesh
 from ..flow.objects import TrackedObject, mesh_for, objects_from_annotations
-from ..objects.trajectory import ObjectTrajectory
+from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 from tqdm import tqdm
 
 __all__ = ["flow_errors", "classical_flow", "synthetic_quality", "photometric_quality", "tracker_objects", "FlowScore"]
@@ -68,8 +68,8 @@ def classical_flow(image_k: np.ndarray, image_k1: np.ndarray, method: str) -> np
     raise ValueError(method)
 
 
-def _static(times: np.ndarray, state: np.ndarray) -> ObjectTrajectory:
-    return ObjectTrajectory.from_samples([int(times.min()) - 10**9, int(times.max()) + 10**9], [state, state])
+def _static(times: np.ndarray, state: np.ndarray) -> Trajectory:
+    return Trajectory.from_samples([int(times.min()) - 10**9, int(times.max()) + 10**9], [state, state], "extrapolate", CAMERA_EXTRAPOLATION_NS)
 
 
 def _gt_objects(world) -> tuple[list[TrackedObject], int]:
@@ -79,7 +79,7 @@ def _gt_objects(world) -> tuple[list[TrackedObject], int]:
     for o in world.objects:
         traj = o.trajectory
         trajectory = (_static(times, traj.states[0]) if traj.is_static
-                      else ObjectTrajectory.from_samples(traj.times_ns, traj.states, max_extrapolation_ns=0))
+                      else Trajectory.from_samples(traj.times_ns, traj.states, "extrapolate", 0))
         mesh = Mesh(np.asarray(o.vertices, float), np.asarray(o.faces, np.int32))
         out.append(TrackedObject(o.id, o.label, trajectory, mesh.vertices, mesh, np.asarray(o.size, float), "gt"))
     for i, b in enumerate(world.background):
@@ -121,7 +121,7 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
             times.append(stamp)
             states.append(e.state.to_array())
         size = np.asarray(result.size, float)
-        out.append(TrackedObject(vid, gt.label, ObjectTrajectory.from_samples(times, states), result.shape,
+        out.append(TrackedObject(vid, gt.label, Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS), result.shape,
                                  mesh_for(result.shape, size, mesh_method), size, "tracker"))
     return out
 

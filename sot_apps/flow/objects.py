@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..io.sequence import Sequence
 from ..objects.selection import DEFAULT_SELECTION
 from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample
-from ..objects.trajectory import ObjectTrajectory
+from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 
 __all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]
 
@@ -34,7 +34,7 @@ class TrackedObject:
 
     object_id: str
     label: str
-    trajectory: ObjectTrajectory
+    trajectory: Trajectory
     points: np.ndarray
     mesh: Mesh
     size: np.ndarray
@@ -99,7 +99,7 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
                     times[i] = seq.frames[record.frame].timestamp_ns + int(np.median(sweep.time_offset_ns[inside]))
         states = [r.state.to_array() for r in track.frames]
         size = track.size.to_array()
-        out.append(TrackedObject(track.object_id, track.label or "", ObjectTrajectory.from_samples(times, states),
+        out.append(TrackedObject(track.object_id, track.label or "", Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS),
                                  shape, mesh_for(shape, size, mesh_method), size, f"track:{Path(directory)}"))
     return out
 
@@ -166,7 +166,7 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
         stamps = [times[tid].get(k, seq.frames[k].timestamp_ns) for k in ks]
         boxes: list[Box] = [track.box_at(k) for k in ks]
         size = np.median(np.array([b.size for b in boxes]), axis=0)
-        trajectory = ObjectTrajectory.from_samples(stamps, [b.state.to_array() for b in boxes])
+        trajectory = Trajectory.from_samples(stamps, [b.state.to_array() for b in boxes], "extrapolate", CAMERA_EXTRAPOLATION_NS)
         # Each point goes to the object frame with the object's pose at the point's own capture time.
         parts = []
         for (pts, t), k in zip(candidates[tid], [k for k in sorted(by_frame) if tid in by_frame[k]]):
@@ -207,6 +207,6 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
         if not np.isfinite(states).all():
             out.append(obj)
             continue
-        out.append(replace(obj, trajectory=ObjectTrajectory.from_samples(traj.times_ns, states,
-                                                                          traj.max_extrapolation_ns)))
+        out.append(replace(obj, trajectory=Trajectory.from_samples(traj.times_ns, states, traj.end,
+                                                                    traj.max_extrapolation_ns)))
     return out

@@ -38,7 +38,7 @@ from ..io.ply import read_ply_mesh, read_ply_points, write_ply_mesh, write_ply_p
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
 from ..objects.meshes import SurfelParams, surfel_mesh
-from ..objects.trajectory import ObjectTrajectory
+from ..objects.trajectory import Trajectory
 
 __all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
            "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points",
@@ -192,11 +192,11 @@ def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: I
     out: dict[str, dict[int, np.ndarray]] = {tid: {} for tid in track_ids}
     for tid in track_ids:
         track = tracks[tid]
-        trajectory = ObjectTrajectory.from_samples([seen_ns[tid][k] for k in track.frames],
-                                                   [[b.x, b.y, b.z, b.heading] for b in track.boxes])
+        trajectory = Trajectory.from_samples([seen_ns[tid][k] for k in track.frames],
+                                             [[b.x, b.y, b.z, b.heading] for b in track.boxes], end="hold")
         for k, (pts, t) in near_points[tid].items():
             box = track.box_at(k)
-            local = trajectory.object_from_world_points(pts, t, hold=True)
+            local = trajectory.object_from_world_points(pts, t)
             half = box.size / 2.0 * 1.02
             inside = (np.abs(local) <= half).all(axis=1) & (local[:, 2] > -box.height / 2 + ground_clearance)
             if inside.any():
