@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracker import Box, transform_points
+from tracker import Box
 
 from ..io.sequence import Sequence
 from ..io.tracks import TrackFile
