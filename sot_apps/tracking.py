@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from tracker import Box, Tracker, TrackResult, TrackerConfig, points_in_box, track
+from tracker import Box, TrackResult, TrackerConfig, points_in_box, track
 
 from .errors import InputError
 from .io.sequence import Sequence
@@ -168,23 +168,16 @@ def track_with_shape_growth(seq: Sequence, init_box: Box, start: int, end: int, 
                             object_id: str, shots: int = 4) -> tuple[TrackResult, ShapeGrowth]:
     """:func:`tracker.track` (same frames, same result) that also keeps the shape after every frame that changed
     it, and returns ``shots`` of those snapshots."""
-    tracker = Tracker(config)
-    previous_pose = None
-    if config.deskew and start > 0:
-        prev = seq.lidar_frame(start - 1)
-        previous_pose = (int(prev.timestamp_ns), np.asarray(prev.world_from_ego, dtype=np.float64))
-    estimates = [tracker.start(seq.lidar_frame(start), init_box, previous_pose)]
-    snapshots = {start: tracker.shape_points()}
-    last = len(snapshots[start])
-    for k in range(start + 1, end + 1):
-        estimates.append(tracker.step(seq.lidar_frame(k)))
-        if len(tracker.shape.points) != last:
-            snapshots[k] = tracker.shape_points()
-            last = len(snapshots[k])
+    snapshots: dict[int, np.ndarray] = {}
+
+    def keep_changed_shape(tracker, estimate) -> None:
+        if not snapshots or len(tracker.shape.points) != len(snapshots[max(snapshots)]):
+            snapshots[estimate.frame] = tracker.shape_points()
+
+    result = track(seq, init_box, start, end, config, on_frame=keep_changed_shape)
     keys = sorted(snapshots)
     if len(keys) > shots:
         keys = sorted({keys[int(round(i))] for i in np.linspace(0, len(keys) - 1, shots)})
-    result = TrackResult(estimates, init_box.size, tracker.shape_points(), config)
     growth = ShapeGrowth(object_id, start, tuple(float(v) for v in init_box.size), tuple(keys),
                          tuple(snapshots[k] for k in keys))
     return result, growth
