@@ -22,7 +22,7 @@ from ..errors import InputError
 from ..io.sequence import Sequence
 from ..objects.selection import DEFAULT_SELECTION
 from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample
-from ..objects.shapes import ShapeParams, TrackBoxes, object_points_by_frame
+from ..objects.shapes import ShapeParams, box_capture_time, TrackBoxes, object_points_by_frame
 from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 
 __all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]
@@ -95,12 +95,12 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
                     continue
                 world = transform_points(seq.frames[record.frame].world_from_ego, sweep.xyz)
                 inside = points_in_box(world, track.box_at_record(record))
-                if inside.sum() >= 3:
-                    times[i] = seq.frames[record.frame].timestamp_ns + int(np.median(sweep.time_offset_ns[inside]))
+                times[i] = box_capture_time(seq.frames[record.frame].timestamp_ns, sweep.time_offset_ns[inside], 3)
         states = [r.state.to_array() for r in track.frames]
         size = track.size.to_array()
-        out.append(TrackedObject(track.object_id, track.label or "", Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS),
-                                 shape, mesh_for(shape, size, mesh_method), size, f"track:{Path(directory)}"))
+        trajectory = Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS)
+        out.append(TrackedObject(track.object_id, track.label or "", trajectory, shape, mesh_for(shape, size, mesh_method),
+                                 size, f"track:{Path(directory)}"))
     return out
 
 
