@@ -617,12 +617,13 @@ class Tracker:
 
 def track(source: FrameSource, init_box: Box, start: int = 0, end: int | None = None,
           config: TrackerConfig | None = None, progress=None, detections: Detections | None = None,
-          initial_motion: np.ndarray | None = None) -> TrackResult:
+          initial_motion: np.ndarray | None = None, on_frame=None) -> TrackResult:
     """Track from ``init_box`` (world frame, at frame ``start``) through frame ``end`` (inclusive, default: last).
 
     ``progress``: optional callable(iterable) -> iterable (e.g. tqdm) wrapping the frame loop.
     ``detections``: per-frame detections for the Detection term (``weight_det > 0``) or the ``det`` baseline
     (``method="det"``, :mod:`tracker.det_baseline`). ``initial_motion``: see :meth:`Tracker.start`.
+    ``on_frame``: optional callable(tracker, estimate) after every frame (e.g. to record the shape growing).
     """
     config = config or TrackerConfig()
     n = len(source)
@@ -639,7 +640,11 @@ def track(source: FrameSource, init_box: Box, start: int = 0, end: int | None = 
         prev = source.lidar_frame(start - 1)
         previous_pose = (int(prev.timestamp_ns), np.asarray(prev.world_from_ego, dtype=np.float64))
     estimates = [tracker.start(source.lidar_frame(start), init_box, previous_pose, initial_motion)]
+    if on_frame is not None:
+        on_frame(tracker, estimates[-1])
     frames = range(start + 1, end + 1)
     for k in (progress(frames) if progress else frames):
         estimates.append(tracker.step(source.lidar_frame(k), None if detections is None else detections.get(k)))
+        if on_frame is not None:
+            on_frame(tracker, estimates[-1])
     return TrackResult(estimates, init_box.size, tracker.shape_points(), config)
