@@ -6,19 +6,24 @@ The one writer of track files: ``sot-apps track`` and the pipeline's tracking st
 
 from __future__ import annotations
 
+import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tracker import Box, TrackResult, TrackerConfig, points_in_box, track
+from tracker import Box, Detections, TrackResult, TrackerConfig, points_in_box, track
 
 from .errors import InputError
 from .io.sequence import Sequence
+from .io.atomic import write_text
 from .io.tracks import FrameRecord, Size, TrackFile, write_track
 
-__all__ = ["parse_init_box", "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence", "refine_track_offline", "track_result_to_trackfile",
+__all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read_shape_growth", "parse_init_box",
+           "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence",
+           "refine_track_offline", "track_result_to_trackfile",
            "write_track_result", "first_box_with_points", "TrackingFailed", "MIN_INIT_POINTS"]
 
 MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box
@@ -82,8 +87,10 @@ def resolve_span(seq: Sequence, start: int, end: int | None) -> tuple[int, int]:
 
 
 def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None = None,
-                   config: TrackerConfig | None = None, progress: bool = True) -> TrackResult:
-    """Track ``init_box`` (world frame at ``start``) through frame ``end`` (inclusive).
+                   config: TrackerConfig | None = None, progress: bool = True,
+                   detections: Detections | None = None) -> TrackResult:
+    """Track ``init_box`` (world frame at ``start``) through frame ``end`` (inclusive); ``detections``
+    feed the Detection term / the Det baseline.
 
     Frames without a sweep are passed to the tracker as such (``LidarFrame.has_sweep`` False): it
     predicts through them with the elapsed time and flags them ``no_sweep``.
@@ -100,7 +107,7 @@ def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None
 
         def wrap(frames):
             return tqdm(frames, desc="track", unit="frame", leave=False)
-    return track(seq, init_box, start, end, config, progress=wrap)
+    return track(seq, init_box, start, end, config, progress=wrap, detections=detections)
 
 
 def first_box_with_points(seq: Sequence, annotated: list[tuple[int, Box]] | tuple[tuple[int, Box], ...],
@@ -163,3 +170,65 @@ def write_track_result(directory: str | Path, seq: Sequence, result: TrackResult
 def init_points(seq: Sequence, frame: int, box: Box) -> int:
     """Number of sweep points inside ``box`` at ``frame`` (for a warning when the init box is empty)."""
     return int(points_in_box(seq.points_world(frame), box).sum())
+
+
+# ------------------------------------------------------------------------------------- shape growth
+
+SHAPE_GROWTH_FILE = "shape_growth.json"
+
+
+@dataclass(frozen=True)
+class ShapeGrowth:
+    """The tracker's aggregated shape (object frame) at a few frames: the start, the last change and evenly
+    spaced changes between (a change is a key frame that added points). What the report's shape-growth
+    figure draws."""
+
+    object_id: str
+    start_frame: int
+    size: tuple[float, float, float]
+    frames: tuple[int, ...]
+    points: tuple[np.ndarray, ...]     # (M_i, 3) per frame
+
+    def to_json(self) -> dict:
+        return {"object_id": self.object_id, "start_frame": self.start_frame, "size": list(self.size),
+                "snapshots": [{"frame": int(k), "points": np.round(p, 3).tolist()}
+                              for k, p in zip(self.frames, self.points)]}
+
+    @classmethod
+    def from_json(cls, doc: dict) -> "ShapeGrowth":
+        snaps = doc["snapshots"]
+        return cls(str(doc["object_id"]), int(doc["start_frame"]), tuple(float(v) for v in doc["size"]),
+                   tuple(int(s["frame"]) for s in snaps),
+                   tuple(np.asarray(s["points"], dtype=np.float64).reshape(-1, 3) for s in snaps))
+
+
+def track_with_shape_growth(seq: Sequence, init_box: Box, start: int, end: int, config: TrackerConfig,
+                            object_id: str, shots: int = 4, detections: Detections | None = None
+                            ) -> tuple[TrackResult, ShapeGrowth]:
+    """:func:`tracker.track` (same frames, same result) that also keeps the shape after every frame that changed
+    it, and returns ``shots`` of those snapshots."""
+    snapshots: dict[int, np.ndarray] = {}
+
+    def keep_changed_shape(tracker, estimate) -> None:
+        if not snapshots or len(tracker.shape.points) != len(snapshots[max(snapshots)]):
+            snapshots[estimate.frame] = tracker.shape_points()
+
+    result = track(seq, init_box, start, end, config, detections=detections, on_frame=keep_changed_shape)
+    keys = sorted(snapshots)
+    if len(keys) > shots:
+        keys = sorted({keys[int(round(i))] for i in np.linspace(0, len(keys) - 1, shots)})
+    growth = ShapeGrowth(object_id, start, tuple(float(v) for v in init_box.size), tuple(keys),
+                         tuple(snapshots[k] for k in keys))
+    return result, growth
+
+
+def write_shape_growth(directory: str | Path, growth: ShapeGrowth) -> Path:
+    path = Path(directory) / SHAPE_GROWTH_FILE
+    write_text(path, json.dumps(growth.to_json(), separators=(",", ":")))
+    return path
+
+
+def read_shape_growth(directory: str | Path) -> ShapeGrowth | None:
+    """The record written by :func:`write_shape_growth`, or None when the track has none."""
+    path = Path(directory) / SHAPE_GROWTH_FILE
+    return ShapeGrowth.from_json(json.loads(path.read_text())) if path.is_file() else None

@@ -114,3 +114,10 @@ def test_apps_import_the_tracker_through_its_package():
     bad = sorted(f"{m} imports {i}" for m, found in graph.items() if _in(m, "sot_apps") and not _in(m, "sot_apps.io")
                  for i in found if i.startswith("tracker.") and i.split(".")[1] not in __import__("tracker").__all__)
     assert bad == []
+
+
+def test_report_runs_no_tracker_and_no_evaluation():
+    """The report draws the records the pipeline saved (shape_growth.json, motion_eval.json)."""
+    forbidden = ("tracker.Tracker", "tracker.track", "tracker.sotracker", "sot_apps.evaluation.motion.evaluate_motion",
+                 "sot_apps.motion_export")
+    assert [v for f in forbidden for v in violations("report renders what it is given", "sot_apps.report", f)] == []

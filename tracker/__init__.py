@@ -4,12 +4,14 @@ numpy and scipy only; this package never imports ``sot_apps``.
 """
 
 from .association import NearestNeighbors, RansacResult, fit_rigid_2d, ransac_rigid_2d
-from .config import PRESETS, TrackerConfig, get_preset, preset_names
+from .config import DETECTION_PRESETS, PRESETS, TrackerConfig, get_preset, preset_names
+from .det_baseline import ConstantVelocityFilter
+from .detection import Detections, FrameDetections, align_heading
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, make_transform, points_in_box, rotation_z, transform_points, wrap_angle
 from .ground import GroundParams, fit_plane, ground_mask, remove_ground
 from .metrics import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
-                      PooledMetrics, TrackletScores, accuracy, centre_errors_batch, chamfer_distance, difficulty, iou_3d_batch,
+                      PooledMetrics, TrackletScores, accuracy, centre_errors_batch, iou_bev_batch, chamfer_distance, difficulty, iou_3d_batch,
                       pool_metrics, robustness, score_tracklet, tracklet_metrics, voxel_downsample_centres)
 from .motion import MotionPrior
 from .offline import refine_offline
@@ -30,4 +32,5 @@ __all__ = [
     "DIFFICULTIES", "DIFFICULTY_THRESHOLDS", "PRECISION_THRESHOLDS", "ROB_THRESHOLDS", "SUCCESS_THRESHOLDS",
     "PooledMetrics", "TrackletScores", "centre_errors_batch", "iou_3d_batch", "difficulty", "pool_metrics",
     "score_tracklet", "tracklet_metrics", "accuracy", "robustness",
+    "DETECTION_PRESETS", "Detections", "FrameDetections", "align_heading", "ConstantVelocityFilter", "iou_bev_batch",
 ]

@@ -14,7 +14,7 @@ from typing import Any
 
 from .ground import GroundParams
 
-__all__ = ["TrackerConfig", "PRESETS", "get_preset", "preset_names"]
+__all__ = ["TrackerConfig", "PRESETS", "DETECTION_PRESETS", "get_preset", "preset_names"]
 
 
 @dataclass(frozen=True)
@@ -26,6 +26,12 @@ class TrackerConfig:
     weight_shape: float = 1.0
     weight_mc: float = 0.1
     weight_mp: float = 0.1
+    # --- Detection term (Det+SOT, docs/detection.md); weight 0 = off. ``method="det"``: no point
+    # registration at all, the detections associated with a constant-velocity Kalman filter (the paper's Det row)
+    weight_det: float = 0.0
+    det_min_score: float = 0.5           # a detection below this score is never used
+    det_min_iou: float = 0.1             # BEV IoU with the motion model's prediction needed to associate
+    method: str = "sot"                  # "sot" (SOTracker, with Det when weight_det > 0) or "det" (baseline)
     # --- search regions (box size factors, applied to length, width AND height)
     search_scale: float = 1.5            # gamma_in
     first_search_scale: float = 3.0      # frame-1 wide search
@@ -143,6 +149,8 @@ class TrackerConfig:
             raise ValueError(f"z_mode must be 'icp', 'ground' or 'fixed', not {self.z_mode!r}")
         if self.prior_frame not in ("world", "object"):
             raise ValueError(f"prior_frame must be 'world' or 'object', not {self.prior_frame!r}")
+        if self.method not in ("sot", "det"):
+            raise ValueError(f"method must be 'sot' or 'det', not {self.method!r}")
         if self.mp_reference not in ("prior", "iteration"):
             raise ValueError(f"mp_reference must be 'prior' or 'iteration', not {self.mp_reference!r}")
         choices = {"association": ("global", "crop"), "ransac_mode": ("fixed", "upstream"),
@@ -158,6 +166,8 @@ class TrackerConfig:
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive")
 
+
+DET_WEIGHT = 0.03  # Detection-term weight of det_sot: ~ (sigma_ICP / sigma_Det)^2, docs/detection.md
 
 _FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
                       anderson_depth=3, symmetric_mc=False, prior_frame="object", alpha=0.6, max_yaw_change=0.03,
@@ -180,7 +190,15 @@ PRESETS: dict[str, TrackerConfig] = {
     "no_ground_removal": _FULL.replace(ground_removal=False, preset="no_ground_removal"),
     "no_ransac": _FULL.replace(use_ransac=False, preset="no_ransac"),
     "no_subshape": _FULL.replace(use_subshape=False, preset="no_subshape"),
+    # the paper's Det+SOT row: full + the Detection term (weight: docs/detection.md)
+    "det_sot": _FULL.replace(weight_det=DET_WEIGHT, preset="det_sot"),
+    # the paper's Det row: detections + a constant-velocity Kalman filter, no point registration
+    "det": _FULL.replace(method="det", preset="det"),
 }
+
+
+# presets that need per-frame detections (track(..., detections=...))
+DETECTION_PRESETS: tuple[str, ...] = ("det_sot", "det")
 
 
 def preset_names() -> list[str]:

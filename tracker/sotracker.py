@@ -12,6 +12,10 @@ Per frame k (the paper's Algorithms 1 and 2):
 4. keep the object points, grow the shape at key frames and update the motion prior.
 
 Frame 1 has no motion prior: an ICP-only search in the start box scaled 3.0 precedes the normal step.
+
+With ``weight_det > 0`` (Det+SOT) and the frame's detections passed to ``step``, the detection associated
+with the prediction S^_k (:func:`tracker.detection.associate_detection`) adds the Detection term to the
+loss of step 3; a frame without points then takes the motion from the detection and the prior.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import numpy as np
 from .association import NearestNeighbors, random_subset, ransac_rigid_2d
 from .config import TrackerConfig
 from .finder import finder_icp, resample
+from .detection import Detections, FrameDetections, associate_detection, detection_motion
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
@@ -31,7 +36,8 @@ from .motion import MotionPrior
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
 from .sweep_ground import cached_sweep_ground_mask
-from .terms import ResidualBlock, apply_motion, motion_consistency_block, motion_prior_block, point_pair_block
+from .terms import (ResidualBlock, apply_motion, detection_block, motion_consistency_block, motion_prior_block,
+                    point_pair_block)
 
 __all__ = ["FrameEstimate", "TrackResult", "Tracker", "track", "deskew_points"]
 
@@ -241,10 +247,13 @@ class Tracker:
         return world, flags
 
     # ------------------------------------------------------------------ API
-    def start(self, frame: LidarFrame, box: Box, previous_pose: tuple[int, np.ndarray] | None = None) -> FrameEstimate:
+    def start(self, frame: LidarFrame, box: Box, previous_pose: tuple[int, np.ndarray] | None = None,
+              initial_motion: np.ndarray | None = None) -> FrameEstimate:
         """Begin a track at ``frame`` with the (world-frame) ``box``.
 
         ``previous_pose``: (timestamp_ns, world_from_ego) of the frame before, used only to de-skew.
+        ``initial_motion``: a known per-frame motion [dx, dy, dz, dtheta] (world frame), e.g. from associated
+        detections: the motion prior starts from it instead of zero (frame 1's search starts there).
         """
         t0 = time.perf_counter()
         c = self.config
@@ -257,6 +266,8 @@ class Tracker:
         self.first_box = box
         self.box = box
         self.prior = MotionPrior(c.alpha, c.prior_frame)
+        if initial_motion is not None:
+            self.prior.update(np.asarray(initial_motion, dtype=np.float64), box.heading)
         self.shape = ShapeModel(c.voxel_size)
         self.subshape = SubShape(c.subshape_frames if c.use_subshape else 0, c.voxel_size)
         self.steps = 0
@@ -356,7 +367,8 @@ class Tracker:
         return src[:0], idx[:0], tgt[:0]
 
     def _estimate(self, target: _Target, x0: np.ndarray, scale: float, outer: int, icp_only: bool,
-                  mp_reference: np.ndarray | None, flags: list[str]) -> tuple[np.ndarray, dict]:
+                  mp_reference: np.ndarray | None, flags: list[str],
+                  det_target: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
         """Outer loop of Algorithm 2 from motion ``x0``; returns the motion and diagnostics."""
         c = self.config
         prev = self.box
@@ -427,6 +439,8 @@ class Tracker:
                     blocks.append(motion_consistency_block(xx, prev.heading, c.weight_mc, c.symmetric_mc))
                 if use_priors and c.weight_mp > 0 and reference is not None:
                     blocks.append(motion_prior_block(xx, reference, c.weight_mp))
+                if use_priors and det_target is not None:
+                    blocks.append(detection_block(xx, det_target, c.weight_det))
                 return blocks
 
             # the LM stops on a step below a tenth of the outer tolerance (at least 1e-8: never a fixed 50 steps)
@@ -446,13 +460,22 @@ class Tracker:
             flags.append("no_shape_inliers")
         return x, info
 
-    def step(self, frame: LidarFrame) -> FrameEstimate:
+    def detection_target(self, prediction: Box, detections: FrameDetections | None) -> np.ndarray | None:
+        """The Detection term's target motion S_D - S_{k-1} for this frame, or None (term off): the
+        detection associated with ``prediction`` (the motion model's predicted box S^_k)."""
+        c = self.config
+        if c.weight_det <= 0 or detections is None:
+            return None
+        det = associate_detection(prediction, detections, c.det_min_score, c.det_min_iou)
+        return None if det is None else detection_motion(self.box, det, prediction.heading)
+
+    def step(self, frame: LidarFrame, detections: FrameDetections | None = None) -> FrameEstimate:
         """Estimate the object's state in ``frame`` (the frame after the previous call).
 
         The motion prior is scaled by the elapsed time over the nominal frame interval (the first
         step's). A frame without a sweep (``frame.has_sweep`` False) is a prediction only, flagged
-        ``no_sweep``.
-        """
+        ``no_sweep``. ``detections``: the frame's detections (world boxes), used by the Detection term when
+        ``config.weight_det > 0``."""
         if not self._started:
             raise RuntimeError("Tracker.step called before Tracker.start")
         t0 = time.perf_counter()
@@ -475,7 +498,10 @@ class Tracker:
         # coasting (no data) keeps the velocity but lets the turn rate die out
         prior[3] *= c.coast_yaw_decay ** self._coasting
         search_scale = c.first_search_scale if first else c.search_scale
-        reach_box = _box_moved(prev, prior)
+        reach_box = _box_moved(prev, prior)  # the motion model's prediction S^_k
+        det_target = self.detection_target(reach_box, detections)
+        if det_target is not None:
+            flags.append("det")
         local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale))
         flags += point_flags
         x = prior.copy()
@@ -494,12 +520,17 @@ class Tracker:
                 reference = x.copy()
             else:
                 reference = prior
-            x, info = self._estimate(target, x, c.search_scale, c.outer_iterations, False, reference, flags)
+            x, info = self._estimate(target, x, c.search_scale, c.outer_iterations, False, reference, flags,
+                                     det_target)
             if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
                 flags.append("low_points")
                 if c.data_free_frames == "prior":
                     flags.append("prior_only")
                     x = np.zeros(4) if first else prior.copy()
+        if "prior_only" in flags and det_target is not None:
+            # no points to register: the loss is the motion prior and the Detection term alone
+            flags = [f for f in flags if f != "prior_only"] + ["det_only"]
+            x = (c.weight_mp * prior + c.weight_det * det_target) / (c.weight_mp + c.weight_det)
         if not np.isfinite(x).all():
             flags.append("prior_only")
             x = prior.copy()
@@ -585,23 +616,35 @@ class Tracker:
 
 
 def track(source: FrameSource, init_box: Box, start: int = 0, end: int | None = None,
-          config: TrackerConfig | None = None, progress=None) -> TrackResult:
+          config: TrackerConfig | None = None, progress=None, detections: Detections | None = None,
+          initial_motion: np.ndarray | None = None, on_frame=None) -> TrackResult:
     """Track from ``init_box`` (world frame, at frame ``start``) through frame ``end`` (inclusive, default: last).
 
     ``progress``: optional callable(iterable) -> iterable (e.g. tqdm) wrapping the frame loop.
+    ``detections``: per-frame detections for the Detection term (``weight_det > 0``) or the ``det`` baseline
+    (``method="det"``, :mod:`tracker.det_baseline`). ``initial_motion``: see :meth:`Tracker.start`.
+    ``on_frame``: optional callable(tracker, estimate) after every frame (e.g. to record the shape growing).
     """
     config = config or TrackerConfig()
     n = len(source)
     end = n - 1 if end is None else end
     if not 0 <= start < n or not start <= end < n:
         raise IndexError(f"frames {start}..{end} are outside 0..{n - 1}")
+    if config.method == "det":
+        from .det_baseline import track_detections
+
+        return track_detections(source, init_box, start, end, config, detections or {}, progress)
     tracker = Tracker(config)
     previous_pose = None
     if config.deskew and start > 0:
         prev = source.lidar_frame(start - 1)
         previous_pose = (int(prev.timestamp_ns), np.asarray(prev.world_from_ego, dtype=np.float64))
-    estimates = [tracker.start(source.lidar_frame(start), init_box, previous_pose)]
+    estimates = [tracker.start(source.lidar_frame(start), init_box, previous_pose, initial_motion)]
+    if on_frame is not None:
+        on_frame(tracker, estimates[-1])
     frames = range(start + 1, end + 1)
     for k in (progress(frames) if progress else frames):
-        estimates.append(tracker.step(source.lidar_frame(k)))
+        estimates.append(tracker.step(source.lidar_frame(k), None if detections is None else detections.get(k)))
+        if on_frame is not None:
+            on_frame(tracker, estimates[-1])
     return TrackResult(estimates, init_box.size, tracker.shape_points(), config)

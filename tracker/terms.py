@@ -1,4 +1,4 @@
-"""The four terms of the SOTracker loss as residual blocks with analytic Jacobians.
+"""The terms of the SOTracker loss (ICP, Shape, MC, MP and the Det+SOT Detection term) as residual blocks with analytic Jacobians.
 
 Parameters x = [dx, dy, dz, dtheta]: rotate by dtheta about the vertical axis through ``pivot`` (the
 previous box centre), then translate by (dx, dy, dz) — the paper's Eq. (3). Every term is a sum of
@@ -12,7 +12,8 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["ResidualBlock", "apply_motion", "point_pair_block", "motion_consistency_block", "motion_prior_block"]
+__all__ = ["ResidualBlock", "apply_motion", "point_pair_block", "motion_consistency_block", "motion_prior_block",
+           "detection_block"]
 
 
 @dataclass(frozen=True)
@@ -127,3 +128,11 @@ def motion_consistency_block(x: np.ndarray, previous_heading: float, weight: flo
 def motion_prior_block(x: np.ndarray, reference: np.ndarray, weight: float) -> ResidualBlock:
     """||x - reference||^2: stay close to the predicted motion."""
     return ResidualBlock("mp", np.asarray(x, dtype=np.float64) - reference, np.eye(4), weight)
+
+
+def detection_block(x: np.ndarray, target: np.ndarray, weight: float) -> ResidualBlock:
+    """The paper's Detection term ||dS_k - (S_D - S_{k-1})||^2: ``target`` is the associated detection's
+    motion from the previous box (:func:`tracker.detection.detection_motion`)."""
+    r = np.asarray(x, dtype=np.float64) - target
+    r[3] = (r[3] + np.pi) % (2.0 * np.pi) - np.pi
+    return ResidualBlock("det", r, np.eye(4), weight)

@@ -72,7 +72,8 @@ def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.nda
 def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int = 20, sensor_name: str = "waymo_top") -> dict:
     from ..lidar_sim.noise import Realism
     from ..raycast import RaycastScene
-    from ..lidar_sim.scan import SimObject, Trajectory, simulate_scan
+    from ..lidar_sim.scan import SimObject, simulate_scan
+    from ..objects.trajectory import Trajectory
     from ..lidar_sim.sensors import load_sensor
 
     pinned = _pin_one_core()

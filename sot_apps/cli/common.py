@@ -30,3 +30,41 @@ def add_action(subparsers, name: str, help: str, description: str, examples: lis
     """A nested action (``bank build``, ``sensor fit``) with examples in its ``--help``."""
     return subparsers.add_parser(name, help=help, description=description, epilog=example_epilog(*examples),
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def add_detections_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--detections FILE`` (+ its format and KITTI calib) for the Det / Det+SOT presets."""
+    parser.add_argument("--detections", metavar="FILE",
+                        help="detections for the det / det_sot presets: our detections JSON, KITTI label text with a "
+                             "score column (file or directory), or nuScenes results JSON (docs/detection.md)")
+    parser.add_argument("--detections-format", choices=("json", "kitti", "nuscenes"), default=None,
+                        help="format of --detections (default: from the content)")
+    parser.add_argument("--kitti-calib", metavar="FILE",
+                        help="KITTI calib file of KITTI detections (default: KITTI's camera axes at the LiDAR origin)")
+
+
+def load_detections(args: argparse.Namespace, sequence: Sequence):
+    """The detections named by ``--detections`` (world boxes per frame), or None."""
+    if not getattr(args, "detections", None):
+        return None
+    from ..io.detections import read_sequence_detections
+
+    return read_sequence_detections(args.detections, sequence, args.detections_format, args.kitti_calib)
+
+
+def check_profile(profile: str) -> None:
+    """An unknown simulated-detection profile is an InputError."""
+    from ..detection.simulate import NOISE_PROFILES
+    from ..errors import InputError
+
+    if profile not in NOISE_PROFILES:
+        raise InputError(None, f"unknown detection profile {profile!r}; known: {', '.join(NOISE_PROFILES)}")
+
+
+def simulated_detections(sequence: Sequence, profile: str, seed: int, progress=None):
+    """Simulated vehicle detections (docs/detection.md) of ``sequence``."""
+    from ..detection.simulate import simulate_detections
+    from ..objects.selection import DEFAULT_SELECTION
+
+    check_profile(profile)
+    return simulate_detections(sequence, profile, seed, DEFAULT_SELECTION.vehicle_labels(sequence), progress)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
+                     check_profile, simulated_detections)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -17,7 +18,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                      "box holds >= 15 points on average over its first 10 frames (the 9 dev tracks on pandaset_002)."),
         examples=["sot-apps eval ../shared/data/pandaset_002 --all-moving",
                   "sot-apps eval ../shared/data/pandaset_002 --all-moving --preset all --offline --json eval.json",
-                  "sot-apps eval ../shared/data/pandaset_002 --tracks 20d13d1d,91aa5b5c --preset full icp_mp --seeds 3"])
+                  "sot-apps eval ../shared/data/pandaset_002 --tracks 20d13d1d,91aa5b5c --preset full icp_mp --seeds 3",
+                  "sot-apps eval ../shared/data/pandaset_002 --all-moving --preset det full det_sot "
+                  "--simulate-detections learned --seeds 3"])
     add_sequence_argument(parser)
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("--tracks", metavar="ID,...", help="comma-separated track ids (unique prefixes allowed)")
@@ -29,6 +32,10 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--end-frame", type=int, metavar="K", help="stop every track at frame K (default: span end)")
     parser.add_argument("--no-per-track", action="store_true", help="omit the per-track table")
     parser.add_argument("--json", metavar="FILE", help="also write the full report as JSON (atomically)")
+    add_detections_arguments(parser)
+    parser.add_argument("--simulate-detections", metavar="PROFILE",
+                        help="instead of --detections: ground truth with a detector's errors, simulated per seed "
+                             "(profiles: learned, noisy, clean; docs/detection.md)")
     parser.set_defaults(func=run)
     return parser
 
@@ -42,8 +49,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise InputError(None, f"--seeds must be at least 1, not {args.seeds}")
-    presets = resolve_presets(args.preset)
+    if args.detections and args.simulate_detections:
+        raise InputError(None, "give --detections or --simulate-detections, not both")
+    presets = resolve_presets(args.preset, with_detections=bool(args.detections or args.simulate_detections))
     sequence = load_sequence(args)
+    detections = load_detections(args, sequence)
+    if args.simulate_detections:
+        check_profile(args.simulate_detections)
+        detections = lambda seed: simulated_detections(sequence, args.simulate_detections, seed)  # noqa: E731
     ids = [t.strip() for t in args.tracks.split(",") if t.strip()] if args.tracks else None
     if args.tracks is not None and not ids:
         raise InputError(None, "--tracks is empty")
@@ -51,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         sequence.check_index(args.end_frame)
     progress = lambda jobs: tqdm(jobs, desc="eval", unit="track", file=sys.stderr, leave=False)  # noqa: E731
     report = evaluate(sequence, ids, presets, offline=args.offline, seeds=list(range(args.seeds)),
-                      end_frame=args.end_frame, progress=progress)
+                      end_frame=args.end_frame, progress=progress, detections=detections)
     print(format_report(report, per_track=not args.no_per_track))
     if args.json:
         write_json(args.json, report.to_dict())

@@ -56,6 +56,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("pipeline", metavar="PIPELINE.json", help="pipeline file")
     parser.add_argument("--out", metavar="DIR", help="output directory (overrides the file's 'out')")
     add_executor_arguments(parser)
+    parser.add_argument("--detections", metavar="FILE",
+                        help="per-frame detections of the (single) sequence, for stages.track.preset det / det_sot")
     parser.add_argument("--report", action="store_true",
                         help="also write OUT/report/index.html (figures of the first sequences, as `sot-apps demo`)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from ..pipeline.config import load_config
     from ..pipeline.runner import run_pipeline
 
-    config = load_config(args.pipeline, out=args.out)
+    config = load_config(args.pipeline, out=args.out, detections=args.detections)
     spec = executor_from_args(args)
     result = run_pipeline(config, spec, progress=not args.quiet)
     print(f"{len(result.plan.objects)} objects in {len(result.plan.sequences)} sequences, {spec.describe()}, "

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tracker import get_preset, preset_names
+from tracker import DETECTION_PRESETS, get_preset, preset_names
 
 from ..errors import InputError
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -43,6 +43,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="after the online pass, refine all states jointly against the final shape with a "
                              "smoothness prior, and rebuild the shape (docs/evaluation.md)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_detections_arguments(parser)
     parser.set_defaults(func=run)
     return parser
 
@@ -56,6 +57,9 @@ def run(args: argparse.Namespace) -> int:
         overrides["deskew"] = args.deskew
     config = get_preset(args.preset, **overrides)
     seq = load_sequence(args)
+    detections = load_detections(args, seq)
+    if detections is None and args.preset in DETECTION_PRESETS:
+        raise InputError(None, f"preset {args.preset!r} needs --detections FILE")
     label = None
     if args.track_id is not None:
         object_id = seq.resolve_track_id(args.track_id)
@@ -83,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         object_id = "custom"
         start = 0 if args.start_frame is None else args.start_frame
         end = args.end_frame
-    result = track_sequence(seq, init_box, start, end, config, progress=not args.quiet)
+    result = track_sequence(seq, init_box, start, end, config, progress=not args.quiet, detections=detections)
     if init_points(seq, result.frames[0], init_box) == 0:
         sys.stderr.write(f"warning: the init box holds no points at frame {result.frames[0]}; "
                          "frames continue on the motion prior and are flagged\n")

@@ -26,7 +26,8 @@ from ..flow.annotate import FlowOptions, build_pair, compute_pair
 from ..flow.dense import RayCache
 from ..objects.meshes import Mesh
 from ..flow.objects import TrackedObject, mesh_for, objects_from_annotations
-from ..objects.trajectory import ObjectTrajectory
+from ..objects.shapes import box_capture_time
+from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 from tqdm import tqdm
 
 __all__ = ["flow_errors", "classical_flow", "synthetic_quality", "photometric_quality", "tracker_objects", "FlowScore"]
@@ -68,8 +69,9 @@ def classical_flow(image_k: np.ndarray, image_k1: np.ndarray, method: str) -> np
     raise ValueError(method)
 
 
-def _static(times: np.ndarray, state: np.ndarray) -> ObjectTrajectory:
-    return ObjectTrajectory.from_samples([int(times.min()) - 10**9, int(times.max()) + 10**9], [state, state])
+def _static(times: np.ndarray, state: np.ndarray) -> Trajectory:
+    return Trajectory.from_samples([int(times.min()) - 10**9, int(times.max()) + 10**9], [state, state], "extrapolate",
+                                   CAMERA_EXTRAPOLATION_NS)
 
 
 def _gt_objects(world) -> tuple[list[TrackedObject], int]:
@@ -79,7 +81,7 @@ def _gt_objects(world) -> tuple[list[TrackedObject], int]:
     for o in world.objects:
         traj = o.trajectory
         trajectory = (_static(times, traj.states[0]) if traj.is_static
-                      else ObjectTrajectory.from_samples(traj.times_ns, traj.states, max_extrapolation_ns=0))
+                      else Trajectory.from_samples(traj.times_ns, traj.states, "extrapolate", 0))
         mesh = Mesh(np.asarray(o.vertices, float), np.asarray(o.faces, np.int32))
         out.append(TrackedObject(o.id, o.label, trajectory, mesh.vertices, mesh, np.asarray(o.size, float), "gt"))
     for i, b in enumerate(world.background):
@@ -116,12 +118,12 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
             sweep = seq.sweep(e.frame)
             if sweep.time_offset_ns is not None and (i > 0 or box_time == "points"):
                 inside = points_in_box(transform_points(seq.frames[e.frame].world_from_ego, sweep.xyz), e.box)
-                if inside.sum() >= 3:
-                    stamp += int(np.median(sweep.time_offset_ns[inside]))
+                stamp = box_capture_time(stamp, sweep.time_offset_ns[inside], 3)
             times.append(stamp)
             states.append(e.state.to_array())
         size = np.asarray(result.size, float)
-        out.append(TrackedObject(vid, gt.label, ObjectTrajectory.from_samples(times, states), result.shape,
+        trajectory = Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS)
+        out.append(TrackedObject(vid, gt.label, trajectory, result.shape,
                                  mesh_for(result.shape, size, mesh_method), size, "tracker"))
     return out
 

@@ -213,24 +213,30 @@ def format_table(acc: MotionAccuracy, ks: Seq[int] = (1, 2, 5, 10, 15, 20, 25, 3
     return "\n".join(lines)
 
 
-def plot_accuracy(acc: MotionAccuracy, path: str | Path, title: str = "") -> None:
-    """PNG line plot (OpenCV drawing, no matplotlib): mean centre error (cm) vs k."""
+def plot_accuracy(acc: MotionAccuracy | dict, path: str | Path, title: str = "") -> None:
+    """PNG line plot (OpenCV drawing, no matplotlib): mean centre error (cm) vs k. ``acc`` may be a
+    :class:`MotionAccuracy` or its :meth:`~MotionAccuracy.to_json` document (what the pipeline saves)."""
     import cv2
 
     from ..io.atomic import write_bytes
 
+    doc = acc.to_json() if isinstance(acc, MotionAccuracy) else acc
+
+    def series(key: str) -> np.ndarray:
+        return np.array([np.nan if v is None else v for v in doc[key]], dtype=np.float64)
+
     W, H = 900, 560
     left, right, top, bottom = 90, 30, 60, 70
     img = np.full((H, W, 3), 255, np.uint8)
-    curves = [("exported (smoothed) 3D", acc.curve("centre_3d")[0], (200, 90, 20)),
-              ("exported (smoothed) BEV", acc.curve("centre_bev")[0], (60, 160, 60)),
-              ("raw tracker 3D", acc.curve("raw_centre_3d")[0], (60, 60, 220)),
-              ("exported 3D, median over tracks", acc.median_curve("centre_3d"), (160, 60, 160))]
+    curves = [("exported (smoothed) 3D", series("mean_centre_3d_by_k"), (200, 90, 20)),
+              ("exported (smoothed) BEV", series("mean_centre_bev_by_k"), (60, 160, 60)),
+              ("raw tracker 3D", series("mean_raw_centre_3d_by_k"), (60, 60, 220)),
+              ("exported 3D, median over tracks", series("median_centre_3d_by_k"), (160, 60, 160))]
     values = np.concatenate([c[1] for c in curves])
     ymax_cm = max(12.0, float(np.nanmax(values) * 100 * 1.1) if np.isfinite(values).any() else 12.0)
     ystep = 2.0 if ymax_cm <= 20 else 5.0 if ymax_cm <= 60 else 20.0
     ymax_cm = ystep * np.ceil(ymax_cm / ystep)
-    k_max = acc.horizon
+    k_max = int(doc["horizon"])
 
     def px(k: float, cm: float) -> tuple[int, int]:
         x = left + (k - 0) / k_max * (W - left - right)

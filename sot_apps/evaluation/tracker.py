@@ -25,8 +25,8 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
-                     Box, LidarFrame, PooledMetrics, TrackResult, TrackerConfig, TrackletScores, chamfer_distance,
+from tracker import (DETECTION_PRESETS, DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
+                     Box, Detections, LidarFrame, PooledMetrics, TrackResult, TrackerConfig, TrackletScores, chamfer_distance,
                      difficulty, get_preset, mean_points_in_boxes, pool_metrics, preset_names, pseudo_gt_shape,
                      score_tracklet, track, tracklet_metrics)
 
@@ -300,15 +300,19 @@ def _score(spec: TrackSpec, result: TrackResult, config: EvalConfig) -> Tracklet
     return dataclasses.replace(scores, shape_cd=cd)
 
 
-def resolve_presets(names: Sequence[str] | None) -> list[str]:
-    """Preset names, with ``all`` expanded; unknown names raise InputError."""
+def resolve_presets(names: Sequence[str] | None, with_detections: bool = False) -> list[str]:
+    """Preset names, with ``all`` expanded (the detection presets only ``with_detections``); unknown names,
+    and a detection preset without detections, raise InputError."""
     names = list(names or ["full"])
     out: list[str] = []
     for name in names:
-        expanded = preset_names() if name == "all" else [name]
+        expanded = ([p for p in preset_names() if with_detections or p not in DETECTION_PRESETS] if name == "all"
+                    else [name])
         for n in expanded:
             if n not in preset_names():
                 raise InputError(None, f"unknown preset {n!r}; known: {', '.join(preset_names())}, all")
+            if n in DETECTION_PRESETS and not with_detections:
+                raise InputError(None, f"preset {n!r} needs detections (--detections FILE or --simulate-detections)")
             if n not in out:
                 out.append(n)
     return out
@@ -317,10 +321,19 @@ def resolve_presets(names: Sequence[str] | None) -> list[str]:
 def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, presets: Sequence[str] = ("full",),
              offline: bool = False, seeds: Sequence[int] = (0,), config: EvalConfig = EvalConfig(),
              end_frame: int | None = None, progress: Callable[[Iterable], Iterable] | None = None,
-             refine: Callable[..., TrackResult] | None = None, with_shape: bool = True) -> EvalReport:
+             refine: Callable[..., TrackResult] | None = None, with_shape: bool = True,
+             detections: Detections | Callable[[int], Detections] | None = None) -> EvalReport:
     """Evaluate ``presets`` (online, plus offline-refined rows when ``offline``) on ``track_ids``
     (default: all moving vehicle tracks). ``refine(source, result, config) -> TrackResult`` overrides the
-    offline refinement (default: :func:`tracker.offline.refine_offline`)."""
+    offline refinement (default: :func:`tracker.offline.refine_offline`). ``detections``: per-frame
+    detections for the Det / Det+SOT presets, or a function seed -> detections (e.g. simulated per seed)."""
+    per_seed: dict[int, Detections | None] = {}
+
+    def detections_for(seed: int) -> Detections | None:
+        if seed not in per_seed:
+            per_seed[seed] = detections(seed) if callable(detections) else detections
+        return per_seed[seed]
+
     source = CachedSource(sequence)
     ids = list(track_ids) if track_ids else select_moving_vehicle_tracks(sequence, config, source)
     if not ids:
@@ -335,7 +348,8 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     for preset, seed, spec in (progress(jobs) if progress else jobs):
         tconfig = get_preset(preset, seed=int(seed))
         tracker_configs[preset] = get_preset(preset).to_dict()
-        result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], tconfig)
+        result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], tconfig,
+                       detections=detections_for(int(seed)))
         ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
         online[preset].append(RunRecord(preset, int(seed), spec.track_id, _score(spec, result, config), ms,
                                         _flag_counts(result)))

@@ -15,15 +15,15 @@ from pathlib import Path
 from typing import Iterable
 
 import numpy as np
-from tqdm import tqdm
 
-from tracker import Box, points_in_box, transform_points
+from tracker import points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence
 from ..objects.selection import DEFAULT_SELECTION
 from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample
-from ..objects.trajectory import ObjectTrajectory
+from ..objects.shapes import ShapeParams, box_capture_time, TrackBoxes, object_points_by_frame
+from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 
 __all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]
 
@@ -34,7 +34,7 @@ class TrackedObject:
 
     object_id: str
     label: str
-    trajectory: ObjectTrajectory
+    trajectory: Trajectory
     points: np.ndarray
     mesh: Mesh
     size: np.ndarray
@@ -97,12 +97,12 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
                     continue
                 world = transform_points(seq.frames[record.frame].world_from_ego, sweep.xyz)
                 inside = points_in_box(world, track.box_at_record(record))
-                if inside.sum() >= 3:
-                    times[i] = seq.frames[record.frame].timestamp_ns + int(np.median(sweep.time_offset_ns[inside]))
+                times[i] = box_capture_time(seq.frames[record.frame].timestamp_ns, sweep.time_offset_ns[inside], 3)
         states = [r.state.to_array() for r in track.frames]
         size = track.size.to_array()
-        out.append(TrackedObject(track.object_id, track.label or "", ObjectTrajectory.from_samples(times, states),
-                                 shape, mesh_for(shape, size, mesh_method), size, f"track:{Path(directory)}"))
+        trajectory = Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS)
+        out.append(TrackedObject(track.object_id, track.label or "", trajectory, shape, mesh_for(shape, size, mesh_method),
+                                 size, f"track:{Path(directory)}"))
     return out
 
 
@@ -132,54 +132,23 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
     if not tracks:
         raise InputError(seq.root, "the sequence has no annotations (needed by --from-annotations)")
     ids = [seq.resolve_track_id(t) for t in track_ids] if track_ids else sorted(tracks)
-    frame_list = sorted(set(range(len(seq.frames)) if frames is None else frames))
-    by_frame: dict[int, list[str]] = {}
-    for tid in ids:
-        for k in tracks[tid].frames:
-            if k in frame_list:
-                by_frame.setdefault(k, []).append(tid)
-    # Pass over the sweeps: box stamps, and candidate points near each box with their capture times.
-    candidates: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {tid: [] for tid in ids}
-    times: dict[str, dict[int, int]] = {tid: {} for tid in ids}
-    for k in tqdm(sorted(by_frame), desc="shapes from boxes", unit="frame", disable=not progress, leave=False):
-        sweep = seq.sweep(k)
-        world = transform_points(seq.frames[k].world_from_ego, sweep.xyz)
-        stamp_frame = seq.frames[k].timestamp_ns
-        offsets = sweep.time_offset_ns if sweep.time_offset_ns is not None else np.zeros(len(world), np.int64)
-        for tid in by_frame[k]:
-            box = tracks[tid].box_at(k)
-            local = transform_points(box.object_from_world(), world)
-            half = box.size / 2.0
-            inside = (np.abs(local) <= half + np.array([0.1, 0.1, 0.0])).all(axis=1)
-            stamp = stamp_frame
-            if box_time == "points" and sweep.time_offset_ns is not None and inside.sum() >= 3:
-                stamp += int(np.median(offsets[inside]))
-            times[tid][k] = stamp
-            near = (np.abs(local) <= half + np.array([2.0, 2.0, 0.0])).all(axis=1)
-            candidates[tid].append((world[near], stamp_frame + offsets[near]))
+    frame_list = set(range(len(seq.frames)) if frames is None else frames)
+    boxes = {tid: TrackBoxes(tuple(k for k in tracks[tid].frames if k in frame_list),
+                             tuple(b for k, b in zip(tracks[tid].frames, tracks[tid].boxes) if k in frame_list))
+             for tid in ids}
+    boxes = {tid: tb for tid, tb in boxes.items() if tb.frames}
+    if moving_only:
+        boxes = {tid: tb for tid, tb in boxes.items()
+                 if DEFAULT_SELECTION.track_motion(tracks[tid], seq.timestamps_ns).moving}
+    params = ShapeParams(ground_clearance=ground_clearance, capture_time=box_time == "points", end="extrapolate",
+                         max_extrapolation_ns=CAMERA_EXTRAPOLATION_NS)
+    points, trajectories = object_points_by_frame(seq, boxes, params, progress=progress)
     out = []
-    for tid in ids:
-        track = tracks[tid]
-        ks = [k for k in track.frames if k in frame_list]
-        if not ks:
-            continue
-        if moving_only and not DEFAULT_SELECTION.track_motion(track, seq.timestamps_ns).moving:
-            continue
-        stamps = [times[tid].get(k, seq.frames[k].timestamp_ns) for k in ks]
-        boxes: list[Box] = [track.box_at(k) for k in ks]
-        size = np.median(np.array([b.size for b in boxes]), axis=0)
-        trajectory = ObjectTrajectory.from_samples(stamps, [b.state.to_array() for b in boxes])
-        # Each point goes to the object frame with the object's pose at the point's own capture time.
-        parts = []
-        for (pts, t), k in zip(candidates[tid], [k for k in sorted(by_frame) if tid in by_frame[k]]):
-            if len(pts) == 0:
-                continue
-            local = trajectory.object_from_world_points(pts, t)
-            half = track.box_at(k).size / 2.0
-            keep = (np.abs(local) <= half + np.array([0.1, 0.1, 0.0])).all(axis=1) & (local[:, 2] > -half[2] + ground_clearance)
-            parts.append(local[keep])
+    for tid, tb in boxes.items():
+        size = np.median(np.array([b.size for b in tb.boxes]), axis=0)
+        parts = [points[tid][k] for k in sorted(points[tid])]
         shape = voxel_downsample(np.concatenate(parts) if parts else np.zeros((0, 3)), voxel)
-        out.append(TrackedObject(tid, track.label, trajectory, shape,
+        out.append(TrackedObject(tid, tracks[tid].label, trajectories[tid], shape,
                                  mesh_for(shape, size, mesh_method, extend_to_ground), size, "annotations"))
     return out
 
@@ -209,6 +178,6 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
         if not np.isfinite(states).all():
             out.append(obj)
             continue
-        out.append(replace(obj, trajectory=ObjectTrajectory.from_samples(traj.times_ns, states,
-                                                                          traj.max_extrapolation_ns)))
+        out.append(replace(obj, trajectory=Trajectory.from_samples(traj.times_ns, states, traj.end,
+                                                                    traj.max_extrapolation_ns)))
     return out

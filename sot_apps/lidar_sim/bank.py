@@ -30,7 +30,7 @@ from typing import Iterable
 
 import numpy as np
 
-from tracker import Box, points_in_box, transform_points
+from tracker import Box
 
 from ..errors import InputError
 from ..io.atomic import write_json
@@ -38,7 +38,7 @@ from ..io.ply import read_ply_mesh, read_ply_points, write_ply_mesh, write_ply_p
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
 from ..objects.meshes import SurfelParams, surfel_mesh
-from ..objects.trajectory import ObjectTrajectory
+from ..objects.shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
 
 __all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
            "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points",
@@ -162,46 +162,17 @@ def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: I
     then put into the object frame of the box interpolated to ITS OWN capture time, which undoes the
     rolling-scan smear of moving vehicles. Points below ``ground_clearance`` above the box bottom are dropped.
     """
-    from tqdm import tqdm
-
     tracks = seq.tracks()
     missing = [t for t in track_ids if t not in tracks]
     if missing:
         raise InputError(seq.root, f"no annotated track {missing[0]!r}")
     excluded = set(int(k) for k in exclude_frames)
-    stamps = seq.timestamps_ns
-    by_frame: dict[int, list[str]] = {}
-    for tid in track_ids:
-        for k in tracks[tid].frames:
-            by_frame.setdefault(k, []).append(tid)
-    # Pass 1: the points near each box, their capture times, and the box's observation time.
-    near_points: dict[str, dict[int, tuple[np.ndarray, np.ndarray]]] = {tid: {} for tid in track_ids}
-    seen_ns: dict[str, dict[int, float]] = {tid: {} for tid in track_ids}
-    for k in tqdm(sorted(by_frame), desc="aggregating", unit="frame", disable=not progress, leave=False):
-        pts_world = seq.points_world(k)
-        offsets = seq.sweep(k).time_offset_ns
-        for tid in by_frame[k]:
-            box = tracks[tid].box_at(k)
-            near = np.flatnonzero(points_in_box(pts_world, box, scale=(1.3, 1.3, 1.05)))
-            t = stamps[k] + (offsets[near] if offsets is not None else np.zeros(near.size, dtype=np.int64))
-            inside = points_in_box(pts_world[near], box)
-            seen_ns[tid][k] = float(np.median(t[inside])) if inside.any() else float(stamps[k])
-            if near.size and k not in excluded:
-                near_points[tid][k] = (pts_world[near], t)
-    # Pass 2: object-frame points with the box interpolated to each point's capture time.
-    out: dict[str, dict[int, np.ndarray]] = {tid: {} for tid in track_ids}
-    for tid in track_ids:
-        track = tracks[tid]
-        trajectory = ObjectTrajectory.from_samples([seen_ns[tid][k] for k in track.frames],
-                                                   [[b.x, b.y, b.z, b.heading] for b in track.boxes])
-        for k, (pts, t) in near_points[tid].items():
-            box = track.box_at(k)
-            local = trajectory.object_from_world_points(pts, t, hold=True)
-            half = box.size / 2.0 * 1.02
-            inside = (np.abs(local) <= half).all(axis=1) & (local[:, 2] > -box.height / 2 + ground_clearance)
-            if inside.any():
-                out[tid][k] = local[inside]
-    return out
+    boxes = {tid: TrackBoxes(tuple(tracks[tid].frames), tuple(tracks[tid].boxes)) for tid in track_ids}
+    params = ShapeParams(near=BoxMargin(scale=(1.3, 1.3, 1.05)), stamp=BoxMargin(), min_stamp_points=1,
+                         keep=BoxMargin(scale=(1.02, 1.02, 1.02)), ground_clearance=ground_clearance, end="hold")
+    points, _ = object_points_by_frame(seq, boxes, params, [k for k in range(len(seq.frames)) if k not in excluded],
+                                       progress)
+    return points
 
 
 def aggregate_tracks_points(seq: Sequence, track_ids: list[str], exclude_frames: Iterable[int] = (),
@@ -224,8 +195,6 @@ def entries_from_annotations(bank_root: Path, seq: Sequence, track_ids: list[str
                              params: SurfelParams = SurfelParams(), min_points: int = 50,
                              progress: bool = False) -> tuple[list[BankEntry], list[str]]:
     """Entries for annotated tracks; returns (entries, messages about skipped tracks)."""
-    from tqdm import tqdm
-
     entries, skipped = [], []
     tracks = seq.tracks()
     start = time.perf_counter()

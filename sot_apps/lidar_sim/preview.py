@@ -1,7 +1,9 @@
 """Bird's-eye-view preview PNG of a scan with its boxes (OpenCV).
 
-Image up = sensor +x (forward), image left = sensor +y. Background points are grey (brighter = higher),
-each object's points and box outline get their own colour; a short line marks each box's heading.
+Sensor frame from above, x to the right and y up (as every bird's-eye view of the project); a box's heading
+is the angle of its length axis from +x, counter-clockwise, drawn as a line from its centre to its front.
+The sensor is a white arrowhead (pointing along +x) at the origin, labelled, with range rings labelled in
+metres. Background points are grey (brighter = higher); each object's points and box get their own colour.
 """
 
 from __future__ import annotations
@@ -28,13 +30,17 @@ def bev_image(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], extent: f
     scale = size / (2.0 * extent)
 
     def to_px(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        col = (size / 2.0 - (y - centre[1]) * scale)
-        row = (size / 2.0 - (x - centre[0]) * scale)
+        col = (size / 2.0 + (x - centre[0]) * scale)
+        row = (size / 2.0 - (y - centre[1]) * scale)
         return col, row
 
     for r in (10, 20, 30, 40, 50, 75, 100):
         if r < extent * 1.5 and centre == (0.0, 0.0):
-            cv2.circle(image, (size // 2, size // 2), int(r * scale), (48, 48, 48), 1, cv2.LINE_AA)
+            cv2.circle(image, (size // 2, size // 2), int(r * scale), (60, 60, 60), 1, cv2.LINE_AA)
+            # labelled where the ring crosses the view's upper-left diagonal
+            p = (int(size / 2 - r * scale * 0.7071) + 3, int(size / 2 - r * scale * 0.7071) - 3)
+            if 0 <= p[0] < size - 30 and 12 <= p[1] < size:
+                cv2.putText(image, f"{r} m", p, cv2.FONT_HERSHEY_SIMPLEX, 0.4, (150, 150, 150), 1, cv2.LINE_AA)
     col, row = to_px(xyz[:, 0], xyz[:, 1])
     inside = (col >= 0) & (col < size) & (row >= 0) & (row < size)
     col, row = col[inside].astype(int), row[inside].astype(int)
@@ -56,7 +62,11 @@ def bev_image(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], extent: f
         c1, r1 = to_px(front[:1], front[1:])
         cv2.line(image, (int(c0[0]), int(r0[0])), (int(c1[0]), int(r1[0])), color, 1, cv2.LINE_AA)
     if centre == (0.0, 0.0):
-        cv2.drawMarker(image, (size // 2, size // 2), (255, 255, 255), cv2.MARKER_TRIANGLE_UP, 10, 1)
+        c = np.array([size / 2.0, size / 2.0])
+        tip = np.array([[c[0] + 9, c[1]], [c[0] - 6, c[1] - 6], [c[0] - 3, c[1]], [c[0] - 6, c[1] + 6]])
+        cv2.fillPoly(image, [np.round(tip * 16).astype(np.int32)], (255, 255, 255), cv2.LINE_AA, shift=4)
+        cv2.putText(image, "sensor (+x)", (int(c[0]) + 8, int(c[1]) + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                    (230, 230, 230), 1, cv2.LINE_AA)
     return image
 
 
@@ -70,8 +80,8 @@ def write_bev_png(path: Path, xyz: np.ndarray, instance: np.ndarray, boxes: list
 
 def object_gallery(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], panel: int = 240, half_m: float = 3.5,
                    columns: int | None = None) -> np.ndarray:
-    """One bird's-eye panel per object (+-``half_m`` around its box, sensor axes: up = +x), with range, heading
-    and point count; panels are ordered as the boxes, ``columns`` per row (default: up to 4)."""
+    """One bird's-eye panel per object (+-``half_m`` around its box; x right, y up), with range, heading and point
+    count, and an arrow towards the sensor; panels are ordered as the boxes, ``columns`` per row (default: up to 4)."""
     n = len(boxes)
     columns = columns or min(4, max(1, n))
     rows = (n + columns - 1) // columns
@@ -81,9 +91,19 @@ def object_gallery(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], pane
         # keep only this object's colour inside the panel's box outline
         corners = box.bev_corners()
         scale = panel / (2 * half_m)
-        pts = np.stack([panel / 2 - (corners[:, 1] - box.y) * scale, panel / 2 - (corners[:, 0] - box.x) * scale], axis=1)
+        pts = np.stack([panel / 2 + (corners[:, 0] - box.x) * scale, panel / 2 - (corners[:, 1] - box.y) * scale], axis=1)
         color = tuple(int(v) for v in _PALETTE[i % len(_PALETTE)])
         cv2.polylines(sub, [pts.round().astype(np.int32)], True, color, 1, cv2.LINE_AA)
+        front = np.array([np.cos(box.heading), np.sin(box.heading)]) * box.length / 2 * scale
+        cv2.line(sub, (panel // 2, panel // 2), (int(panel / 2 + front[0]), int(panel / 2 - front[1])), color, 1,
+                 cv2.LINE_AA)
+        towards = -np.array([box.x, box.y]) / max(float(np.hypot(box.x, box.y)), 1e-9)
+        start = np.array([panel - 34.0 if towards[0] > 0 else 34.0, 30.0])
+        end = start + 20 * np.array([towards[0], -towards[1]])
+        cv2.arrowedLine(sub, tuple(int(v) for v in start), tuple(int(v) for v in end), (230, 230, 230), 1,
+                        cv2.LINE_AA, tipLength=0.3)
+        cv2.putText(sub, "sensor", (int(start[0]) - 22, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (230, 230, 230), 1,
+                    cv2.LINE_AA)
         count = int((instance == i).sum())
         label = f"{np.hypot(box.x, box.y):.0f} m, {np.degrees(box.heading):.0f} deg, {count} pts"
         cv2.putText(sub, label, (6, panel - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (230, 230, 230), 1, cv2.LINE_AA)

@@ -21,43 +21,12 @@ import numpy as np
 
 from tracker import invert_transform
 
+from ..objects.trajectory import Trajectory, world_from_object
 from .noise import Realism, apply_range_noise, drop_mask, incidence_cosine, lambertian_intensity
 from ..raycast import RaycastScene, RayHits
 from .sensors import Sensor
 
-__all__ = ["Trajectory", "SimObject", "Scan", "simulate_scan", "range_image", "build_static_scene", "state_to_matrix"]
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """A 4-DOF trajectory sampled at increasing integer-ns times; states (T, 4) = x, y, z, heading (world).
-
-    A single sample is a static pose. Between samples states are interpolated linearly (heading unwrapped);
-    outside they are held.
-    """
-
-    times_ns: np.ndarray
-    states: np.ndarray
-
-    @classmethod
-    def static(cls, x: float, y: float, z: float, heading: float) -> "Trajectory":
-        return cls(np.zeros(1, dtype=np.int64), np.array([[x, y, z, heading]], dtype=np.float64))
-
-    @property
-    def is_static(self) -> bool:
-        return len(self.times_ns) == 1
-
-    def at(self, t_ns: np.ndarray | int) -> np.ndarray:
-        """(..., 4) states at the given times."""
-        t = np.asarray(t_ns, dtype=np.float64)
-        if self.is_static:
-            return np.broadcast_to(self.states[0], t.shape + (4,)).copy()
-        times = self.times_ns.astype(np.float64)
-        heading = np.unwrap(self.states[:, 3])
-        cols = [np.interp(t, times, self.states[:, i]) for i in range(3)] + [np.interp(t, times, heading)]
-        out = np.stack(cols, axis=-1)
-        out[..., 3] = (out[..., 3] + np.pi) % (2 * np.pi) - np.pi
-        return out
+__all__ = ["SimObject", "Scan", "simulate_scan", "range_image", "build_static_scene"]
 
 
 def rotate(rotation: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -71,18 +40,6 @@ def rotate(rotation: np.ndarray, points: np.ndarray) -> np.ndarray:
         np.multiply(x, rotation[i, 0], out=out[:, i])
         out[:, i] += y * rotation[i, 1]
         out[:, i] += z * rotation[i, 2]
-    return out
-
-
-def state_to_matrix(states: np.ndarray) -> np.ndarray:
-    """(..., 4) states -> (..., 4, 4) world_from_object transforms."""
-    states = np.asarray(states, dtype=np.float64)
-    c, s = np.cos(states[..., 3]), np.sin(states[..., 3])
-    out = np.zeros(states.shape[:-1] + (4, 4))
-    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s, s, c
-    out[..., 2, 2] = 1.0
-    out[..., 3, 3] = 1.0
-    out[..., :3, 3] = states[..., :3]
     return out
 
 
@@ -156,8 +113,8 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
     abs_times = frame_time_ns + times  # per column
 
     if isinstance(world_from_sensor, Trajectory):
-        sensor_T_col = state_to_matrix(world_from_sensor.at(abs_times))          # (C, 4, 4)
-        world_from_sensor_frame = state_to_matrix(world_from_sensor.at(frame_time_ns))
+        sensor_T_col = world_from_object(world_from_sensor.states_at(abs_times))          # (C, 4, 4)
+        world_from_sensor_frame = world_from_object(world_from_sensor.states_at(frame_time_ns))
     else:
         sensor_T_col = np.broadcast_to(np.asarray(world_from_sensor, dtype=np.float64), (sensor.columns, 4, 4))
         world_from_sensor_frame = np.asarray(world_from_sensor, dtype=np.float64)
@@ -181,12 +138,12 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
 
     for i in moving_idx:
         o = objects[i]
-        states_col = o.trajectory.at(abs_times)                 # (C, 4)
+        states_col = o.trajectory.states_at(abs_times)                 # (C, 4)
         centres = states_col[column, :3]
         cand = np.flatnonzero(_near_sphere(origins, dirs, centres, o.radius(), sensor.max_range))
         if cand.size == 0:
             continue
-        object_from_world = invert_transform_batch(state_to_matrix(states_col))[column[cand]]
+        object_from_world = invert_transform_batch(world_from_object(states_col))[column[cand]]
         o_obj = np.einsum("nij,nj->ni", object_from_world[:, :3, :3], origins[cand]) + object_from_world[:, :3, 3]
         d_obj = np.einsum("nij,nj->ni", object_from_world[:, :3, :3], dirs[cand])
         scene = RaycastScene()
@@ -237,7 +194,7 @@ def build_static_scene(objects: list[SimObject]) -> RaycastScene:
     scene = RaycastScene()
     for o in objects:
         if o.trajectory.is_static:
-            T = state_to_matrix(o.trajectory.states[0])
+            T = world_from_object(o.trajectory.states[0])
             scene.add_mesh(rotate(T[:3, :3], np.asarray(o.vertices, dtype=np.float64)) + T[:3, 3], o.faces)
     return scene
 

@@ -15,11 +15,12 @@ from typing import Iterable, Sequence as Seq
 
 import numpy as np
 
-from tracker import Box, invert_transform, points_in_box, transform_points, voxel_downsample_centres
+from tracker import Box, voxel_downsample_centres
 
 from ..errors import InputError
 from ..io.sequence import Sequence
 from ..io.tracks import DEFAULT_INVALID_FLAGS, frame_is_valid
+from ..objects.shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
 from ..objects.smoother import ObjectTrack
 
 __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
@@ -107,15 +108,11 @@ def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20
     if len(idx) == 0:
         return np.zeros((0, 3))
     pick = idx[np.unique(np.linspace(0, len(idx) - 1, min(max_frames, len(idx))).round().astype(int))]
-    chunks = []
-    for i in pick:
-        x, y, z, heading = track.states[i]
-        box = Box(x, y, z, heading, *track.size)
-        world_from_ego = sequence.frames[int(track.frames[i])].world_from_ego
-        ego_from_world = invert_transform(world_from_ego)
-        # test in the ego frame: cheaper than moving the whole sweep into the world
-        box_ego = box.transformed(ego_from_world)
-        pts = sequence.sweep(int(track.frames[i])).xyz
-        inside = pts[points_in_box(pts, box_ego, scale)]
-        chunks.append(transform_points(box_ego.object_from_world(), inside))
+    boxes = TrackBoxes(tuple(int(track.frames[i]) for i in pick),
+                       tuple(Box(*(float(v) for v in track.states[i]), *track.size) for i in pick))
+    margin = BoxMargin(scale=(scale, scale, scale))
+    params = ShapeParams(near=margin, stamp=margin, keep=margin, ground_clearance=None, capture_time=False,
+                         per_point_time=False)
+    points, _ = object_points_by_frame(sequence, {track.object_id: boxes}, params)
+    chunks = [points[track.object_id][k] for k in sorted(points[track.object_id])]
     return voxel_downsample_centres(np.concatenate(chunks) if chunks else np.zeros((0, 3)), voxel)

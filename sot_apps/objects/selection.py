@@ -102,6 +102,10 @@ class Selection:
         """Ids of every annotated vehicle track, sorted."""
         return sorted(tid for tid, t in sequence.tracks().items() if self.is_vehicle(t.label))
 
+    def vehicle_labels(self, sequence) -> tuple[str, ...]:
+        """The distinct class labels of the sequence's annotated vehicles, sorted (for APIs that filter by label)."""
+        return tuple(sorted({t.label for t in sequence.tracks().values() if self.is_vehicle(t.label)}))
+
     def moving_vehicles(self, sequence) -> list[str]:
         """Ids of the moving vehicle tracks, sorted."""
         stamps = sequence.timestamps_ns

@@ -1,97 +1,132 @@
-"""Object states and camera poses at camera timestamps.
+"""Timed object states (``x, y, z, heading``, world frame) and camera poses at other timestamps.
 
-Object states are SE(2) + z (``x, y, z, heading``, world frame) sampled at known times. They are
-interpolated linearly in position and in the UNWRAPPED heading, and extrapolated linearly from the
-nearest segment for at most ``max_extrapolation_ns`` (PandaSet's front camera fires about 50 ms
-before the LiDAR; never assume it — the camera's own timestamps are used).
-Camera poses, when a camera only has ego poses, are interpolated on SE(3) (linear translation,
-slerp rotation).
+One :class:`Trajectory` serves flow, the LiDAR simulator, the bank and the synthetic world. States are
+interpolated linearly in position and in the UNWRAPPED heading (unwrapped once, at construction). Outside
+the samples the ``end`` mode says what happens, explicitly:
+
+- ``"hold"``: the end states are held (the simulator's sensor and objects, the bank's de-skew);
+- ``"extrapolate"``: the end segment is continued linearly (flow: PandaSet's front camera fires about 50 ms
+  before the LiDAR; never assume it -- the camera's own timestamps are used).
+
+``max_extrapolation_ns`` (None: unlimited) bounds :meth:`Trajectory.covers` / :meth:`Trajectory.state_at`.
+Camera poses, when a camera only has ego poses, are interpolated on SE(3) (linear translation, slerp rotation).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from tracker import make_transform, rotation_z
+from tracker import make_transform
 
-__all__ = ["ObjectTrajectory", "interpolate_pose", "world_from_object"]
+__all__ = ["Trajectory", "EndMode", "CAMERA_EXTRAPOLATION_NS", "interpolate_pose", "world_from_object", "wrap_heading"]
+
+EndMode = Literal["hold", "extrapolate"]
+
+# How far flow extrapolates a track to a camera timestamp beyond its LiDAR samples.
+CAMERA_EXTRAPOLATION_NS = 150_000_000
 
 
-def world_from_object(state: np.ndarray) -> np.ndarray:
-    """4x4 transform of a state ``[x, y, z, heading]``."""
-    x, y, z, heading = (float(v) for v in np.asarray(state, dtype=np.float64).reshape(4))
-    return make_transform(rotation_z(heading), np.array([x, y, z]))
+def world_from_object(states: np.ndarray) -> np.ndarray:
+    """(..., 4) states ``[x, y, z, heading]`` -> (..., 4, 4) ``world_from_object`` transforms."""
+    states = np.asarray(states, dtype=np.float64)
+    c, s = np.cos(states[..., 3]), np.sin(states[..., 3])
+    out = np.zeros(states.shape[:-1] + (4, 4))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s, s, c
+    out[..., 2, 2] = 1.0
+    out[..., 3, 3] = 1.0
+    out[..., :3, 3] = states[..., :3]
+    return out
+
+
+def wrap_heading(heading: np.ndarray | float) -> np.ndarray:
+    """Heading(s) wrapped to [-pi, pi)."""
+    return (np.asarray(heading, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi
 
 
 @dataclass(frozen=True)
-class ObjectTrajectory:
-    """States of one object: ``times_ns`` (N,) int64 increasing, ``states`` (N, 4) with unwrapped heading."""
+class Trajectory:
+    """States of one object: ``times_ns`` (N,) int64 strictly increasing, ``states`` (N, 4) with unwrapped heading.
+
+    The constructor sorts the samples, drops repeated times and unwraps the heading, so
+    ``Trajectory(times, states, end=...)`` and :meth:`from_samples` are the same thing.
+    """
 
     times_ns: np.ndarray
     states: np.ndarray
-    max_extrapolation_ns: int = 150_000_000
+    end: EndMode = "hold"
+    max_extrapolation_ns: int | None = None
 
-    @classmethod
-    def from_samples(cls, times_ns, states, max_extrapolation_ns: int = 150_000_000) -> "ObjectTrajectory":
-        times = np.asarray(times_ns, dtype=np.int64).ravel()
-        values = np.asarray(states, dtype=np.float64).reshape(-1, 4).copy()
+    def __post_init__(self) -> None:
+        times = np.asarray(self.times_ns, dtype=np.int64).ravel()
+        values = np.array(self.states, dtype=np.float64).reshape(-1, 4)
         if len(times) != len(values) or len(times) == 0:
             raise ValueError("need as many times as states, at least one")
+        if self.end not in ("hold", "extrapolate"):
+            raise ValueError(f"end must be 'hold' or 'extrapolate', not {self.end!r}")
         order = np.argsort(times, kind="stable")
         times, values = times[order], values[order]
         keep = np.concatenate([[True], np.diff(times) > 0])
         times, values = times[keep], values[keep]
         values[:, 3] = np.unwrap(values[:, 3])
-        return cls(times, values, int(max_extrapolation_ns))
+        object.__setattr__(self, "times_ns", times)
+        object.__setattr__(self, "states", values)
+
+    @classmethod
+    def from_samples(cls, times_ns, states, end: EndMode = "hold", max_extrapolation_ns: int | None = None
+                     ) -> "Trajectory":
+        return cls(times_ns, states, end, None if max_extrapolation_ns is None else int(max_extrapolation_ns))
+
+    @classmethod
+    def static(cls, x: float, y: float, z: float, heading: float) -> "Trajectory":
+        """A fixed pose (one sample, held at every time)."""
+        return cls(np.zeros(1, dtype=np.int64), np.array([[x, y, z, heading]], dtype=np.float64))
+
+    @property
+    def is_static(self) -> bool:
+        return len(self.times_ns) == 1
 
     def covers(self, time_ns: int) -> bool:
+        if self.max_extrapolation_ns is None:
+            return True
         return bool(self.times_ns[0] - self.max_extrapolation_ns <= time_ns <= self.times_ns[-1] + self.max_extrapolation_ns)
+
+    def states_at(self, times_ns: np.ndarray | int) -> np.ndarray:
+        """(..., 4) states at the given times (any shape; heading unwrapped); the ``end`` mode outside the
+        samples, no coverage check."""
+        shape = np.shape(times_ns)
+        times = np.asarray(times_ns, dtype=np.int64).ravel()
+        t = self.times_ns
+        if len(t) == 1:
+            return np.repeat(self.states, len(times), axis=0).reshape(shape + (4,))
+        if self.end == "hold":
+            times = np.clip(times, t[0], t[-1])
+        i = np.clip(np.searchsorted(t, times) - 1, 0, len(t) - 2)
+        alpha = (times - t[i]).astype(np.float64) / (t[i + 1] - t[i]).astype(np.float64)
+        return (self.states[i] + alpha[:, None] * (self.states[i + 1] - self.states[i])).reshape(shape + (4,))
 
     def state_at(self, time_ns: int) -> np.ndarray | None:
         """[x, y, z, heading] at ``time_ns`` (heading unwrapped), or None outside the covered span."""
-        if not self.covers(time_ns):
-            return None
-        t = self.times_ns
-        if len(t) == 1:
-            return self.states[0].copy()
-        i = int(np.clip(np.searchsorted(t, time_ns) - 1, 0, len(t) - 2))
-        # Linear inside [t_i, t_i+1]; beyond the ends the same formula extrapolates the end segment.
-        alpha = (time_ns - int(t[i])) / float(int(t[i + 1]) - int(t[i]))
-        return self.states[i] + alpha * (self.states[i + 1] - self.states[i])
-
-    def states_at(self, times_ns: np.ndarray, hold: bool = False) -> np.ndarray:
-        """(N, 4) states at many times (linear, extrapolating the end segments; no coverage check). ``hold``:
-        outside the samples the end states are held instead."""
-        times = np.asarray(times_ns, dtype=np.int64).ravel()
-        t = self.times_ns
-        if hold:
-            times = np.clip(times, t[0], t[-1])
-        if len(t) == 1:
-            return np.repeat(self.states, len(times), axis=0)
-        i = np.clip(np.searchsorted(t, times) - 1, 0, len(t) - 2)
-        alpha = (times - t[i]).astype(np.float64) / (t[i + 1] - t[i]).astype(np.float64)
-        return self.states[i] + alpha[:, None] * (self.states[i + 1] - self.states[i])
-
-    def object_from_world_points(self, points_world: np.ndarray, times_ns: np.ndarray, hold: bool = False
-                                 ) -> np.ndarray:
-        """Object-frame coordinates of world points captured at their own times (rolling-shutter LiDAR);
-        ``hold`` as in :meth:`states_at`."""
-        states = self.states_at(times_ns, hold)
-        d = np.asarray(points_world, dtype=np.float64).reshape(-1, 3) - states[:, :3]
-        c, s = np.cos(states[:, 3]), np.sin(states[:, 3])
-        return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+        return self.states_at(int(time_ns)) if self.covers(time_ns) else None
 
     def world_from_object_at(self, time_ns: int) -> np.ndarray | None:
         state = self.state_at(time_ns)
         return None if state is None else world_from_object(state)
 
+    def object_from_world_points(self, points_world: np.ndarray, times_ns: np.ndarray) -> np.ndarray:
+        """Object-frame coordinates of world points captured at their own times (rolling-shutter LiDAR)."""
+        states = self.states_at(np.asarray(times_ns).ravel())
+        d = np.asarray(points_world, dtype=np.float64).reshape(-1, 3) - states[:, :3]
+        c, s = np.cos(states[:, 3]), np.sin(states[:, 3])
+        return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+
     def velocity_at(self, time_ns: int) -> np.ndarray:
-        """d[x, y, z, heading]/dt in units per second, of the segment used at ``time_ns``."""
+        """d[x, y, z, heading]/dt in units per second, of the segment used at ``time_ns`` (zero when held)."""
         t = self.times_ns
-        if len(t) == 1:
+        if len(t) == 1 or (self.end == "hold" and not t[0] <= time_ns <= t[-1]):
             return np.zeros(4)
         i = int(np.clip(np.searchsorted(t, time_ns) - 1, 0, len(t) - 2))
         return (self.states[i + 1] - self.states[i]) / ((int(t[i + 1]) - int(t[i])) * 1e-9)

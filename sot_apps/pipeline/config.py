@@ -64,10 +64,11 @@ class SequenceConfig:
     format: str | None = None
     frames: tuple[int, int] | None = None
     objects: ObjectSource = field(default_factory=ObjectSource)
+    detections: str | None = None   # per-frame detections for the det / det_sot presets
 
     def to_json(self) -> dict:
         out: dict[str, Any] = {"path": self.path, "objects": self.objects.to_json()}
-        for key in ("name", "format"):
+        for key in ("name", "format", "detections"):
             if getattr(self, key) is not None:
                 out[key] = getattr(self, key)
         if self.frames is not None:
@@ -162,12 +163,22 @@ class PipelineConfig:
             seq_path = s["path"] if Path(s["path"]).is_absolute() else str((base / s["path"]).resolve())
             objects = ObjectSource.from_json(s.get("objects", default_objects), base)
             _check_objects(objects, path)
+            dets = s.get("detections")
+            if dets is not None and not Path(dets).is_absolute():
+                dets = str((base / dets).resolve())
             sequences.append(SequenceConfig(seq_path, s.get("name"), s.get("format"),
-                                            tuple(s["frames"]) if "frames" in s else None, objects))
+                                            tuple(s["frames"]) if "frames" in s else None, objects, dets))
         stages_doc = doc.get("stages", {})
         stages = Stages(**{name: _stage(type(getattr(Stages(), name)), stages_doc.get(name)) for name in STAGE_NAMES})
         out = doc["out"] if Path(doc["out"]).is_absolute() else str((base / doc["out"]).resolve())
         config = cls(out, tuple(sequences), stages, doc.get("description", ""))
+        from tracker import DETECTION_PRESETS
+
+        if config.stages.track.enabled and config.stages.track.preset in DETECTION_PRESETS:
+            missing = [s.path for s in config.sequences if s.detections is None]
+            if missing:
+                raise InputError(path, f"stages.track.preset {config.stages.track.preset!r} needs 'detections' for "
+                                       f"every sequence (missing for {missing[0]})")
         names = [n for n in config.sequence_names() if n is not None]
         if len(set(names)) != len(names):
             raise InputError(path, "sequences: two sequences have the same name; give each a unique 'name'")
@@ -212,8 +223,10 @@ def _check_objects(objects: ObjectSource, path) -> None:
             check_vehicle_size(box, f"{path}: box {b['id']!r}", False, flag="\"allow_any_size\": true")
 
 
-def load_config(path: str | Path, out: str | Path | None = None) -> PipelineConfig:
-    """Read and validate a pipeline JSON file; relative paths are resolved against its directory."""
+def load_config(path: str | Path, out: str | Path | None = None, detections: str | Path | None = None
+                ) -> PipelineConfig:
+    """Read and validate a pipeline JSON file; relative paths are resolved against its directory.
+    ``detections``: the detections file of the pipeline's single sequence (overrides its 'detections')."""
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "pipeline file is missing")
@@ -225,4 +238,10 @@ def load_config(path: str | Path, out: str | Path | None = None) -> PipelineConf
         raise InputError(path, "a pipeline file is a JSON object")
     if out is not None:
         doc["out"] = str(Path(out).resolve())
+    if detections is not None:
+        if not isinstance(doc.get("sequences"), list) or len(doc["sequences"]) != 1:
+            raise InputError(path, "--detections needs a pipeline with exactly one sequence "
+                                   "(give each sequence its own 'detections' in the file)")
+        if isinstance(doc["sequences"][0], dict):
+            doc["sequences"][0]["detections"] = str(Path(detections).resolve())
     return PipelineConfig.from_json(doc, path.parent, path)

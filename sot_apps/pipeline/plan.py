@@ -80,6 +80,7 @@ class ObjectPlan:
     # annotations only: the annotated (frame, box) pairs from ``start`` to ``end``, so the tracking stage can
     # start at the first of them with enough LiDAR points (stages.track.start = "first_with_points")
     annotated: tuple[tuple[int, Box], ...] = ()
+    detections: str | None = None   # the sequence's detections file (Detection term / Det baseline)
 
     @property
     def key(self) -> str:
@@ -88,7 +89,8 @@ class ObjectPlan:
     def to_json(self) -> dict:
         b = self.init_box
         return {"sequence": self.sequence, "object_id": self.object_id, "label": self.label, "start": self.start,
-                "end": self.end, "init_box": [b.x, b.y, b.z, b.heading, b.length, b.width, b.height]}
+                "end": self.end, "init_box": [b.x, b.y, b.z, b.heading, b.length, b.width, b.height]} | (
+                    {"detections": self.detections} if self.detections else {})
 
 
 @dataclass(frozen=True)
@@ -190,7 +192,7 @@ def plan_sequence(cfg: SequenceConfig) -> SequencePlan:
         if oid in seen:
             raise InputError(cfg.path, f"object id {object_id!r} appears twice")
         seen.add(oid)
-        objects.append(ObjectPlan(name, cfg.path, cfg.format, oid, label, start, end, box, annotated))
+        objects.append(ObjectPlan(name, cfg.path, cfg.format, oid, label, start, end, box, annotated, cfg.detections))
     return SequencePlan(name, cfg.path, cfg.format, seq.id, (first, last), tuple(sorted(seq.cameras)), tuple(objects))
 
 

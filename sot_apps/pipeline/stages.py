@@ -15,13 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tracking import TrackingFailed, first_box_with_points, write_track_result
+from ..tracking import (TrackingFailed, first_box_with_points, track_with_shape_growth, write_shape_growth,
+                        write_track_result)
 from .config import BankStage, FlowStage, MotionStage, TrackStage
 from .manifest import DoneMarker
 from .plan import ObjectPlan, open_cached
 
 __all__ = ["TrackingFailed", "track_object", "bank_sequence", "motion_sequence", "flow_camera", "simulate_scene",
-           "track_dir", "scene_name"]
+           "track_dir", "scene_name", "MOTION_EVAL_FILE"]
 
 
 def track_dir(out: str | Path, sequence: str, object_id: str) -> Path:
@@ -35,9 +36,9 @@ def _files_under(directory: Path) -> list[Path]:
 # ---------------------------------------------------------------------------------------------- track
 
 def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> dict:
-    """Track one object and write ``OUT/<seq>/tracks/<object>/{track.json, shape.ply}`` (sot_apps.tracking)."""
+    """Track one object and write ``OUT/<seq>/tracks/<object>/{track.json, shape.ply, shape_growth.json}``
+    (sot_apps.tracking; the shape-growth record is what the report draws)."""
     from tracker import get_preset
-    from tracker import track
 
     seq = open_cached(plan.sequence_path, plan.format)
     config = get_preset(stage.preset, **dict(stage.overrides or {}))
@@ -52,7 +53,13 @@ def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> 
         raise TrackingFailed(f"{plan.key}: the start frame {start_frame} has no sweep; nothing to track")
     end_frame = plan.end if stage.max_frames is None else min(plan.end, start_frame + stage.max_frames)
     start = time.perf_counter()
-    result = track(seq, init_box, start_frame, end_frame, config)
+    detections = None
+    if plan.detections:
+        from ..io.detections import read_sequence_detections
+
+        detections = read_sequence_detections(plan.detections, seq)
+    result, growth = track_with_shape_growth(seq, init_box, start_frame, end_frame, config, plan.object_id,
+                                             detections=detections)
     seconds = time.perf_counter() - start
     first = result.estimates[0]
     if first.num_points < min_points:
@@ -65,8 +72,10 @@ def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> 
     # Per-frame time_ms is left out (it differs run to run): pipeline outputs are reproducible byte for byte;
     # the unit's total time is in the manifest.
     write_track_result(directory, seq, result, plan.object_id, init_box, plan.label, with_time_ms=False)
+    growth_path = write_shape_growth(directory, growth)
     qualities = [float(np.clip(e.quality, 0.0, 1.0)) for e in result.estimates]
-    DoneMarker(Path(out), f"track/{plan.key}").mark(digest, [directory / "track.json", directory / "shape.ply"],
+    DoneMarker(Path(out), f"track/{plan.key}").mark(digest, [directory / "track.json", directory / "shape.ply",
+                                                             growth_path],
                                                     extra={"frames": len(qualities)})
     return {"sequence": plan.sequence, "object": plan.object_id, "frames": len(qualities),
             "tracked_frames": len(qualities) - 1, "seconds": round(seconds, 3),
@@ -103,9 +112,16 @@ def bank_sequence(out: str, sequence: str, object_ids: list[str], stage: BankSta
 
 # --------------------------------------------------------------------------------------------- motion
 
+MOTION_EVAL_FILE = "motion_eval.json"
+MOTION_EVAL_HORIZON = 30    # frames after each track's start
+
 def motion_sequence(out: str, sequence: str, path: str, format: str | None, object_ids: list[str], stage: MotionStage,
                     digest: str) -> dict:
-    """``OUT/<seq>/motion.mcap`` (+ ``motion.parquet``, ``motion.npz``) from the sequence's tracks."""
+    """``OUT/<seq>/motion.mcap`` (+ ``motion.parquet``, ``motion.npz``) from the sequence's tracks, and, when the
+    sequence is annotated, ``OUT/<seq>/motion_eval.json``: the export's error against the annotations
+    (:func:`sot_apps.evaluation.motion.evaluate_motion`), which the report draws."""
+    from ..evaluation.motion import evaluate_motion
+    from ..io.atomic import write_text
     from ..motion_export.export import export_motion
     from ..motion_export.sources import tracks_from_dirs
 
@@ -122,6 +138,13 @@ def motion_sequence(out: str, sequence: str, path: str, format: str | None, obje
         outputs["npz"] = root / "motion.npz"
     result = export_motion(seq, tracks, outputs["mcap"], parquet=outputs.get("parquet"), npz=outputs.get("npz"),
                            with_points=stage.with_points, progress=False)
+    annotated = seq.tracks()
+    evaluated = [t for t in tracks if t.object_id in annotated]
+    if evaluated:
+        horizon = max(1, min(MOTION_EVAL_HORIZON, max(len(t.frames) for t in evaluated) - 1))
+        accuracy = evaluate_motion(seq, evaluated, horizon=horizon, source="pipeline tracks")
+        outputs["evaluation"] = root / MOTION_EVAL_FILE
+        write_text(outputs["evaluation"], json.dumps(accuracy.to_json()))
     DoneMarker(Path(out), f"motion/{sequence}").mark(digest, list(outputs.values()))
     return {"sequence": sequence, "objects": len(tracks), "messages": result.mcap.messages if result.mcap else 0,
             "outputs": {k: str(v.relative_to(Path(out))) for k, v in outputs.items()}}

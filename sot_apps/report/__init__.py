@@ -3,18 +3,24 @@
 Figures (like the paper's): tracks in bird's-eye view against ground truth, the shape filling in over
 time, optical flow, simulated scans of a bank vehicle at several ranges and headings, and the motion
 export's centre error vs. frames after the start. Drawn with OpenCV (no matplotlib).
+
+The report renders what the pipeline saved: track files, the track stage's shape-growth records
+(``shape_growth.json``), the motion stage's evaluation (``motion_eval.json``), the flow stage's files and the
+scan units' results. It runs no tracker and no evaluation of its own.
 """
 
 from __future__ import annotations
 
 import html
+import json
 import time
 from pathlib import Path
 
 from ..io.tracks import read_track
 from ..pipeline.plan import open_cached
 from ..pipeline.runner import PipelineResult
-from ..pipeline.stages import track_dir
+from ..pipeline.stages import MOTION_EVAL_FILE, track_dir
+from ..tracking import read_shape_growth
 from .figures import (flow_figure, motion_figure, scans_figure, score_tracks, shape_growth_figure,
                       tracks_bev_figure)
 from .page import Section, table_html, write_page
@@ -64,24 +70,28 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
         sec = Section(f"{s.name}: tracks against ground truth")
         health = {h["object"]: h for h in result.track_health if h["sequence"] == s.name}
         sec.tables.append(table_html(
-            ["object", "label", "frames", "measured frames", "tracker's verdict", "mean 3D IoU",
+            ["#", "object", "label", "frames", "measured frames", "tracker's verdict", "mean 3D IoU",
              "mean centre error (cm)", "points / frame", "quality", "shape points"],
-            [[sc.object_id[:12], sc.label, sc.frames, _measured(health.get(sc.object_id)),
+            [[i + 1, sc.object_id[:12], sc.label, sc.frames, _measured(health.get(sc.object_id)),
               health.get(sc.object_id, {}).get("status", "?"), _fmt(sc.mean_iou, 3),
               _fmt(sc.mean_centre_error_m, 1, 100), f"{sc.mean_points:.0f}", f"{sc.mean_quality:.2f}", sc.shape_points]
-             for sc in scores]))
+             for i, sc in enumerate(scores)]))
         sec.paragraphs.append(_lost_paragraph(health, scores))
         name = f"{s.name}_tracks_bev.png"
         tracks_bev_figure(seq, tracks, figures / name)
-        sec.images.append((f"figures/{name}", "Tracked boxes (coloured) and annotated boxes (green), bird's-eye view"))
+        sec.images.append((f"figures/{name}", "Tracked objects (one colour and number each, see the legend), annotated "
+                                              "boxes (green) and the ego, bird's-eye view"))
         sections.append(sec)
 
-        best = max(tracks, key=lambda ts: (len(ts[1]), ts[0].object_id))[0]
-        name = f"{s.name}_shape_growth.png"
-        shape_growth_figure(seq, best, figures / name)
-        sections.append(Section(f"{s.name}: shape filling in over time", [
-            f"Object <code>{html.escape(best.object_id)}</code>: the tracker's aggregated shape (object frame) after "
-            "a few frames; key frames add the points of the current frame."], [(f"figures/{name}", "Shape growth")]))
+        recorded = [(len(shape), t.object_id, d) for (t, shape), d in zip(tracks, dirs)]
+        growth = next((g for _, _, d in sorted(recorded, reverse=True) if (g := read_shape_growth(d)) is not None), None)
+        if growth is not None:
+            name = f"{s.name}_shape_growth.png"
+            shape_growth_figure(growth, figures / name)
+            sections.append(Section(f"{s.name}: shape filling in over time", [
+                f"Object <code>{html.escape(growth.object_id)}</code>: the tracker's aggregated shape (object frame) "
+                "after a few frames, as recorded by the track stage; key frames add the points of the current "
+                "frame."], [(f"figures/{name}", "Shape growth")]))
 
         flow_imgs = []
         for camera in s.cameras:
@@ -93,9 +103,12 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
                 "Flow of the tracked objects between consecutive images, from their shapes moved by the tracked "
                 "motion (Middlebury colour wheel; overlay outlines each object)."], flow_imgs))
 
-        name = f"{s.name}_motion_error.png"
-        path, acc = motion_figure(seq, dirs, figures / name)
-        if path is not None:
+        evaluation_path = out / s.name / MOTION_EVAL_FILE
+        if evaluation_path.is_file():
+            acc = json.loads(evaluation_path.read_text())
+            name = f"{s.name}_motion_error.png"
+            motion_figure(acc, figures / name,
+                          f"Motion export vs. ground truth, {seq.id}, {len(acc['tracks'])} tracks")
             curve = acc.get("mean_centre_3d_by_k") or []
             ks = [k for k in (1, 2, 5, 10, 15, 20, 30) if k <= len(curve)]
             table = table_html(["k (frames after start)"] + [str(k) for k in ks],

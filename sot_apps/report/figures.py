@@ -9,14 +9,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracker import Box, transform_points
+from tracker import Box
 
 from ..io.sequence import Sequence
-from ..io.tracks import TrackFile, read_track
-from .draw import BLACK, GT_COLOR, GREY, BevCanvas, colour_for, hstack, text, title_bar, vstack, write_png
+from ..io.tracks import TrackFile
+from ..tracking import ShapeGrowth
+from .draw import (BLACK, EGO_COLOR, GREY, GT_COLOR, WHITE, BevCanvas, LegendEntry, colour_bar, colour_for, hstack,
+                   legend_panel, place_labels, text, text_size, title_bar, vstack, with_metre_axes, write_png)
 
-__all__ = ["TrackScore", "score_tracks", "tracks_bev_figure", "shape_growth_figure", "flow_figure",
-           "scans_figure", "motion_figure"]
+__all__ = ["TrackScore", "score_tracks", "BevFigure", "tracks_bev_figure", "shape_growth_figure", "flow_figure",
+           "flow_key", "scans_figure", "motion_figure"]
 
 
 @dataclass
@@ -52,104 +54,162 @@ def score_tracks(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]]) -> l
     return out
 
 
+@dataclass(frozen=True)
+class BevFigure:
+    """What :func:`tracks_bev_figure` drew: the file, one legend label per tracked object (in track order), their
+    colours and the pixel rectangles of the on-map labels (map image coordinates)."""
+
+    path: Path
+    object_labels: tuple[str, ...]
+    object_colours: tuple[tuple[int, int, int], ...]
+    label_rects: tuple[tuple[int, int, int, int], ...]
+
+
+def _nice_step(span_m: float, target: int = 8) -> float:
+    for step in (1.0, 2.0, 5.0, 10.0, 20.0, 25.0, 50.0, 100.0):
+        if span_m / step <= target:
+            return step
+    return 200.0
+
+
 def tracks_bev_figure(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]], path: Path,
-                      box_every: int = 3, width: int = 1000) -> Path:
-    """Bird's-eye view: LiDAR points of the middle frame (grey), annotated boxes (green) and tracked boxes
-    (one colour per object) every ``box_every`` frames, with the centre trajectories."""
+                      box_every: int = 3, width: int = 900) -> BevFigure:
+    """Bird's-eye view (world frame, metre axes): LiDAR points of the middle frame (grey), the ego's path and its
+    position and heading at that frame, annotated boxes (green) and each tracked object in its own colour
+    (boxes every ``box_every`` frames, centre path, a numbered label), with a legend naming every object."""
     gt_tracks = seq.tracks() if seq.annotations is not None else {}
-    boxes = [t.box_at_record(r) for t, _ in tracks for r in t.frames]
-    centres = np.array([[b.x, b.y] for b in boxes])
-    canvas = BevCanvas.fit(centres.min(axis=0), centres.max(axis=0), width=width, margin=12.0, max_height=700)
-    canvas.grid(10.0)
     frames = sorted({r.frame for t, _ in tracks for r in t.frames})
     mid = frames[len(frames) // 2]
+    ego_xy = np.array([seq.frames[k].world_from_ego[:2, 3] for k in frames])
+    boxes = [t.box_at_record(r) for t, _ in tracks for r in t.frames]
+    extent = np.concatenate([np.array([[b.x, b.y] for b in boxes]), ego_xy])
+    canvas = BevCanvas.fit(extent.min(axis=0), extent.max(axis=0), width=width, margin=8.0, max_height=760)
+    step = _nice_step(max(canvas.x1 - canvas.x0, canvas.y1 - canvas.y0))
+    canvas.grid(step)
     world = seq.points_world(mid)
     ground_z = np.percentile(world[:, 2], 10) if len(world) else 0.0
     above = world[world[:, 2] > ground_z + 0.3]
-    canvas.points(above[:, :2], (200, 200, 200))
+    canvas.points(above[:, :2], (205, 205, 205))
+    canvas.polyline(ego_xy, EGO_COLOR, 1)
+    anchors, colours, numbers, labels = [], [], [], []
     for i, (t, _) in enumerate(tracks):
-        color = colour_for(i)
+        colour = colour_for(i)
         gt = gt_tracks.get(t.object_id)
         if gt is not None:
             gt_frames = [k for k in gt.frames if t.start_frame <= k <= t.end_frame]
-            canvas.polyline(np.array([[gt.box_at(k).x, gt.box_at(k).y] for k in gt_frames]), GT_COLOR, 2)
+            canvas.polyline(np.array([[gt.box_at(k).x, gt.box_at(k).y] for k in gt_frames]), GT_COLOR, 1)
             for k in gt_frames[::box_every]:
                 canvas.box(gt.box_at(k), GT_COLOR, 1)
         records = t.frames
-        canvas.polyline(np.array([[r.state.x, r.state.y] for r in records]), color, 2)
+        canvas.polyline(np.array([[r.state.x, r.state.y] for r in records]), colour, 2)
         for r in records[::box_every]:
-            canvas.box(t.box_at_record(r), color, 2 if r is records[0] else 1)
-        c = canvas.px([records[-1].state.x, records[-1].state.y])[0]
-        text(canvas.image, t.object_id[:8], (c[0] + 8, c[1] - 8), 0.45, color)
-    canvas.scale_bar(10.0)
-    img = canvas.image
-    legend = np.full((28, img.shape[1], 3), 255, np.uint8)
-    cv2.line(legend, (10, 14), (40, 14), GT_COLOR, 2)
-    text(legend, "ground truth", (46, 19))
-    cv2.line(legend, (170, 14), (200, 14), colour_for(0), 2)
-    text(legend, f"tracked (one colour per object; boxes every {box_every} frames; grey: LiDAR frame {mid})", (206, 19))
-    return write_png(path, title_bar(np.concatenate([img, legend]), f"{seq.id}: tracks in bird's-eye view"))
+            canvas.box(t.box_at_record(r), colour, 2 if r is records[0] else 1)
+        anchors.append(canvas.px([records[-1].state.x, records[-1].state.y])[0])
+        colours.append(colour)
+        numbers.append(str(i + 1))
+        labels.append(f"{i + 1}: {t.object_id[:10]} {t.label or ''} ({len(records)} fr)".rstrip())
+    canvas.ego(seq.frames[mid].world_from_ego)
+    scale = 0.5
+    sizes = [(text_size(n, scale, 2)[0] + 8, text_size(n, scale, 2)[1] + 8) for n in numbers]
+    h, w = canvas.image.shape[:2]
+    ego_px = canvas.px(seq.frames[mid].world_from_ego[:2, 3])[0]
+    ego_rect = (int(ego_px[0]) - 12, int(ego_px[1]) - 12, int(ego_px[0]) + 12, int(ego_px[1]) + 12)
+    rects = place_labels(np.array(anchors), sizes, (w, h), occupied=[ego_rect])
+    for anchor, rect, colour, n in zip(anchors, rects, colours, numbers):
+        nearest = (int(np.clip(anchor[0], rect[0], rect[2])), int(np.clip(anchor[1], rect[1], rect[3])))
+        cv2.line(canvas.image, (int(anchor[0]), int(anchor[1])), nearest, colour, 1, cv2.LINE_AA)
+        cv2.rectangle(canvas.image, rect[:2], (rect[2] - 1, rect[3] - 1), WHITE, -1)
+        cv2.rectangle(canvas.image, rect[:2], (rect[2] - 1, rect[3] - 1), colour, 1)
+        text(canvas.image, n, (rect[0] + 4, rect[3] - 5), scale, colour, 2)
+    entries = [LegendEntry("line", GT_COLOR, "ground truth (annotated boxes)"),
+               LegendEntry("ego", EGO_COLOR, f"ego at frame {mid} (arrow: heading)"),
+               LegendEntry("line", EGO_COLOR, "ego path"),
+               LegendEntry("points", (170, 170, 170), f"LiDAR points, frame {mid}")]
+    entries += [LegendEntry("box", c, s) for c, s in zip(colours, labels)]
+    legend = legend_panel(entries, f"tracked objects (boxes every {box_every} frames)", width=330)
+    img = hstack([with_metre_axes(canvas, step), legend], gap=10)
+    write_png(path, title_bar(img, f"{seq.id}: tracks in bird's-eye view (world frame)"))
+    return BevFigure(Path(path), tuple(labels), tuple(colours), tuple(rects))
 
 
-def _shape_panel(points: np.ndarray, size: np.ndarray, label: str, px_per_m: float = 60.0) -> np.ndarray:
-    """Top view (x right, y up) above side view (x right, z up) of object-frame points with the box outline."""
-    length, width, height = (float(v) for v in size)
+def _object_view(points: np.ndarray, colours: np.ndarray, size: np.ndarray, axes: tuple[int, int],
+                 px_per_m: float = 50.0) -> np.ndarray:
+    """One view of object-frame points (``axes`` = the two coordinates drawn) with the box outline and metre axes."""
+    half = np.asarray(size, dtype=np.float64) / 2.0
     margin = 0.4
-    w = int((length + 2 * margin) * px_per_m)
-    top_h = int((width + 2 * margin) * px_per_m)
-    side_h = int((height + 2 * margin) * px_per_m)
-    panel = np.full((top_h + side_h + 30, w, 3), 255, np.uint8)
-
-    def to_px(u, v, v_half, row0):
-        col = (u + length / 2 + margin) * px_per_m
-        row = row0 + (v_half + margin - v) * px_per_m
-        return col, row
-
-    z = points[:, 2] if len(points) else np.zeros(0)
-    t = np.clip((z + height / 2) / max(height, 1e-6), 0, 1)
-    colors = cv2.applyColorMap((t * 255).astype(np.uint8).reshape(-1, 1), cv2.COLORMAP_VIRIDIS).reshape(-1, 3) \
-        if len(points) else np.zeros((0, 3), np.uint8)
-    for (u, v, half, row0) in ((0, 1, width / 2, 0), (0, 2, height / 2, top_h)):
-        c0, r0 = to_px(-length / 2, half, half, row0)
-        c1, r1 = to_px(length / 2, -half, half, row0)
-        cv2.rectangle(panel, (int(c0), int(r0)), (int(c1), int(r1)), GREY, 1)
-        if len(points):
-            c, r = to_px(points[:, u], points[:, v], half, row0)
-            for (cc, rr), col in zip(np.stack([c, r], axis=1).astype(int), colors):
-                cv2.circle(panel, (int(cc), int(rr)), 1, tuple(int(x) for x in col), -1)
-    text(panel, label, (4, top_h + side_h + 22), 0.5)
-    return panel
+    u, v = axes
+    canvas = BevCanvas.fit(-half[[u, v]], half[[u, v]], width=int((2 * half[u] + 2 * margin) * px_per_m), margin=margin,
+                           max_height=10_000)
+    canvas.polyline(np.array([[-half[u], -half[v]], [half[u], -half[v]], [half[u], half[v]], [-half[u], half[v]]]),
+                    GREY, 1, closed=True)
+    if len(points):
+        canvas.points(points[:, [u, v]], colours, radius=0)
+        p = np.round(canvas.px(points[:, [u, v]])).astype(int)
+        for d in ((1, 0), (0, 1), (1, 1)):   # 2x2 dots
+            q = p + d
+            ok = (q[:, 0] >= 0) & (q[:, 0] < canvas.image.shape[1]) & (q[:, 1] >= 0) & (q[:, 1] < canvas.image.shape[0])
+            canvas.image[q[ok, 1], q[ok, 0]] = colours[ok]
+    names = "xyz"
+    return with_metre_axes(canvas, 1.0, f"{names[u]} (m, object frame)", f"{names[v]} (m)")
 
 
-def shape_growth_figure(seq: Sequence, track: TrackFile, path: Path, shots: int = 4) -> Path:
-    """The shape filling in: the tracker is rerun on this object and its aggregated shape (object frame)
-    is drawn at a few frames, top view above side view."""
-    from tracker import TrackerConfig
-    from tracker import Tracker
+def shape_growth_figure(growth: ShapeGrowth, path: Path) -> Path:
+    """The shape filling in, from the track stage's record (:class:`sot_apps.tracking.ShapeGrowth`): for each
+    recorded frame the aggregated points from above (x-y) over the side view (x-z); colour = height above
+    the box bottom, with its colour bar."""
+    size = np.asarray(growth.size, dtype=np.float64)
+    height = float(size[2])
+    panels = []
+    for k, pts in zip(growth.frames, growth.points):
+        t = np.clip((pts[:, 2] + height / 2) / max(height, 1e-6), 0, 1) if len(pts) else np.zeros(0)
+        colours = cv2.applyColorMap((t * 255).astype(np.uint8).reshape(-1, 1), cv2.COLORMAP_VIRIDIS).reshape(-1, 3)
+        top = _object_view(pts, colours, size, (0, 1))
+        side = _object_view(pts, colours, size, (0, 2))
+        panels.append(title_bar(vstack([top, side], gap=6),
+                                f"frame {k} (+{k - growth.start_frame}): {len(pts)} points", 26, 0.5))
+    bar = colour_bar(cv2.COLORMAP_VIRIDIS, 0.0, height, "height above box bottom (m)", height=220,
+                     unit_format="{:.2f}")
+    img = hstack(panels + [bar], gap=14)
+    return write_png(path, title_bar(img, f"{growth.object_id}: shape filling in over time (top: from above, "
+                                          "bottom: from the side)"))
 
-    config = TrackerConfig.from_dict({k: v for k, v in track.config.items() if k in TrackerConfig.__dataclass_fields__})
-    tracker = Tracker(config)
-    tracker.start(seq.lidar_frame(track.start_frame), track.init_box)
-    frames = list(range(track.start_frame + 1, track.end_frame + 1))
-    shapes = {track.start_frame: tracker.shape_points()}
-    for k in frames:   # keep the shape after every frame that changed it (key frames)
-        tracker.step(seq.lidar_frame(k))
-        if len(tracker.shape.points) != len(shapes[max(shapes)]):
-            shapes[k] = tracker.shape_points()
-    keys = sorted(shapes)
-    if len(keys) > shots:   # the start, the last change and evenly spaced changes between
-        keys = sorted({keys[int(round(i))] for i in np.linspace(0, len(keys) - 1, shots)})
-    shapes = {k: shapes[k] for k in keys}
-    size = track.size.to_array()
-    panels = [_shape_panel(pts, size, f"frame {k} (+{k - track.start_frame}): {len(pts)} pts")
-              for k, pts in sorted(shapes.items())]
-    img = hstack(panels, gap=14)
-    return write_png(path, title_bar(img, f"{track.object_id}: shape filling in over time (top: from above, "
-                                          f"bottom: from the side; colour = height)"))
+
+FLOW_BACKGROUND = (70, 70, 70)   # pixels without flow: dark, so that small (pale) flows stay visible
+
+
+def flow_key(max_flow: float, size: int = 150) -> np.ndarray:
+    """The colour-wheel key of flow images drawn with ``max_flow``: a disc whose colour at (u, v) is that of a
+    flow (u, v) pixels, axes and the saturation radius labelled."""
+    from ..flow.visualize import flow_to_color
+
+    r = size // 2 - 4
+    grid = np.mgrid[-r:r + 1, -r:r + 1].astype(np.float64)
+    flow = np.stack([grid[1], grid[0]], axis=-1) * (max_flow / r)        # u right, v down (image axes)
+    inside = np.hypot(grid[0], grid[1]) <= r
+    disc = cv2.cvtColor(flow_to_color(flow, inside, max_flow), cv2.COLOR_RGB2BGR)
+    disc[~inside] = 255
+    pad = 26
+    img = np.full((disc.shape[0] + 2 * pad + 18, disc.shape[1] + 2 * pad, 3), 255, np.uint8)
+    img[pad:pad + disc.shape[0], pad:pad + disc.shape[1]] = disc
+    c = (pad + r, pad + r)
+    cv2.circle(img, c, r, GREY, 1, cv2.LINE_AA)
+    cv2.arrowedLine(img, c, (c[0] + r + 18, c[1]), BLACK, 1, cv2.LINE_AA, tipLength=0.08)
+    cv2.arrowedLine(img, c, (c[0], c[1] + r + 18), BLACK, 1, cv2.LINE_AA, tipLength=0.08)
+    text(img, "+u", (c[0] + r + 2, c[1] + 18), 0.42)
+    text(img, "+v", (c[0] + 8, c[1] + r + 16), 0.42)
+    text(img, "flow key", (4, 16), 0.45)
+    label = f"rim: |flow| = {max_flow:.1f} px"
+    text(img, label, (4, img.shape[0] - 6), 0.42)
+    return img
 
 
 def flow_figure(seq: Sequence, flow_root: Path, camera: str, path: Path, pairs: int = 3, width: int = 400) -> Path | None:
-    """Rows of (image k, flow colour wheel, overlay) for a few pairs written by the flow stage."""
+    """Rows of (image k, flow, overlay) for a few pairs written by the flow stage, and beside them the colour-wheel
+    key. The flow column is drawn here from the stage's KITTI flow (``flow_occ``) with ONE saturation radius
+    for all rows (the 99th percentile of their flow magnitudes), which the key states."""
+    from ..flow.kitti_io import read_kitti_flow
+    from ..flow.visualize import flow_to_color
+
     cam_root = flow_root / camera
     stats_path = cam_root / "stats.json"
     if not stats_path.is_file():
@@ -159,43 +219,83 @@ def flow_figure(seq: Sequence, flow_root: Path, camera: str, path: Path, pairs: 
     if not records:
         return None
     chosen = [records[int(round(i))] for i in np.linspace(0, len(records) - 1, min(pairs, len(records)))]
+    ks = sorted({int(rec["frame"] if "frame" in rec else rec["k"]) for rec in chosen})
+    flows = {}
+    for k in ks:
+        occ = cam_root / "flow_occ" / f"{k:06d}.png"
+        if occ.is_file():
+            flows[k] = read_kitti_flow(occ)
+    magnitudes = np.concatenate([np.linalg.norm(f[v], axis=1) for f, v in flows.values()]) if flows else np.zeros(0)
+    max_flow = float(np.percentile(magnitudes, 99)) if magnitudes.size else 1.0
+    max_flow = max(max_flow, 1.0)
     rows = []
-    seen = set()
     for rec in chosen:
         k = int(rec["frame"] if "frame" in rec else rec["k"])
-        if k in seen:
+        if any(r[0] == k for r in rows):
             continue
-        seen.add(k)
         image = cv2.imread(str(seq.cameras[camera].frames[k].image_path))
-        flow_png = cv2.imread(str(cam_root / "vis" / f"{k:06d}_flow.png"))
+        flow_img = None
+        if k in flows:
+            flow, valid = flows[k]
+            flow_img = cv2.cvtColor(flow_to_color(flow, valid, max_flow), cv2.COLOR_RGB2BGR)
+            flow_img[~valid] = FLOW_BACKGROUND
         over = cv2.imread(str(cam_root / "vis" / f"{k:06d}_overlay.jpg"))
         tiles = []
-        for name, tile in ((f"image {k}", image), ("flow (colour wheel)", flow_png), ("overlay", over)):
+        for name, tile in ((f"image {k}", image), ("flow (colour: see key)", flow_img), ("overlay", over)):
             if tile is None:
                 continue
             scale = width / tile.shape[1]
             tile = cv2.resize(tile, (width, int(round(tile.shape[0] * scale))), interpolation=cv2.INTER_AREA)
             tiles.append(title_bar(tile, name, 24, 0.5))
         pixels = sum(o["pixels"] for o in rec["objects"])
-        rows.append(title_bar(hstack(tiles), f"pair {k} -> {k + 1}: {pixels} object pixels", 26, 0.5))
-    img = vstack(rows, gap=12)
+        rows.append((k, title_bar(hstack(tiles), f"pair {k} -> {k + 1}: {pixels} object pixels", 26, 0.5)))
+    img = hstack([vstack([r for _, r in rows], gap=12), flow_key(max_flow)], gap=12)
     return write_png(path, title_bar(img, f"{seq.id} / {camera}: optical flow from tracked shapes"))
 
 
-def _crop_bev(xyz: np.ndarray, mask: np.ndarray, box: Box, size_px: int = 220, half_m: float | None = None) -> np.ndarray:
-    half_m = max(4.0, 0.5 * max(box.length, box.width) + 1.0) if half_m is None else half_m
+def _crop_view(xyz: np.ndarray, mask: np.ndarray, box: Box, size_px: int = 230, half_m: float = 4.0) -> np.ndarray:
+    """The points of one inserted vehicle from above (sensor frame, x right, y up), range rings around the
+    sensor every metre (labelled every 2 m), an arrow towards the sensor, metre axes."""
+    half_m = max(half_m, 0.5 * max(box.length, box.width) + 1.0)
     canvas = BevCanvas(box.x - half_m, box.y - half_m, box.x + half_m, box.y + half_m, size_px / (2 * half_m),
                        np.full((size_px, size_px, 3), 255, np.uint8))
+    r = float(np.hypot(box.x, box.y))
+    rings = np.arange(np.floor(r - 1.5 * half_m), np.ceil(r + 1.5 * half_m) + 1)
+    rings = rings[rings > 0]
+    canvas.range_rings((0.0, 0.0), [v for v in rings if v % 2 == 1], (225, 225, 225), label=False)
+    canvas.range_rings((0.0, 0.0), [v for v in rings if v % 2 == 0], (190, 190, 190))
     canvas.box(box, GREY, 1)
     pts = xyz[mask]
     if len(pts):
         canvas.points(pts[:, :2], (200, 80, 20), radius=1)
-    return canvas.image
+    # towards the sensor, from the lower corner nearest to it
+    d = -np.array([box.x, box.y]) / max(r, 1e-9)
+    start = np.array([size_px - 40.0, size_px - 40.0]) if d[0] > 0 else np.array([40.0, size_px - 40.0])
+    tip = start + 26 * np.array([d[0], -d[1]])
+    cv2.arrowedLine(canvas.image, tuple(int(v) for v in start), tuple(int(v) for v in tip), EGO_COLOR, 1,
+                    cv2.LINE_AA, tipLength=0.3)
+    text(canvas.image, "sensor", (int(start[0]) - 22, int(start[1]) + (16 if tip[1] <= start[1] else -8)), 0.4)
+    return with_metre_axes(canvas, 2.0, "x (m, sensor)", "y (m)")
+
+
+def _scene_overview(boxes: list[Box], max_range: float, size_px: int = 260) -> np.ndarray:
+    """Where the vehicles of a scene are: the sensor (arrow = its heading, +x) at the origin, labelled range rings."""
+    extent = max(max_range, max(max(abs(b.x), abs(b.y)) + 0.6 * b.length for b in boxes)) + 3.0
+    canvas = BevCanvas(-extent, -extent, extent, extent, size_px / (2 * extent),
+                       np.full((size_px, size_px, 3), 255, np.uint8))
+    step = 10.0 if extent > 15 else 5.0
+    canvas.range_rings((0.0, 0.0), list(np.arange(step, extent + 1e-9, step)))
+    for b in boxes:
+        canvas.box(b, (200, 80, 20), 1)
+    canvas.ego(np.eye(4), size=9)
+    text(canvas.image, "sensor", (size_px // 2 + 8, size_px // 2 + 16), 0.4)
+    return with_metre_axes(canvas, step * 2, "x (m, sensor)", "y (m)")
 
 
 def scans_figure(scans_root: Path, scene_dirs: list[Path], path: Path) -> Path | None:
-    """Rows = ranges, columns = headings: the simulated points on each inserted bank vehicle (bird's-eye view,
-    at least 8 m x 8 m around the box, x right; the sensor is at the scene origin), with point counts."""
+    """Rows = ranges: an overview (sensor, range rings, the inserted vehicles), then one panel per heading with the
+    simulated points on that vehicle (sensor frame, x right, y up; heading = angle of the length axis from +x,
+    counter-clockwise, as everywhere), with point counts."""
     rows = []
     for d in scene_dirs:
         scan_path, boxes_path = d / "scan.npz", d / "boxes.json"
@@ -207,41 +307,33 @@ def scans_figure(scans_root: Path, scene_dirs: list[Path], path: Path) -> Path |
         finite = np.isfinite(xyz).all(axis=1)
         xyz, instance = xyz[finite], instance[finite]
         scene = json.loads((d / "scene.json").read_text())
-        tiles = []
-        for i, o in enumerate(scene["objects"]):
-            entry = json.loads(boxes_path.read_text())
-            b = entry["boxes"][i] if isinstance(entry, dict) and "boxes" in entry else entry[i]
-            box = Box(*(float(b[k]) for k in ("x", "y", "z", "heading", "length", "width", "height")))
+        doc = json.loads(boxes_path.read_text())
+        raw = doc["boxes"] if isinstance(doc, dict) and "boxes" in doc else doc
+        boxes = [Box(*(float(b[k]) for k in ("x", "y", "z", "heading", "length", "width", "height")))
+                 for b in raw[:len(scene["objects"])]]
+        if not boxes:
+            continue
+        r = float(np.hypot(boxes[0].x, boxes[0].y))
+        tiles = [title_bar(_scene_overview(boxes, r), "scene (from above)", 24, 0.45)]
+        for i, box in enumerate(boxes):
             n = int((instance == i).sum())
-            tile = _crop_bev(xyz, instance == i, box)
-            text(tile, f"heading {np.degrees(o['heading']):.0f} deg", (4, 16), 0.42)
-            text(tile, f"{n} points", (4, 212), 0.42)
-            tiles.append(tile)
-        if tiles:
-            r = float(np.hypot(scene["objects"][0]["x"], scene["objects"][0]["y"]))
-            rows.append(title_bar(hstack(tiles), f"{d.name.split('__r')[0]} at {r:.0f} m", 26, 0.5))
+            tile = _crop_view(xyz, instance == i, box)
+            tiles.append(title_bar(tile, f"heading {np.degrees(box.heading):.0f} deg: {n} points", 24, 0.45))
+        rows.append(title_bar(hstack(tiles, gap=10), f"vehicle at {r:.0f} m from the sensor", 26, 0.5))
     if not rows:
         return None
     img = vstack(rows, gap=12)
-    return write_png(path, title_bar(img, "Simulated scans of a bank vehicle at several ranges and headings"))
+    return write_png(path, title_bar(img, "Simulated scans of a bank vehicle at several ranges and headings "
+                                          "(heading: length axis from +x, counter-clockwise)"))
 
 
-def motion_figure(seq: Sequence, track_dirs: list[Path], path: Path, horizon: int = 30) -> tuple[Path | None, dict | None]:
-    """Mean centre error of the motion export vs. k frames after the start (helper: sot_apps.evaluation.motion)."""
-    from ..evaluation.motion import evaluate_motion, plot_accuracy
-    from ..motion_export.sources import tracks_from_dirs
+def motion_figure(evaluation: dict, path: Path, title: str) -> Path:
+    """Mean centre error of the motion export vs. k frames after the start, from the motion stage's evaluation
+    (``motion_eval.json``, :meth:`sot_apps.evaluation.motion.MotionAccuracy.to_json`)."""
+    from ..evaluation.motion import plot_accuracy
 
-    if not seq.tracks():
-        return None, None
-    gt = seq.tracks()
-    dirs = [d for d in track_dirs if read_track(d)[0].object_id in gt]
-    if not dirs:
-        return None, None
-    tracks = tracks_from_dirs(dirs, seq)
-    horizon = max(1, min(horizon, max(len(t.frames) for t in tracks) - 1))
-    acc = evaluate_motion(seq, tracks, horizon=horizon, source="pipeline tracks")
-    plot_accuracy(acc, path, f"Motion export vs. ground truth, {seq.id}, {len(tracks)} tracks")
-    return Path(path), acc.to_json()
+    plot_accuracy(evaluation, path, title)
+    return Path(path)
 
 
 def placeholder(path: Path, message: str) -> Path:

@@ -32,7 +32,7 @@ def render_camera_images(world, cam, times_ns: np.ndarray, out_dir: Path) -> lis
     import cv2
     import trimesh
 
-    from ..lidar_sim.scan import state_to_matrix
+    from ..objects.trajectory import world_from_object
 
     pyrender = _pyrender()
     scene = pyrender.Scene(bg_color=[0.62, 0.75, 0.9, 1.0], ambient_light=[0.35, 0.35, 0.35])
@@ -62,7 +62,7 @@ def render_camera_images(world, cam, times_ns: np.ndarray, out_dir: Path) -> lis
         for k, t in enumerate(times_ns):
             t = int(t)
             for node, o in zip(nodes, world.objects):
-                scene.set_pose(node, state_to_matrix(o.trajectory.at(t)))
+                scene.set_pose(node, world_from_object(o.trajectory.states_at(t)))
             world_from_camera = world.world_from_ego(t) @ cam.ego_from_camera
             scene.set_pose(cam_node, world_from_camera @ CV_FROM_GL)
             color, _ = renderer.render(scene)

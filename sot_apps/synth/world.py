@@ -53,7 +53,8 @@ from ..io.sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequenc
 from ..objects.meshes import box_mesh
 from ..lidar_sim.noise import Realism
 from ..raycast import RaycastScene
-from ..lidar_sim.scan import Scan, SimObject, Trajectory, simulate_scan, state_to_matrix
+from ..lidar_sim.scan import Scan, SimObject, simulate_scan
+from ..objects.trajectory import Trajectory, world_from_object, wrap_heading
 from ..lidar_sim.sensors import Sensor, load_sensor
 from .vehicles import random_vehicle
 
@@ -80,7 +81,7 @@ class WorldObject:
     reflectivity: float = 0.5
 
     def box_at(self, t_ns: int) -> Box:
-        x, y, z, h = self.trajectory.at(t_ns)
+        x, y, z, h = _wrapped(self.trajectory, t_ns)
         return Box(float(x), float(y), float(z), float(h), *self.size)
 
 
@@ -112,7 +113,7 @@ class World:
         return len(self.frame_times_ns)
 
     def world_from_ego(self, t_ns: int) -> np.ndarray:
-        return state_to_matrix(self.ego.at(t_ns))
+        return world_from_object(self.ego.states_at(t_ns))
 
     def boxes_at(self, t_ns: int) -> list[Box]:
         return [o.box_at(t_ns) for o in self.objects]
@@ -312,12 +313,19 @@ def make_world(frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pand
 
 # ------------------------------------------------------------------------------------------ writing
 
+def _wrapped(trajectory: Trajectory, times_ns) -> np.ndarray:
+    """States at ``times_ns`` with the heading wrapped to [-pi, pi) (the ground truth files' convention)."""
+    states = trajectory.states_at(times_ns)
+    states[..., 3] = wrap_heading(states[..., 3])
+    return states
+
+
 def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
     objects = []
     for o in world.objects:
         states = []
         for k, t in enumerate(world.frame_times_ns):
-            x, y, z, h = (float(v) for v in o.trajectory.at(int(t)))
+            x, y, z, h = (float(v) for v in _wrapped(o.trajectory, int(t)))
             states.append({"frame": k, "timestamp_ns": int(t), "x": x, "y": y, "z": z, "heading": h})
         entry = {"id": o.id, "label": o.label, "kind": o.kind, "moving": o.moving,
                  "size": {"length": o.size[0], "width": o.size[1], "height": o.size[2]},
@@ -325,7 +333,7 @@ def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
                  "states": states}
         if camera_times:
             entry["camera_states"] = {
-                cam.name: [dict(zip(("x", "y", "z", "heading"), (float(v) for v in o.trajectory.at(int(t)))),
+                cam.name: [dict(zip(("x", "y", "z", "heading"), (float(v) for v in _wrapped(o.trajectory, int(t)))),
                                 timestamp_ns=int(t)) for t in times]
                 for cam, times in zip(world.cameras, camera_times)}
         objects.append(entry)
@@ -381,7 +389,7 @@ def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: st
                    annotations=annotations, cache_size=0)
     for o in world.objects:
         write_ply_mesh(out / "gt" / "meshes" / f"{o.id}.ply", o.vertices, o.faces)
-    ids = {o.id: o.trajectory.at(world.ego.times_ns) for o in world.objects}
+    ids = {o.id: _wrapped(o.trajectory, world.ego.times_ns) for o in world.objects}
     write_npz(out / "gt" / "trajectories.npz", times_ns=world.ego.times_ns, ego=world.ego.states, **ids)
     write_json(out / "gt" / "objects.json", _gt_document(world, camera_times))
     _write_preview(out / "preview.png", world, scan, infos[-1])

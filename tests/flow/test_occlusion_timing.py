@@ -14,7 +14,7 @@ from sot_apps.objects.meshes import Mesh
 from sot_apps.flow.objects import TrackedObject
 from sot_apps.flow.occlusion import project_lidar
 from sot_apps.flow.scene import FlowObject, OcclusionParams, PairSetup
-from sot_apps.objects.trajectory import ObjectTrajectory, world_from_object
+from sot_apps.objects.trajectory import Trajectory, world_from_object
 from sot_apps.io.sequence import Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
 CAM_ROT = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -126,9 +126,10 @@ def _sequence(camera_times: list[int]) -> Sequence:
 def test_shifted_camera_timestamp_changes_flow_by_projected_velocity():
     velocity = np.array([-8.0, 2.0, 0.0])  # m/s, towards the camera and sideways
     t0 = 1_000_000_000
-    trajectory = ObjectTrajectory.from_samples([t0 - 200_000_000, t0 + 400_000_000],
-                                               [[25.0 + velocity[0] * -0.2, -1.0 + velocity[1] * -0.2, 1.5, 0.0],
-                                                [25.0 + velocity[0] * 0.4, -1.0 + velocity[1] * 0.4, 1.5, 0.0]])
+    trajectory = Trajectory.from_samples([t0 - 200_000_000, t0 + 400_000_000],
+                                         [[25.0 + velocity[0] * -0.2, -1.0 + velocity[1] * -0.2, 1.5, 0.0],
+                                          [25.0 + velocity[0] * 0.4, -1.0 + velocity[1] * 0.4, 1.5, 0.0]],
+                                         "extrapolate", 150_000_000)
     mesh = plate(1.0, 0.8)
     obj = TrackedObject("car", "Car", trajectory, mesh.vertices, mesh, np.array([0.1, 2.0, 1.6]), "test")
     options = FlowOptions(use_lidar=False)

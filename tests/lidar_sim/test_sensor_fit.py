@@ -12,7 +12,8 @@ from sot_apps.cli.main import main
 from sot_apps.io.canonical import write_sequence
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
 from sot_apps.lidar_sim.noise import Realism
-from sot_apps.lidar_sim.scan import SimObject, Trajectory, simulate_scan
+from sot_apps.lidar_sim.scan import SimObject, simulate_scan
+from sot_apps.objects.trajectory import Trajectory
 from sot_apps.lidar_sim.sensors import PRESETS
 
 

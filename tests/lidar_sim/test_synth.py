@@ -10,7 +10,7 @@ import numpy as np
 
 from sot_apps.io import open_sequence
 from sot_apps.lidar_sim.noise import Realism
-from sot_apps.lidar_sim.scan import Trajectory, state_to_matrix
+from sot_apps.objects.trajectory import Trajectory, world_from_object
 from sot_apps.synth import make_world, write_world
 from tracker.geometry import invert_transform, transform_points
 
@@ -51,13 +51,13 @@ def test_points_lie_on_their_object_at_their_own_time():
         sel = scan.instance == i
         if sel.sum() < 5:
             continue
-        states = obj.trajectory.at(t + scan.time_offset_ns[sel])
-        obj_from_world = np.linalg.inv(state_to_matrix(states))
+        states = obj.trajectory.states_at(t + scan.time_offset_ns[sel])
+        obj_from_world = np.linalg.inv(world_from_object(states))
         local = np.einsum("nij,nj->ni", obj_from_world[:, :3, :3], pts_world[sel]) + obj_from_world[:, :3, 3]
         half = np.asarray(obj.size) / 2 + 2e-3
         assert (np.abs(local) <= half).all(), obj.id
         # ... and NOT all in the box at the frame time for a vehicle that moved during the sweep
-        box_local = transform_points(invert_transform(state_to_matrix(obj.trajectory.at(t))), pts_world[sel])
+        box_local = transform_points(invert_transform(world_from_object(obj.trajectory.states_at(t))), pts_world[sel])
         if obj.moving and (np.abs(box_local) > half).any():
             moved_any = True
     assert moved_any, "expected visible rolling-scan distortion on at least one moving vehicle"

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from tracker.config import PRESETS, get_preset
+from tracker.detection import FrameDetections
 from tracker.sotracker import Tracker, track
 from tracker.metrics import iou_3d
 
@@ -92,7 +93,9 @@ def test_init_box_without_points_never_crashes():
 @pytest.mark.parametrize("name", sorted(PRESETS))
 def test_every_preset_runs(name):
     seq = make_sequence(n_frames=7, seed=5)
-    result = track(seq, seq.boxes[0], 0, 6, get_preset(name))
+    # the detection presets (det, det_sot) get the true boxes as detections; the others ignore them
+    detections = {k: FrameDetections(b.to_array()[None], np.array([0.9])) for k, b in enumerate(seq.boxes)}
+    result = track(seq, seq.boxes[0], 0, 6, get_preset(name), detections=detections)
     assert result.config.preset == name
     ious = [iou_3d(b, g) for b, g in zip(result.boxes[1:], seq.boxes[1:])]
     assert np.mean(ious) > 0.75, (name, np.round(ious, 3))

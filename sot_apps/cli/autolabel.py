@@ -1,0 +1,83 @@
+"""``sot-apps autolabel``: full vehicle tracks (auto-labels) of a sequence from per-frame detections."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..errors import InputError
+from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
+                     simulated_detections)
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    parser = add_subcommand(
+        subparsers, "autolabel", help="auto-label every vehicle of a sequence from detections (Det+SOT, offline)",
+        description="Associate detections into tracks, start SOT (det_sot) at each track's most reliable detection, "
+                    "track forward and backward, refine offline, and write DIR/sequence (canonical, the labels as "
+                    "its boxes), DIR/kitti/label_02/0000.txt (+ calib) and DIR/av2/annotations.feather. With "
+                    "--evaluate, print the label quality against the sequence's annotations next to the raw "
+                    "detections (docs/detection.md). Without --detections the model-free detector runs first.",
+        examples=["sot-apps autolabel ../shared/data/pandaset_002 --detections dets.json --out labels --evaluate",
+                  "sot-apps autolabel /tmp/world --simulate learned --out /tmp/world_labels --evaluate"])
+    add_sequence_argument(parser)
+    add_detections_arguments(parser)
+    parser.add_argument("--simulate", metavar="PROFILE", help="instead of --detections: simulated detections")
+    parser.add_argument("--seed", type=int, default=0, help="seed of --simulate and of the tracker (default 0)")
+    parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    parser.add_argument("--no-offline", action="store_true", help="skip the offline refinement")
+    parser.add_argument("--no-sequence", action="store_true", help="do not write the canonical sequence copy")
+    parser.add_argument("--evaluate", action="store_true", help="print label quality against the annotations")
+    parser.add_argument("--json", metavar="FILE", help="with --evaluate: write the quality rows as JSON")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.set_defaults(func=run)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from tracker import get_preset
+
+    from ..detection.autolabel import autolabel, write_autolabels
+    from ..evaluation.tracker import CachedSource
+    from ..objects.selection import DEFAULT_SELECTION
+    from ..io.atomic import write_json
+
+    sequence = load_sequence(args)
+
+    def progress(items, desc="autolabel"):
+        return items if args.quiet else tqdm(items, desc=desc, file=sys.stderr, leave=False)
+
+    detections = load_detections(args, sequence)
+    if detections is None and args.simulate:
+        detections = simulated_detections(sequence, args.simulate, args.seed)
+    elif detections is None:
+        from ..detection.detector import detect_sequence
+
+        detections = detect_sequence(sequence, progress=lambda f: progress(f, "detect"))
+    labels, det_tracks = autolabel(CachedSource(sequence), detections, get_preset("det_sot", seed=args.seed),
+                                   offline=not args.no_offline, progress=progress)
+    paths = write_autolabels(args.out, sequence, labels, with_sequence=not args.no_sequence)
+    print(f"{len(labels)} labelled tracks ({sum(len(lbl.boxes) for lbl in labels)} boxes) from "
+          f"{sum(len(d) for d in detections.values())} detections")
+    for fmt, path in paths.items():
+        print(f"wrote {fmt}: {path}")
+    if args.evaluate:
+        from ..detection.autolabel import labels_as_detections, tracks_as_detections
+        from ..evaluation.detection import autolabel_quality, format_quality_table, ground_truth_frames, rows_for_json
+
+        if not sequence.annotations:
+            raise InputError(sequence.root, "--evaluate needs annotations")
+        truth = ground_truth_frames(sequence, DEFAULT_SELECTION.vehicle_labels(sequence))
+        rows = autolabel_quality(
+            {"raw detections": (detections, None),
+             "detection tracks (CV Kalman)": (tracks_as_detections(det_tracks), {t.track_id: t.boxes for t in det_tracks}),
+             "auto-labels": (labels_as_detections(labels),
+                             {lbl.track_id: {k: b.to_array() for k, b in lbl.boxes.items()} for lbl in labels})},
+            truth)
+        print(format_quality_table(rows))
+        if args.json:
+            write_json(args.json, rows_for_json(rows))
+    return 0
+

@@ -1,0 +1,1 @@
+"""Detections for tracking and auto-labelling: simulated detections, a model-free detector, auto-labels."""

@@ -1,0 +1,265 @@
+"""Auto-labels: full, consistent tracks of every vehicle of a sequence from per-frame detections.
+
+1. :func:`associate_tracks`: tracking-by-detection. Every live track predicts its box with a constant-velocity
+   Kalman filter (:class:`tracker.det_baseline.ConstantVelocityFilter`); detections with score >=
+   ``min_score`` are assigned to predictions by the Hungarian method on 1 - BEV IoU (IoU >= ``min_iou``, or
+   centres within ``max_centre_distance`` for small fast boxes); an unassigned detection with score >=
+   ``birth_score`` starts a track; a track missed ``max_misses`` frames in a row ends. Tracks with fewer
+   than ``min_detections`` detections are dropped (clutter).
+2. :func:`label_track`: SOT from the track's most reliable detection (highest score; its size is the
+   median size of the track's detections), forward to the track's last frame and backward to its first,
+   with the Detection term on the track's own detections (``det_sot``); then the offline refinement
+   (:mod:`tracker.offline`) over the whole span, and the whole track is moved by the median offset of its
+   detections (:func:`anchor_to_detections`: SOT is exact relative to its seed box, the detections fix where
+   the box sits).
+3. :func:`autolabel`: all tracks; each label box carries its track's mean detection score.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from tracker import (align_heading, Box, ConstantVelocityFilter, FrameDetections, FrameSource, get_preset,
+                     iou_bev_batch, LidarFrame, track, TrackerConfig, TrackResult, wrap_angle)
+
+__all__ = ["AssociationConfig", "DetectionTrack", "AutoLabel", "associate_tracks", "label_track", "anchor_to_detections",
+           "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",
+           "write_autolabels"]
+
+
+@dataclass(frozen=True)
+class AssociationConfig:
+    min_score: float = 0.3
+    birth_score: float = 0.5
+    min_iou: float = 0.1
+    max_centre_distance: float = 1.5
+    max_misses: int = 3
+    min_detections: int = 3
+
+
+@dataclass(frozen=True)
+class DetectionTrack:
+    """Detections associated over time: frame -> (7,) box and score."""
+
+    track_id: str
+    boxes: dict[int, np.ndarray]
+    scores: dict[int, float]
+
+    @property
+    def frames(self) -> list[int]:
+        return sorted(self.boxes)
+
+    @property
+    def mean_score(self) -> float:
+        return float(np.mean(list(self.scores.values())))
+
+
+@dataclass(frozen=True)
+class AutoLabel:
+    """One auto-labelled object: a box per frame of its span, its score, and the shape of the refinement."""
+
+    track_id: str
+    boxes: dict[int, Box]
+    score: float
+    shape: np.ndarray
+    detections: DetectionTrack
+
+
+def associate_tracks(detections: dict[int, FrameDetections], n_frames: int,
+                     config: AssociationConfig = AssociationConfig()) -> list[DetectionTrack]:
+    """Detection tracks (see the module docstring), ids ``t0000``, ``t0001``, ... in order of birth."""
+    live: list[dict] = []
+    finished: list[dict] = []
+    next_id = 0
+    for k in range(n_frames):
+        det = detections.get(k, FrameDetections.empty())
+        keep = det.scores >= config.min_score
+        boxes, scores = det.boxes[keep], det.scores[keep]
+        predicted = np.array([np.r_[t["kf"].predict(), t["size"]] for t in live]).reshape(-1, 7)
+        cost = np.ones((len(live), len(boxes)))
+        if len(live) and len(boxes):
+            a = np.repeat(predicted, len(boxes), axis=0)
+            b = np.tile(boxes, (len(live), 1))
+            iou = iou_bev_batch(a, b).reshape(len(live), len(boxes))
+            dist = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]).reshape(len(live), len(boxes))
+            ok = (iou >= config.min_iou) | (dist <= config.max_centre_distance)
+            cost = np.where(ok, 1.0 - iou + 0.1 * np.minimum(dist, 10.0), 1e6)
+        assigned_tracks, assigned_dets = set(), set()
+        if cost.size:
+            rows, cols = linear_sum_assignment(cost)
+            for r, c in zip(rows, cols):
+                if cost[r, c] < 1e6:
+                    t = live[r]
+                    t["kf"].update(boxes[c])
+                    t["boxes"][k] = boxes[c].copy()
+                    t["scores"][k] = float(scores[c])
+                    t["misses"] = 0
+                    assigned_tracks.add(r)
+                    assigned_dets.add(c)
+        still = []
+        for i, t in enumerate(live):
+            if i not in assigned_tracks:
+                t["misses"] += 1
+            (still if t["misses"] <= config.max_misses else finished).append(t)
+        live = still
+        for c in range(len(boxes)):
+            if c not in assigned_dets and scores[c] >= config.birth_score:
+                box = Box(*boxes[c])
+                live.append({"id": next_id, "kf": ConstantVelocityFilter(box), "size": boxes[c][4:7].copy(),
+                             "boxes": {k: boxes[c].copy()}, "scores": {k: float(scores[c])}, "misses": 0})
+                next_id += 1
+    finished += live
+    finished.sort(key=lambda t: t["id"])
+    return [DetectionTrack(f"t{t['id']:04d}", t["boxes"], t["scores"]) for t in finished
+            if len(t["boxes"]) >= config.min_detections]
+
+
+class _Reversed:
+    """A FrameSource over frames ``last`` .. 0 in reverse order (frame indices stay the original ones)."""
+
+    def __init__(self, source: FrameSource, last: int) -> None:
+        self.source, self.last = source, last
+
+    def __len__(self) -> int:
+        return self.last + 1
+
+    def lidar_frame(self, index: int) -> LidarFrame:
+        return self.source.lidar_frame(self.last - index)
+
+
+def _turned(box: Box) -> Box:
+    return Box(box.x, box.y, box.z, float(wrap_angle(box.heading + np.pi)), box.length, box.width, box.height)
+
+
+def _merge(backward: TrackResult | None, forward: TrackResult) -> TrackResult:
+    """One result in frame order; the backward pass ran on the turned box (see :func:`label_track`)."""
+    estimates = list(forward.estimates)
+    if backward is not None:
+        back = [dataclasses.replace(e, box=_turned(e.box), state=_turned(e.box).state) for e in backward.estimates[1:]]
+        estimates = list(reversed(back)) + estimates
+    return TrackResult(estimates, forward.size, forward.shape, forward.config)
+
+
+def _detection_velocity(detection_track: DetectionTrack, frame: int, window: int = 5) -> np.ndarray:
+    """Per-frame motion [dx, dy, dz, 0] near ``frame`` from the track's detections: a least-squares line through
+    the detection centres of the ``window`` frames either side (zero with fewer than 2 detections)."""
+    near = [k for k in detection_track.frames if abs(k - frame) <= window]
+    if len(near) < 2:
+        return np.zeros(4)
+    t = np.array(near, dtype=np.float64)
+    centres = np.array([detection_track.boxes[k][:3] for k in near])
+    slope = np.polyfit(t - t.mean(), centres, 1)[0]
+    return np.array([slope[0], slope[1], slope[2], 0.0])
+
+
+def label_track(source: FrameSource, detection_track: DetectionTrack, config: TrackerConfig | None = None,
+                offline: bool = True) -> AutoLabel:
+    """SOT forward and backward from the track's most reliable detection, then the offline refinement."""
+    config = config or get_preset("det_sot")
+    frames = detection_track.frames
+    seed_frame = max(frames, key=lambda k: (detection_track.scores[k], -abs(k - frames[len(frames) // 2])))
+    sizes = np.array([detection_track.boxes[k][4:7] for k in frames])
+    seed = Box(*detection_track.boxes[seed_frame][:4], *np.median(sizes, axis=0))
+    own = {k: FrameDetections(b[None], np.array([detection_track.scores[k]])) for k, b in detection_track.boxes.items()}
+    velocity = _detection_velocity(detection_track, seed_frame)
+    forward = track(source, seed, seed_frame, frames[-1], config, detections=own, initial_motion=velocity)
+    backward = None
+    if seed_frame > frames[0]:
+        last = seed_frame
+        flipped = {last - k: d for k, d in own.items() if k <= seed_frame}
+        # backward in time the vehicle drives in reverse; turned by pi it drives forward again, as the
+        # motion-consistency term expects
+        backward = track(_Reversed(source, last), _turned(seed), 0, last - frames[0], config, detections=flipped,
+                         initial_motion=-velocity)
+    result = _merge(backward, forward)
+    if offline and len(result.estimates) > 2:
+        from tracker import refine_offline
+
+        result = refine_offline(source, result, config)
+    boxes = anchor_to_detections({e.frame: e.box for e in result.estimates}, detection_track)
+    return AutoLabel(detection_track.track_id, boxes, detection_track.mean_score, result.shape, detection_track)
+
+
+def anchor_to_detections(boxes: dict[int, Box], detection_track: DetectionTrack) -> dict[int, Box]:
+    """The track moved by one constant correction in the object frame (heading, then centre): the median,
+    over the track's detections, of how the detection sits relative to the tracked box (headings modulo
+    pi). SOT fixes the motion relative to the seed box, so the seed detection's error would otherwise stay
+    in every frame; the median over all detections averages the detector's errors and ignores outliers."""
+    frames = [k for k in detection_track.boxes if k in boxes]
+    if not frames:
+        return boxes
+    turn = float(np.median([wrap_angle(align_heading(detection_track.boxes[k][3], boxes[k].heading)
+                                       - boxes[k].heading) for k in frames]))
+    offsets = []
+    for k in frames:
+        det, box = detection_track.boxes[k], boxes[k]
+        c, s = np.cos(box.heading + turn), np.sin(box.heading + turn)
+        d = det[:3] - box.center
+        offsets.append([c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]])
+    du, dv, dz = np.median(np.array(offsets), axis=0)
+    out = {}
+    for k, box in boxes.items():
+        heading = float(wrap_angle(box.heading + turn))
+        c, s = np.cos(heading), np.sin(heading)
+        out[k] = Box(box.x + c * du - s * dv, box.y + s * du + c * dv, box.z + dz, heading,
+                     box.length, box.width, box.height)
+    return out
+
+
+def autolabel(source: FrameSource, detections: dict[int, FrameDetections], config: TrackerConfig | None = None,
+              association: AssociationConfig = AssociationConfig(), offline: bool = True,
+              progress=None) -> tuple[list[AutoLabel], list[DetectionTrack]]:
+    """Auto-labels of every detection track of ``source`` (and the detection tracks themselves)."""
+    tracks = associate_tracks(detections, len(source), association)
+    labels = [label_track(source, t, config, offline) for t in (progress(tracks) if progress else tracks)]
+    return labels, tracks
+
+
+def per_frame_detections(entries) -> dict[int, FrameDetections]:
+    """(frame, box (7,), score) triples grouped into FrameDetections per frame."""
+    per_frame: dict[int, list[tuple[np.ndarray, float]]] = {}
+    for k, box, score in entries:
+        per_frame.setdefault(k, []).append((np.asarray(box, dtype=np.float64), float(score)))
+    return {k: FrameDetections(np.array([b for b, _ in items]), np.array([s for _, s in items]))
+            for k, items in per_frame.items()}
+
+
+def labels_as_detections(labels: list[AutoLabel]) -> dict[int, FrameDetections]:
+    """The auto-label boxes per frame, each scored with its track's score (for AP)."""
+    return per_frame_detections((k, box.to_array(), label.score) for label in labels for k, box in label.boxes.items())
+
+
+def tracks_as_detections(tracks: list[DetectionTrack]) -> dict[int, FrameDetections]:
+    """The detections kept in detection tracks, per frame, with their own scores."""
+    return per_frame_detections((k, box, t.scores[k]) for t in tracks for k, box in t.boxes.items())
+
+
+def write_autolabels(out_dir, sequence, labels: list[AutoLabel], category: str = "Car",
+                     with_sequence: bool = True) -> dict[str, str]:
+    """Write the labels as a canonical sequence (its boxes = the labels), KITTI tracking label_02 and AV2
+    annotations.feather under ``out_dir``; returns the written paths by format."""
+    from pathlib import Path
+
+    from ..io.canonical import write_sequence
+    from ..io.labels import write_av2_annotations, write_kitti_tracking
+    from ..io.sequence import BoxAnnotation
+
+    out_dir = Path(out_dir)
+    tracks = [(label.track_id, category, label.score, label.boxes) for label in labels]
+    world_from_ego = [np.asarray(f.world_from_ego) for f in sequence.frames]
+    world_from_lidar = [w @ np.asarray(sequence.ego_from_lidar) for w in world_from_ego]
+    paths = {"kitti": str(write_kitti_tracking(out_dir / "kitti", tracks, world_from_lidar)),
+             "av2": str(write_av2_annotations(out_dir / "av2" / "annotations.feather", tracks, world_from_ego,
+                                              [int(f.timestamp_ns) for f in sequence.frames], sequence.id))}
+    if with_sequence:
+        annotations = [[] for _ in sequence.frames]
+        for label in labels:
+            for k, box in label.boxes.items():
+                annotations[k].append(BoxAnnotation(label.track_id, category, box))
+        labelled = dataclasses.replace(sequence, annotations=annotations, _cache=sequence._cache)
+        paths["sequence"] = str(write_sequence(labelled, out_dir / "sequence", progress=False))
+    return paths

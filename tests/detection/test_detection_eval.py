@@ -1,0 +1,42 @@
+"""AP and identity coverage on hand-made cases with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sot_apps.evaluation.detection import GroundTruthFrame, average_precision, identity_coverage
+from tracker.detection import FrameDetections
+
+CARS = np.array([[10.0, 0.0, 1.0, 0.0, 4.5, 1.9, 1.6], [30.0, 5.0, 1.0, 0.5, 4.5, 1.9, 1.6]])
+
+
+def truth(n_frames: int = 4) -> dict[int, GroundTruthFrame]:
+    return {k: GroundTruthFrame(CARS + [k, 0, 0, 0, 0, 0, 0], np.array([50, 50]), np.zeros(2), ("a", "b"))
+            for k in range(n_frames)}
+
+
+def test_ap_is_one_for_the_truth_and_falls_with_misses_and_false_positives():
+    gt = truth()
+    perfect = {k: FrameDetections(g.boxes, np.array([0.9, 0.8])) for k, g in gt.items()}
+    assert average_precision(perfect, gt, 0.7)["ap"] == 1.0
+    # only the first car: recall 0.5, precision 1 -> AP = 0.5 (20 of 40 recall points)
+    half = {k: FrameDetections(g.boxes[:1], np.array([0.9])) for k, g in gt.items()}
+    r = average_precision(half, gt, 0.7)
+    assert r["recall"] == 0.5 and abs(r["ap"] - 0.5) < 1e-9
+    # a confident false positive in every frame ranks first: precision drops at every recall
+    fp = {k: FrameDetections(np.vstack([g.boxes, [[50, 50, 1, 0, 4.5, 1.9, 1.6]]]), np.array([0.8, 0.7, 0.95]))
+          for k, g in gt.items()}
+    assert average_precision(fp, gt, 0.7)["ap"] < 0.8
+    # range bands: the far car (30 m) alone in the 20-40 m band
+    assert average_precision(half, gt, 0.7, band=(20.0, 40.0))["ap"] == 0.0
+    assert average_precision(half, gt, 0.7, band=(0.0, 20.0))["ap"] == 1.0
+
+
+def test_identity_coverage_counts_one_track_per_object():
+    gt = truth(4)
+    whole = {"t1": {k: gt[k].boxes[0] for k in range(4)}, "t2": {k: gt[k].boxes[1] for k in range(4)}}
+    assert identity_coverage(whole, gt)["coverage"] == 1.0
+    # car a split into two tracks of 2 frames each: its best single track covers 2 of 4 frames
+    split = {"t1a": {k: gt[k].boxes[0] for k in (0, 1)}, "t1b": {k: gt[k].boxes[0] for k in (2, 3)},
+             "t2": whole["t2"]}
+    assert identity_coverage(split, gt)["coverage"] == (2 + 4) / 8
