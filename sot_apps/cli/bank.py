@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import add_subcommand
+from .common import add_subcommand, declare_outputs
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -34,6 +34,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                        help="skip annotated tracks with fewer aggregated points (default 200)")
     build.add_argument("--mirror", action="store_true", help="mirror-complete about the length axis (y -> -y)")
     build.set_defaults(func=run_build)
+    declare_outputs(build, dirs=("out",))
     lst = sub.add_parser("list", help="print the entries of a bank")
     lst.add_argument("bank", metavar="BANK")
     lst.set_defaults(func=run_list)

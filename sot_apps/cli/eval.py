@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -30,6 +30,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--no-per-track", action="store_true", help="omit the per-track table")
     parser.add_argument("--json", metavar="FILE", help="also write the full report as JSON (atomically)")
     parser.set_defaults(func=run)
+    declare_outputs(parser, files=("json",))
     return parser
 
 

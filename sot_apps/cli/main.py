@@ -12,6 +12,7 @@ import importlib
 import os
 import pkgutil
 import re
+import signal
 import sys
 import traceback
 from typing import Sequence as Seq
@@ -86,6 +87,9 @@ def main(argv: Seq[str] | None = None) -> int:
         if not getattr(args, "command", None):
             parser.print_help()
             return 2
+        from .common import check_outputs
+
+        check_outputs(args)
         result = args.func(args)
         return int(result or 0)
     except InputError as exc:
@@ -94,16 +98,31 @@ def main(argv: Seq[str] | None = None) -> int:
         sys.stderr.write(f"error: {exc.one_line()}\n")
         return 2
     except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C while shutting down prints nothing more
         sys.stderr.write("interrupted: finished outputs are kept; rerun to resume\n")
         return 130
     except BrokenPipeError:
         return 0
-    except Exception as exc:  # noqa: BLE001 - last line of defence: one line unless --debug
+    except OSError as exc:   # an environment fault outside the atomic writers (which name the final path)
+        from ..io.atomic import is_environment_error
+
+        if not is_environment_error(exc):
+            return _unexpected(exc, debug)
         if debug:
             traceback.print_exc()
-        message = " ".join(str(exc).split()) or type(exc).__name__
-        sys.stderr.write(f"error: {type(exc).__name__}: {message} (rerun with --debug for the traceback)\n")
-        return 1
+        where = f"{exc.filename}: " if exc.filename else ""
+        sys.stderr.write(f"error: {where}{exc.strerror}\n")
+        return 2
+    except Exception as exc:  # noqa: BLE001 - last line of defence: one line unless --debug
+        return _unexpected(exc, debug)
+
+
+def _unexpected(exc: BaseException, debug: bool) -> int:
+    if debug:
+        traceback.print_exc()
+    message = " ".join(str(exc).split()) or type(exc).__name__
+    sys.stderr.write(f"error: {type(exc).__name__}: {message} (rerun with --debug for the traceback)\n")
+    return 1
 
 
 if __name__ == "__main__":

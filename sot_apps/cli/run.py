@@ -61,8 +61,11 @@ def run(args: argparse.Namespace) -> int:
     from ..pipeline.config import load_config
     from ..pipeline.runner import run_pipeline
 
+    from ..io.atomic import ensure_writable
+
     config = load_config(args.pipeline, out=args.out)
     spec = executor_from_args(args)
+    ensure_writable(config.out, directory=True)
     result = run_pipeline(config, spec, progress=not args.quiet)
     print(f"{len(result.plan.objects)} objects in {len(result.plan.sequences)} sequences, {spec.describe()}, "
           f"{result.seconds:.1f} s")

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -42,6 +42,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                           "time (interpolated between frames; needs per-point times)")
     fit.add_argument("--compare", default=None, metavar="PRESET", help="print a comparison with a preset")
     fit.set_defaults(func=run_fit)
+    declare_outputs(fit, files=("out",))
     parser.set_defaults(func=lambda args: (parser.print_help(), 2)[1])
     return parser
 

@@ -8,7 +8,7 @@ import sys
 from tracker import get_preset, preset_names
 
 from ..errors import InputError
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -41,6 +41,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                              "smoothness prior, and rebuild the shape (docs/evaluation.md)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
+    declare_outputs(parser, dirs=("out",))
     return parser
 
 

@@ -37,6 +37,7 @@ class TaskOutcome:
     result: Any = None
     error: str | None = None
     seconds: float = 0.0
+    environment: bool = False   # failed because an output could not be written (full disk, read-only, ...)
 
 
 @dataclass(frozen=True)
@@ -70,10 +71,16 @@ def _call(task: Task) -> TaskOutcome:
     except BaseException as exc:  # noqa: BLE001 - a worker must report, not die
         if isinstance(exc, KeyboardInterrupt):
             raise
+        from ..errors import OutputError
+        from ..io.atomic import is_environment_error
+
+        seconds = time.perf_counter() - start
+        if isinstance(exc, OutputError):
+            return TaskOutcome(task.key, False, error=exc.one_line(), seconds=seconds, environment=True)
         message = " ".join(str(exc).split()) or type(exc).__name__
         detail = traceback.format_exc(limit=8) if os.environ.get("SOT_APPS_DEBUG") == "1" else ""
-        return TaskOutcome(task.key, False, error=f"{type(exc).__name__}: {message}{detail}",
-                           seconds=time.perf_counter() - start)
+        return TaskOutcome(task.key, False, error=f"{type(exc).__name__}: {message}{detail}", seconds=seconds,
+                           environment=is_environment_error(exc))
 
 
 def _worker_init() -> None:

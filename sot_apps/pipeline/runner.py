@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from ..errors import OutputError
 from ..io.atomic import write_json
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
@@ -108,6 +109,9 @@ def _make_unit(out: Path, stage: str, key: str, sequence: str | None, obj: str |
 def _run_units(units: list[_Unit], out: Path, session: ExecutorSession, desc: str, progress: bool) -> list[UnitRecord]:
     todo = [u for u in units if u.task is not None]
     outcomes: dict[str, TaskOutcome] = {o.key: o for o in session.run([u.task for u in todo], desc, progress)}
+    for o in outcomes.values():
+        if o.environment:   # a full disk or an unwritable output stops the run (finished units resume)
+            raise OutputError(None, o.error or "cannot write an output")
     records = []
     for u in units:
         if u.task is None:
