@@ -7,7 +7,9 @@ keyword arguments). :func:`run_tasks` runs them, shows a progress bar, and retur
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import time
 import traceback
 import uuid
@@ -62,11 +64,19 @@ def _single_threaded_env() -> None:
         os.environ.setdefault(var, "1")
 
 
+_task_running = False   # in a worker process: whether a task is running (see _worker_sigint)
+
+
 def _call(task: Task) -> TaskOutcome:
     """Run a task, turning any exception into a failed outcome (runs in the worker)."""
+    global _task_running
     start = time.perf_counter()
     try:
-        result = task.fn(*task.args, **task.kwargs)
+        _task_running = True
+        try:
+            result = task.fn(*task.args, **task.kwargs)
+        finally:
+            _task_running = False
         return TaskOutcome(task.key, True, result=result, seconds=time.perf_counter() - start)
     except BaseException as exc:  # noqa: BLE001 - a worker must report, not die
         if isinstance(exc, KeyboardInterrupt):
@@ -83,8 +93,29 @@ def _call(task: Task) -> TaskOutcome:
                            environment=is_environment_error(exc))
 
 
+def _worker_sigint(signum, frame) -> None:
+    """Ctrl-C in a worker process: stop the running task (its atomic writes clean up; the pool hands the
+    KeyboardInterrupt back to the parent, which reports the interrupt once); an idle worker ignores it."""
+    if _task_running:
+        raise KeyboardInterrupt
+
+
 def _worker_init() -> None:
     _single_threaded_env()
+    signal.signal(signal.SIGINT, _worker_sigint)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})   # blocked while the parent started us
+
+
+@contextlib.contextmanager
+def _sigint_blocked_in_children():
+    """Start worker processes with SIGINT blocked (the mask is inherited), so a Ctrl-C while a worker imports
+    cannot print its traceback; :func:`_worker_init` installs the worker's handler, then unblocks. A Ctrl-C
+    meanwhile reaches this process after the block (it is pending, not lost)."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _progress(total: int, desc: str, enabled: bool) -> tqdm:
@@ -167,10 +198,11 @@ class ExecutorSession:
         from concurrent.futures.process import BrokenProcessPool
 
         outcomes: dict[int, TaskOutcome] = {}
-        pool = self._process_pool()
-        pending: dict[Future, int] = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
         broken = False
         try:
+            with _sigint_blocked_in_children():   # submit() starts the worker processes
+                pool = self._process_pool()
+                pending: dict[Future, int] = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
             with _progress(len(tasks), desc, progress) as bar:
                 while pending:
                     done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -185,7 +217,7 @@ class ExecutorSession:
                             outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
                         bar.update(1)
         except BaseException:
-            self.close(wait=False)   # Ctrl-C: cancel what is queued; workers get the same SIGINT and stop
+            self.close(wait=False)   # Ctrl-C: cancel what is queued; workers get the same SIGINT, stop their task
             raise
         if broken:   # a worker died (e.g. killed): the next batch gets a fresh pool
             self._pool.shutdown(wait=False, cancel_futures=True)
