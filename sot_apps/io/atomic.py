@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import OutputError
 
 __all__ = ["atomic_path", "write_bytes", "write_text", "write_json", "write_npz", "ensure_writable",
-           "is_environment_error", "output_error"]
+           "is_environment_error", "output_error", "remove_stale_temporaries"]
 
 # errno values that describe the place an output goes to, not the data or the code
 _ENVIRONMENT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EISDIR,
@@ -98,6 +98,22 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         if is_environment_error(exc):
             raise output_error(path, exc) from exc   # type: ignore[arg-type]
         raise
+
+
+def remove_stale_temporaries(root: str | Path) -> list[Path]:
+    """Remove the temporary files (``.NAME.XXXXXXXX.tmp``) that a killed process left under ``root``.
+
+    A process killed outright (SIGKILL, a lost Dask worker, a power cut) cannot clean up; its temporaries never
+    carry a final name, but they are litter. Call this only while no other writer works under ``root`` (the
+    pipeline calls it at the start of a run).
+    """
+    removed = []
+    for tmp in Path(root).rglob(".*.tmp"):
+        if tmp.is_file():
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+                removed.append(tmp)
+    return removed
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:

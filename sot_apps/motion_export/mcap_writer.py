@@ -213,13 +213,14 @@ class _Writer:
 
 
 class _FirstErrorSink:
-    """The file the MCAP writer writes through: the first OSError (e.g. a full disk) is kept and every later
-    write is dropped (positions still advance as if written, as the writer checks them), so the writer does
-    not log one failure per message; the caller raises the error once."""
+    """The file the MCAP writer writes through: the first exception (an OSError such as a full disk, or a
+    Ctrl-C that lands in this Python callback, which the writer would otherwise turn into an I/O error and lose)
+    is kept and every later write is dropped (positions still advance as if written, as the writer checks them),
+    so the writer does not log one failure per message; the caller raises it once, after each frame."""
 
     def __init__(self, handle) -> None:
         self._handle = handle
-        self.error: OSError | None = None
+        self.error: BaseException | None = None
         self._position = 0   # after an error: where the file would be
         self._end = 0
 
@@ -227,7 +228,7 @@ class _FirstErrorSink:
         if self.error is None:
             try:
                 return self._handle.write(data)
-            except OSError as exc:
+            except BaseException as exc:  # noqa: BLE001 - kept and raised by raise_error
                 self._fail(exc)
         self._position += len(data)
         self._end = max(self._end, self._position)
@@ -237,7 +238,7 @@ class _FirstErrorSink:
         if self.error is None:
             try:
                 return self._handle.seek(offset, whence)
-            except OSError as exc:
+            except BaseException as exc:  # noqa: BLE001 - kept and raised by raise_error
                 self._fail(exc)
         self._position = (offset, self._position + offset, self._end + offset)[whence]
         return self._position
@@ -246,7 +247,7 @@ class _FirstErrorSink:
         if self.error is None:
             try:
                 return self._handle.tell()
-            except OSError as exc:
+            except BaseException as exc:  # noqa: BLE001 - kept and raised by raise_error
                 self._fail(exc)
         return self._position
 
@@ -254,10 +255,10 @@ class _FirstErrorSink:
         if self.error is None:
             try:
                 self._handle.flush()
-            except OSError as exc:
+            except BaseException as exc:  # noqa: BLE001 - kept and raised by raise_error
                 self._fail(exc)
 
-    def _fail(self, exc: OSError) -> None:
+    def _fail(self, exc: BaseException) -> None:
         self.error = exc
         with contextlib.suppress(OSError, ValueError):
             self._position = self._handle.tell()

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import OutputError
-from ..io.atomic import write_json
+from ..io.atomic import remove_stale_temporaries, write_json
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
@@ -147,6 +147,7 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
     t0 = time.perf_counter()
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out)   # left by a killed worker or process; never under a final name
     plan = plan or make_plan(config)
     stages = config.stages
     records: list[UnitRecord] = []
