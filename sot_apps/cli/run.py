@@ -58,10 +58,9 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..io.atomic import ensure_writable
     from ..pipeline.config import load_config
     from ..pipeline.runner import run_pipeline
-
-    from ..io.atomic import ensure_writable
 
     config = load_config(args.pipeline, out=args.out)
     spec = executor_from_args(args)

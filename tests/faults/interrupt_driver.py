@@ -1,7 +1,8 @@
 """Interrupt trials: SIGINT into the process group of a CLI command at random times, then rerun.
 
-For each command: a clean run gives the reference outputs; then, on a fresh output directory, ``trials`` runs are
-each interrupted at a random time (every one resumes what the previous left), and a last run completes. Checked:
+For each command: a clean run gives the reference outputs; then ``trials`` runs on one output directory are each
+sent SIGINT at a random time (each resumes what the previous left; one that finishes before the signal is compared
+with the clean run and the directory starts afresh), and a last run completes and is compared. Checked:
 an interrupted run exits 130 with the one line "interrupted: ..." (or 0 when it finished before the signal, or dies
 of the signal without output when it lands before Python installed its handler or after it removed it), no
 run prints a traceback, no temporary file is left, and the completed outputs equal the clean run byte for byte
@@ -109,11 +110,13 @@ def trials_for(command: str, trials: int, rng: random.Random, world: Path, root:
     clean_out, out = root / f"{command}_clean", root / f"{command}_trials"
     for d in (clean_out, out):
         shutil.rmtree(d, ignore_errors=True)
-    rc, stderr, seconds = _run(_argv(command, world, clean_out, pipeline), None, timeout)
+    # the clean run writes where the trials will (outputs may record their own absolute paths), then moves away
+    rc, stderr, seconds = _run(_argv(command, world, out, pipeline), None, timeout)
     result = CommandResult(command, seconds)
     if rc != 0:
         result.problems.append(f"clean run exit {rc}: {stderr[-500:]}")
         return result
+    out.rename(clean_out)
     reference = checksums(clean_out)
     for i in range(trials):
         delay = rng.uniform(0.3, max(0.6, seconds))
@@ -134,15 +137,22 @@ def trials_for(command: str, trials: int, rng: random.Random, world: Path, root:
             result.problems.append(f"trial {i} (SIGINT at {delay:.2f} s): exit {rc}: {stderr[-1500:]}")
         if _temporaries(out):
             result.problems.append(f"trial {i}: temporary files left: {_temporaries(out)}")
+        if rc == 0:   # this resume finished before the signal: check it, then start the next trial afresh
+            _compare(out, reference, f"trial {i} (finished first)", result)
+            shutil.rmtree(out)
     rc, stderr, _ = _run(_argv(command, world, out, pipeline), None, timeout)
     if rc != 0:
         result.problems.append(f"completing rerun exit {rc}: {stderr[-1500:]}")
     else:
-        got = checksums(out)
-        if got != reference:
-            diff = sorted(k for k in set(got) | set(reference) if got.get(k) != reference.get(k))
-            result.problems.append(f"outputs differ from a clean run: {diff[:20]}")
+        _compare(out, reference, "completing rerun", result)
     return result
+
+
+def _compare(out: Path, reference: dict[str, str], what: str, result: CommandResult) -> None:
+    got = checksums(out)
+    if got != reference:
+        diff = sorted(k for k in set(got) | set(reference) if got.get(k) != reference.get(k))
+        result.problems.append(f"{what}: outputs differ from a clean run: {diff[:20]}")
 
 
 def tiny_world(root: Path) -> Path:
