@@ -50,6 +50,7 @@ WRITERS = {
                                         "--out", t / "sim"], t / "sim"),
     "eval --json": lambda w, i, t: (["eval", w, "--tracks", "veh_000", "--json", t / "e.json"], t / "e.json"),
     "bank build": lambda w, i, t: (["bank", "build", i["track"], "--out", t / "bank"], t / "bank"),
+    "bench --json": lambda w, i, t: (["bench", "motion", w, "--from-annotations", "--ids", "veh_000", "--json", t / "b.json"], t / "b.json"),
     "sensor fit": lambda w, i, t: (["sensor", "fit", w, "--frames", "0,1", "--out", t / "s.json"], t / "s.json"),
     "run": lambda w, i, t: (["run", i["pipeline"], "--quiet", "--out", t / "run"], t / "run"),
 }
