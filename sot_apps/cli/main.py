@@ -7,17 +7,29 @@ Modules are discovered automatically; one that fails to import is reported, neve
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import os
-import pkgutil
-import re
 import signal
 import sys
-import traceback
-from typing import Sequence as Seq
 
-from ..errors import InputError
+
+def _interrupted_while_starting(signum, frame) -> None:
+    sys.stderr.write("interrupted\n")
+    raise SystemExit(130)
+
+
+# As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles
+# it, exits quietly instead of printing a traceback
+if __name__ == "__main__" or sys.argv[0].endswith("sot-apps"):
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import os  # noqa: E402
+import pkgutil  # noqa: E402
+import re  # noqa: E402
+import traceback  # noqa: E402
+from typing import Sequence as Seq  # noqa: E402
+
+from ..errors import InputError  # noqa: E402
 
 # Options whose value may start with a minus sign (e.g. --init-box -12.3,4.0,...).
 NEGATIVE_VALUE_OPTIONS = {"--init-box", "--pairs", "--origin", "--offset"}
@@ -79,6 +91,7 @@ def _join_negative_values(argv: list[str]) -> list[str]:
 
 
 def main(argv: Seq[str] | None = None) -> int:
+    signal.signal(signal.SIGINT, signal.default_int_handler)   # Ctrl-C -> KeyboardInterrupt, handled below
     argv = _join_negative_values(list(sys.argv[1:] if argv is None else argv))
     debug = "--debug" in argv or os.environ.get("SOT_APPS_DEBUG") == "1"
     try:

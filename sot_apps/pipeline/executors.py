@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import threading
 import time
 import traceback
 import uuid
@@ -103,19 +104,22 @@ def _worker_sigint(signum, frame) -> None:
 def _worker_init() -> None:
     _single_threaded_env()
     signal.signal(signal.SIGINT, _worker_sigint)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})   # blocked while the parent started us
 
 
 @contextlib.contextmanager
-def _sigint_blocked_in_children():
-    """Start worker processes with SIGINT blocked (the mask is inherited), so a Ctrl-C while a worker imports
-    cannot print its traceback; :func:`_worker_init` installs the worker's handler, then unblocks. A Ctrl-C
-    meanwhile reaches this process after the block (it is pending, not lost)."""
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+def _sigint_ignored_in_children():
+    """Start worker processes with SIGINT ignored: an ignored signal stays ignored across exec (a blocked one does
+    not: the spawn resets the mask) and Python then installs no KeyboardInterrupt handler, so a Ctrl-C while a
+    worker starts cannot print its traceback; :func:`_worker_init` installs the worker's handler. Only for the
+    few milliseconds of process creation does this process ignore Ctrl-C as well."""
+    if threading.current_thread() is not threading.main_thread():   # only the main thread may set handlers
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        signal.signal(signal.SIGINT, previous)
 
 
 def _progress(total: int, desc: str, enabled: bool) -> tqdm:
@@ -200,7 +204,7 @@ class ExecutorSession:
         outcomes: dict[int, TaskOutcome] = {}
         broken = False
         try:
-            with _sigint_blocked_in_children():   # submit() starts the worker processes
+            with _sigint_ignored_in_children():   # submit() starts the worker processes
                 pool = self._process_pool()
                 pending: dict[Future, int] = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
             with _progress(len(tasks), desc, progress) as bar:
