@@ -93,6 +93,7 @@ def test_killed_worker_mid_run(cluster, world, tmp_path):
             os.killpg(run.pid, signal.SIGKILL)
     assert "Traceback" not in stderr, stderr
     failures = json.loads((out / "failures.json").read_text())["failures"]
+    print(f"after losing worker wa: exit {run.returncode}, failed units {[f['key'] for f in failures]}")
     if run.returncode == 0:
         assert failures == []          # Dask ran the lost tasks again on the other worker
     else:                              # or the run names exactly the lost units
