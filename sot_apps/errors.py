@@ -15,3 +15,11 @@ class InputError(Exception):
 
     def one_line(self) -> str:
         return f"{self.path}: {self.problem}" if self.path else self.problem
+
+
+class OutputError(InputError):
+    """An output cannot be written (no space, no permission, read-only, a directory in the way).
+
+    Printed like :class:`InputError` (``error: <final output path>: cannot write: <cause>``, exit code 2);
+    the path is the file the user asked for, never a temporary sibling.
+    """

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..errors import InputError
-from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
+from .common import (declare_outputs, add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
                      simulated_detections)
 
 
@@ -30,6 +30,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--evaluate", action="store_true", help="print label quality against the annotations")
     parser.add_argument("--json", metavar="FILE", help="with --evaluate: write the quality rows as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    declare_outputs(parser, files=("json",), dirs=("out",))
     parser.set_defaults(func=run)
     return parser
 

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import add_action, add_subcommand
+from .common import add_action, add_subcommand, declare_outputs
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -38,6 +38,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                        help="skip annotated tracks with fewer aggregated points (default 200)")
     build.add_argument("--mirror", action="store_true", help="mirror-complete about the length axis (y -> -y)")
     build.set_defaults(func=run_build)
+    declare_outputs(build, dirs=("out",))
     lst = add_action(sub, "list", help="print the entries of a bank", description="Print the entries of BANK.",
                      examples=["sot-apps bank list bank"])
     lst.add_argument("bank", metavar="BANK")

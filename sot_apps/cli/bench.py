@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..bench import discover
-from .common import add_subcommand
+from .common import add_subcommand, declare_outputs
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -25,6 +25,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                                formatter_class=argparse.RawDescriptionHelpFormatter)
         bench.add_arguments(child)
         child.set_defaults(bench_run=bench.run)
+        declare_outputs(child, files=("json", "plot"))   # checked before the benchmark runs
     parser.set_defaults(func=lambda args: _run(args, parser, registry.errors))
     return parser
 

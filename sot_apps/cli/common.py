@@ -68,3 +68,21 @@ def simulated_detections(sequence: Sequence, profile: str, seed: int, progress=N
 
     check_profile(profile)
     return simulate_detections(sequence, profile, seed, DEFAULT_SELECTION.vehicle_labels(sequence), progress)
+
+
+def declare_outputs(parser: argparse.ArgumentParser, files: tuple[str, ...] = (), dirs: tuple[str, ...] = ()) -> None:
+    """Name the options (argparse dests) that are output files or directories: ``main`` checks that each given
+    one is writable before the command starts its work (:func:`check_outputs`)."""
+    parser.set_defaults(output_files=tuple(files), output_dirs=tuple(dirs))
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Fail early (one line, exit code 2) when an output declared with :func:`declare_outputs` is not writable."""
+    from ..io.atomic import ensure_writable
+
+    for name in getattr(args, "output_files", ()):
+        if getattr(args, name, None):
+            ensure_writable(getattr(args, name))
+    for name in getattr(args, "output_dirs", ()):
+        if getattr(args, name, None):
+            ensure_writable(getattr(args, name), directory=True)

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..io.canonical import write_sequence
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -21,6 +21,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     add_sequence_argument(parser)
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.set_defaults(func=run)
+    declare_outputs(parser, dirs=("out",))
     return parser
 
 

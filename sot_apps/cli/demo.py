@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import add_subcommand
+from .common import add_subcommand, declare_outputs
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -34,6 +34,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     add_executor_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
+    declare_outputs(parser, dirs=("out",))
     return parser
 
 

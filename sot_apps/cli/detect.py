@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..errors import InputError
-from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
+from .common import (declare_outputs, add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
                      simulated_detections)
 
 
@@ -29,6 +29,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--3d", dest="three_d", action="store_true", help="with --evaluate: also 3D AP")
     parser.add_argument("--json", metavar="FILE", help="with --evaluate: write the AP rows as JSON")
     add_detections_arguments(parser)
+    declare_outputs(parser, files=("out", "json"))
     parser.set_defaults(func=run)
     return parser
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
-                     check_profile, simulated_detections)
+from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, declare_outputs, load_detections,
+                     load_sequence, check_profile, simulated_detections)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -37,6 +37,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="instead of --detections: ground truth with a detector's errors, simulated per seed "
                              "(profiles: learned, noisy, clean; docs/detection.md)")
     parser.set_defaults(func=run)
+    declare_outputs(parser, files=("json",))
     return parser
 
 

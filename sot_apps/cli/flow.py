@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..errors import InputError
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
 
 
 def _pairs(text: str) -> tuple[int, int]:
@@ -58,6 +58,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--out", required=True, metavar="OUT", help="output directory (OUT/<camera>/...)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
+    declare_outputs(parser, dirs=("out",))
     return parser
 
 

@@ -7,16 +7,29 @@ Modules are discovered automatically; one that fails to import is reported, neve
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import os
-import pkgutil
-import re
+import signal
 import sys
-import traceback
-from typing import Sequence as Seq
 
-from ..errors import InputError
+
+def _interrupted_while_starting(signum, frame) -> None:
+    sys.stderr.write("interrupted\n")
+    raise SystemExit(130)
+
+
+# As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles
+# it, exits quietly instead of printing a traceback
+if __name__ == "__main__" or sys.argv[0].endswith("sot-apps"):
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import os  # noqa: E402
+import pkgutil  # noqa: E402
+import re  # noqa: E402
+import traceback  # noqa: E402
+from typing import Sequence as Seq  # noqa: E402
+
+from ..errors import InputError  # noqa: E402
 
 # Options whose value may start with a minus sign (e.g. --init-box -12.3,4.0,...).
 NEGATIVE_VALUE_OPTIONS = {"--init-box", "--pairs", "--origin", "--offset"}
@@ -85,6 +98,7 @@ def _join_negative_values(argv: list[str]) -> list[str]:
 
 
 def main(argv: Seq[str] | None = None) -> int:
+    signal.signal(signal.SIGINT, signal.default_int_handler)   # Ctrl-C -> KeyboardInterrupt, handled below
     argv = _join_negative_values(list(sys.argv[1:] if argv is None else argv))
     debug = "--debug" in argv or os.environ.get("SOT_APPS_DEBUG") == "1"
     try:
@@ -93,6 +107,9 @@ def main(argv: Seq[str] | None = None) -> int:
         if not getattr(args, "command", None):
             parser.print_help()
             return 2
+        from .common import check_outputs
+
+        check_outputs(args)
         result = args.func(args)
         return int(result or 0)
     except InputError as exc:
@@ -101,16 +118,31 @@ def main(argv: Seq[str] | None = None) -> int:
         sys.stderr.write(f"error: {exc.one_line()}\n")
         return 2
     except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C while shutting down prints nothing more
         sys.stderr.write("interrupted: finished outputs are kept; rerun to resume\n")
         return 130
     except BrokenPipeError:
         return 0
-    except Exception as exc:  # noqa: BLE001 - last line of defence: one line unless --debug
+    except OSError as exc:   # an environment fault outside the atomic writers (which name the final path)
+        from ..io.atomic import is_environment_error
+
+        if not is_environment_error(exc):
+            return _unexpected(exc, debug)
         if debug:
             traceback.print_exc()
-        message = " ".join(str(exc).split()) or type(exc).__name__
-        sys.stderr.write(f"error: {type(exc).__name__}: {message} (rerun with --debug for the traceback)\n")
-        return 1
+        where = f"{exc.filename}: " if exc.filename else ""
+        sys.stderr.write(f"error: {where}{exc.strerror}\n")
+        return 2
+    except Exception as exc:  # noqa: BLE001 - last line of defence: one line unless --debug
+        return _unexpected(exc, debug)
+
+
+def _unexpected(exc: BaseException, debug: bool) -> int:
+    if debug:
+        traceback.print_exc()
+    message = " ".join(str(exc).split()) or type(exc).__name__
+    sys.stderr.write(f"error: {type(exc).__name__}: {message} (rerun with --debug for the traceback)\n")
+    return 1
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import add_sequence_argument, add_subcommand, load_sequence
+from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -45,6 +45,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="AV2 'observed' = valid and timestep < N (default: every valid timestep is observed)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
+    declare_outputs(parser, files=("out", "parquet", "npz", "csv"))
     return parser
 
 

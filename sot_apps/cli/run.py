@@ -66,11 +66,13 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..io.atomic import ensure_writable
     from ..pipeline.config import load_config
     from ..pipeline.runner import run_pipeline
 
     config = load_config(args.pipeline, out=args.out, detections=args.detections)
     spec = executor_from_args(args)
+    ensure_writable(config.out, directory=True)
     result = run_pipeline(config, spec, progress=not args.quiet)
     print(f"{len(result.plan.objects)} objects in {len(result.plan.sequences)} sequences, {spec.describe()}, "
           f"{result.seconds:.1f} s")

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .common import add_action, add_sequence_argument, add_subcommand, load_sequence
+from .common import add_action, add_sequence_argument, add_subcommand, declare_outputs, load_sequence
 
 MAX_PLAUSIBLE_BEAMS = 128   # the most beams of any spinning LiDAR on sale (e.g. Hesai OT128, Ouster OS-128)
 
@@ -48,6 +48,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                           "time (interpolated between frames; needs per-point times)")
     fit.add_argument("--compare", default=None, metavar="PRESET", help="print a comparison with a preset")
     fit.set_defaults(func=run_fit)
+    declare_outputs(fit, files=("out",))
     parser.set_defaults(func=lambda args: (parser.print_help(), 2)[1])
     return parser
 

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..errors import InputError
-from .common import add_subcommand
+from .common import add_subcommand, declare_outputs
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -35,6 +35,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--format", default="", help="extra point formats, comma-separated: bin,pcd,ply")
     parser.add_argument("--extent", type=float, default=50.0, help="preview half-size in metres (default 50)")
     parser.set_defaults(func=run)
+    declare_outputs(parser, dirs=("out",))
     return parser
 
 

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..errors import InputError
-from .common import add_subcommand
+from .common import add_subcommand, declare_outputs
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -30,6 +30,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--cameras", action="store_true", help="also render a front pinhole camera (pyrender, EGL)")
     parser.add_argument("--camera-size", default="640x360", metavar="WxH", help="camera image size (default 640x360)")
     parser.set_defaults(func=run)
+    declare_outputs(parser, dirs=("out",))
     return parser
 
 

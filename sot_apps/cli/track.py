@@ -8,7 +8,8 @@ import sys
 from tracker import DETECTION_PRESETS, get_preset, preset_names
 
 from ..errors import InputError
-from .common import add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence
+from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, declare_outputs, load_detections,
+                     load_sequence)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -45,6 +46,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_detections_arguments(parser)
     parser.set_defaults(func=run)
+    declare_outputs(parser, dirs=("out",))
     return parser
 
 

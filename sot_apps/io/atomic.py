@@ -1,11 +1,15 @@
 """Atomic writers: every file is written to a temporary sibling and renamed into place.
 
-A crash or Ctrl-C never leaves a half-written file under the final name.
+A crash or Ctrl-C never leaves a half-written file under the final name. An environment failure while writing
+(no space, read-only, no permission, a directory or a file in the way) removes the temporary file and raises
+:class:`~sot_apps.errors.OutputError` naming the final path and the cause (the CLI prints it on one line, exit
+code 2). :func:`ensure_writable` checks an output location before long work starts.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import json
 import os
@@ -15,7 +19,51 @@ from typing import Any, Iterator
 
 import numpy as np
 
-__all__ = ["atomic_path", "write_bytes", "write_text", "write_json", "write_npz"]
+from ..errors import OutputError
+
+__all__ = ["atomic_path", "write_bytes", "write_text", "write_json", "write_npz", "ensure_writable",
+           "is_environment_error", "output_error", "remove_stale_temporaries"]
+
+# errno values that describe the place an output goes to, not the data or the code
+_ENVIRONMENT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EISDIR,
+                                 errno.ENOTDIR, errno.EFBIG, errno.ENAMETOOLONG, errno.EIO})
+
+
+def is_environment_error(exc: BaseException) -> bool:
+    """True for an OSError caused by where an output goes (full disk, read-only, permissions, path clashes)."""
+    return isinstance(exc, OSError) and exc.errno in _ENVIRONMENT_ERRNOS
+
+
+def output_error(path: str | Path, exc: OSError) -> OutputError:
+    """The one-line error for an output ``path`` that could not be written because of ``exc``."""
+    return OutputError(path, f"cannot write: {exc.strerror or exc}")
+
+
+def _nearest_existing(path: Path) -> Path:
+    path = path.absolute()
+    while not os.path.lexists(path) and path != path.parent:
+        path = path.parent
+    return path
+
+
+def ensure_writable(path: str | Path, directory: bool = False) -> None:
+    """Check before long work that ``path`` (a file, or with ``directory`` a directory) can be written.
+
+    Creates and removes a probe file in the nearest existing directory on the way (nothing is left behind;
+    missing directories are not created). Raises :class:`OutputError` naming ``path`` and the cause.
+    """
+    path = Path(path)
+    if path.is_dir() and not directory:
+        raise OutputError(path, f"cannot write: {os.strerror(errno.EISDIR)}")
+    existing = _nearest_existing(path if directory else path.parent)
+    if not existing.is_dir():
+        raise OutputError(path, f"cannot write: {os.strerror(errno.ENOTDIR)} ({existing} is a file)")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".sot-apps-probe.", dir=existing)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise output_error(path, exc) from exc
 
 
 def _umask() -> int:
@@ -31,18 +79,41 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     On any exception the temporary file is removed and ``path`` is left untouched.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+    except OSError as exc:
+        if is_environment_error(exc):
+            raise output_error(path, exc) from exc
+        raise
     tmp = Path(tmp_name)
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600 files; give the usual permissions
         os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
             tmp.unlink()
+        if is_environment_error(exc):
+            raise output_error(path, exc) from exc   # type: ignore[arg-type]
         raise
+
+
+def remove_stale_temporaries(root: str | Path) -> list[Path]:
+    """Remove the temporary files (``.NAME.XXXXXXXX.tmp``) that a killed process left under ``root``.
+
+    A process killed outright (SIGKILL, a lost Dask worker, a power cut) cannot clean up; its temporaries never
+    carry a final name, but they are litter. Call this only while no other writer works under ``root`` (the
+    pipeline calls it at the start of a run).
+    """
+    removed = []
+    for tmp in Path(root).rglob(".*.tmp"):
+        if tmp.is_file():
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+                removed.append(tmp)
+    return removed
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import InputError
 from .atomic import atomic_path, write_bytes
+from ..interrupts import import_trimesh
 
 __all__ = ["write_ply_points", "read_ply", "read_ply_points", "write_ply_mesh", "read_ply_mesh"]
 
@@ -135,7 +136,7 @@ def read_ply_points(path: str | Path) -> np.ndarray:
 
 def write_ply_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray) -> None:
     """Write a triangle mesh as binary PLY (via trimesh), atomically."""
-    import trimesh
+    trimesh = import_trimesh()
 
     mesh = trimesh.Trimesh(vertices=np.asarray(vertices, dtype=np.float64), faces=np.asarray(faces, dtype=np.int64),
                            process=False)
@@ -145,7 +146,7 @@ def write_ply_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray) ->
 
 def read_ply_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (V,3) float64, faces (F,3) int64) of a PLY mesh (via trimesh)."""
-    import trimesh
+    trimesh = import_trimesh()
 
     path = Path(path)
     if not path.is_file():

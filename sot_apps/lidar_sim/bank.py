@@ -39,6 +39,7 @@ from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
 from ..objects.meshes import SurfelParams, surfel_mesh
 from ..objects.shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
+from ..interrupts import import_trimesh
 
 __all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
            "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points",
@@ -218,7 +219,7 @@ def entries_from_annotations(bank_root: Path, seq: Sequence, track_ids: list[str
 
 def entry_from_mesh_file(bank_root: Path, path: str | Path, entry_id: str | None = None,
                          label: str | None = None) -> BankEntry:
-    import trimesh
+    trimesh = import_trimesh()
 
     path = Path(path)
     start = time.perf_counter()

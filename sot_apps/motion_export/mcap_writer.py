@@ -24,6 +24,7 @@ from __future__ import annotations
 import colorsys
 import contextlib
 import json
+import os
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -211,6 +212,63 @@ class _Writer:
                              metadata=metadata, cubes=[cube], texts=[text], lines=lines)
 
 
+class _FirstErrorSink:
+    """The file the MCAP writer writes through: the first exception (an OSError such as a full disk, or a
+    Ctrl-C that lands in this Python callback, which the writer would otherwise turn into an I/O error and lose)
+    is kept and every later write is dropped (positions still advance as if written, as the writer checks them),
+    so the writer does not log one failure per message; the caller raises it once, after each frame."""
+
+    def __init__(self, handle) -> None:
+        self._handle = handle
+        self.error: BaseException | None = None
+        self._position = 0   # after an error: where the file would be
+        self._end = 0
+
+    def write(self, data) -> int:
+        if self.error is None:
+            try:
+                return self._handle.write(data)
+            except BaseException as exc:  # noqa: BLE001 - kept and raised by raise_error
+                self._fail(exc)
+        self._position += len(data)
+        self._end = max(self._end, self._position)
+        return len(data)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        if self.error is None:
+            try:
+                return self._handle.seek(offset, whence)
+            except BaseException as exc:  # noqa: BLE001 - kept and raised by raise_error
+                self._fail(exc)
+        self._position = (offset, self._position + offset, self._end + offset)[whence]
+        return self._position
+
+    def tell(self) -> int:
+        if self.error is None:
+            try:
+                return self._handle.tell()
+            except BaseException as exc:  # noqa: BLE001 - kept and raised by raise_error
+                self._fail(exc)
+        return self._position
+
+    def flush(self) -> None:
+        if self.error is None:
+            try:
+                self._handle.flush()
+            except BaseException as exc:  # noqa: BLE001 - kept and raised by raise_error
+                self._fail(exc)
+
+    def _fail(self, exc: BaseException) -> None:
+        self.error = exc
+        with contextlib.suppress(OSError, ValueError):
+            self._position = self._handle.tell()
+            self._end = max(self._position, os.fstat(self._handle.fileno()).st_size)
+
+    def raise_error(self) -> None:
+        if self.error is not None:
+            raise self.error
+
+
 def write_motion_mcap(path: str | Path, sequence: Sequence, kinematics: list[Kinematics], metadata: dict[str, Any],
                       with_points: bool = False, progress: bool = True) -> McapSummary:
     """Write the MCAP atomically (temporary file, then rename); returns per-topic message counts.
@@ -233,17 +291,20 @@ def write_motion_mcap(path: str | Path, sequence: Sequence, kinematics: list[Kin
     record["objects"] = json.dumps([{"id": k.object_id, "label": k.label, "frames": [int(k.frames[0]), int(k.frames[-1])],
                                      "valid_frames": int(k.valid.sum()), "source": k.source} for k in kinematics])
     record["frames"] = json.dumps([lo, hi])
-    with atomic_path(path) as tmp:
+    with atomic_path(path) as tmp, open(tmp, "wb", buffering=0) as handle:   # the writer buffers
+        sink = _FirstErrorSink(handle)
         ctx = foxglove.Context()
-        writer = foxglove.open_mcap(tmp, allow_overwrite=True, context=ctx)
+        writer = foxglove.open_mcap(sink, context=ctx)
         try:
             state = _Writer(ctx, m, channels, kinematics, sequence)
             for frame in tqdm(frames, desc="mcap", unit="frame", disable=not progress, leave=False):
                 state.frame(frame, with_points)
+                sink.raise_error()
             writer.write_metadata(METADATA_NAME, record)
         except BaseException:
             with contextlib.suppress(Exception):
                 writer.close()
             raise
         writer.close()  # finishes the summary section; errors here must surface
+        sink.raise_error()
     return McapSummary(path=path, frames=len(frames), objects=len(kinematics), message_counts=state.counts)

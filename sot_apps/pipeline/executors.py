@@ -7,7 +7,10 @@ keyword arguments). :func:`run_tasks` runs them, shows a progress bar, and retur
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import threading
 import time
 import traceback
 import uuid
@@ -37,6 +40,7 @@ class TaskOutcome:
     result: Any = None
     error: str | None = None
     seconds: float = 0.0
+    environment: bool = False   # failed because an output could not be written (full disk, read-only, ...)
 
 
 @dataclass(frozen=True)
@@ -61,23 +65,61 @@ def _single_threaded_env() -> None:
         os.environ.setdefault(var, "1")
 
 
+_task_running = False   # in a worker process: whether a task is running (see _worker_sigint)
+
+
 def _call(task: Task) -> TaskOutcome:
     """Run a task, turning any exception into a failed outcome (runs in the worker)."""
+    global _task_running
     start = time.perf_counter()
     try:
-        result = task.fn(*task.args, **task.kwargs)
+        _task_running = True
+        try:
+            result = task.fn(*task.args, **task.kwargs)
+        finally:
+            _task_running = False
         return TaskOutcome(task.key, True, result=result, seconds=time.perf_counter() - start)
     except BaseException as exc:  # noqa: BLE001 - a worker must report, not die
         if isinstance(exc, KeyboardInterrupt):
             raise
+        from ..errors import OutputError
+        from ..io.atomic import is_environment_error
+
+        seconds = time.perf_counter() - start
+        if isinstance(exc, OutputError):
+            return TaskOutcome(task.key, False, error=exc.one_line(), seconds=seconds, environment=True)
         message = " ".join(str(exc).split()) or type(exc).__name__
         detail = traceback.format_exc(limit=8) if os.environ.get("SOT_APPS_DEBUG") == "1" else ""
-        return TaskOutcome(task.key, False, error=f"{type(exc).__name__}: {message}{detail}",
-                           seconds=time.perf_counter() - start)
+        return TaskOutcome(task.key, False, error=f"{type(exc).__name__}: {message}{detail}", seconds=seconds,
+                           environment=is_environment_error(exc))
+
+
+def _worker_sigint(signum, frame) -> None:
+    """Ctrl-C in a worker process: stop the running task (its atomic writes clean up; the pool hands the
+    KeyboardInterrupt back to the parent, which reports the interrupt once); an idle worker ignores it."""
+    if _task_running:
+        raise KeyboardInterrupt
 
 
 def _worker_init() -> None:
     _single_threaded_env()
+    signal.signal(signal.SIGINT, _worker_sigint)
+
+
+@contextlib.contextmanager
+def _sigint_ignored_in_children():
+    """Start worker processes with SIGINT ignored: an ignored signal stays ignored across exec (a blocked one does
+    not: the spawn resets the mask) and Python then installs no KeyboardInterrupt handler, so a Ctrl-C while a
+    worker starts cannot print its traceback; :func:`_worker_init` installs the worker's handler. Only for the
+    few milliseconds of process creation does this process ignore Ctrl-C as well."""
+    if threading.current_thread() is not threading.main_thread():   # only the main thread may set handlers
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _progress(total: int, desc: str, enabled: bool) -> tqdm:
@@ -160,10 +202,11 @@ class ExecutorSession:
         from concurrent.futures.process import BrokenProcessPool
 
         outcomes: dict[int, TaskOutcome] = {}
-        pool = self._process_pool()
-        pending: dict[Future, int] = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
         broken = False
         try:
+            with _sigint_ignored_in_children():   # submit() starts the worker processes
+                pool = self._process_pool()
+                pending: dict[Future, int] = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
             with _progress(len(tasks), desc, progress) as bar:
                 while pending:
                     done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -178,7 +221,7 @@ class ExecutorSession:
                             outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
                         bar.update(1)
         except BaseException:
-            self.close(wait=False)   # Ctrl-C: cancel what is queued; workers get the same SIGINT and stop
+            self.close(wait=False)   # Ctrl-C: cancel what is queued; workers get the same SIGINT, stop their task
             raise
         if broken:   # a worker died (e.g. killed): the next batch gets a fresh pool
             self._pool.shutdown(wait=False, cancel_futures=True)

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from ..io.atomic import write_json
+from ..errors import OutputError
+from ..io.atomic import remove_stale_temporaries, write_json
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
 from .health import health_lines, run_track_health
@@ -121,6 +122,9 @@ def _make_unit(out: Path, stage: str, key: str, sequence: str | None, obj: str |
 def _run_units(units: list[_Unit], out: Path, session: ExecutorSession, desc: str, progress: bool) -> list[UnitRecord]:
     todo = [u for u in units if u.task is not None]
     outcomes: dict[str, TaskOutcome] = {o.key: o for o in session.run([u.task for u in todo], desc, progress)}
+    for o in outcomes.values():
+        if o.environment:   # a full disk or an unwritable output stops the run (finished units resume)
+            raise OutputError(None, o.error or "cannot write an output")
     records = []
     for u in units:
         if u.task is None:
@@ -163,6 +167,7 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
     t0 = time.perf_counter()
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out)   # left by a killed worker or process; never under a final name
     plan = plan or make_plan(config)
     stages = config.stages
     records: list[UnitRecord] = []

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_path
+from ..interrupts import import_pyrender, import_trimesh
 
 __all__ = ["render_camera_images", "CV_FROM_GL"]
 
@@ -22,7 +23,7 @@ CV_FROM_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 
 def _pyrender():
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    import pyrender
+    pyrender = import_pyrender()
 
     return pyrender
 
@@ -30,7 +31,7 @@ def _pyrender():
 def render_camera_images(world, cam, times_ns: np.ndarray, out_dir: Path) -> list[Path]:
     """Render one PNG per time into ``out_dir/NNNNNN.png``; returns the paths."""
     import cv2
-    import trimesh
+    trimesh = import_trimesh()
 
     from ..objects.trajectory import world_from_object
 

@@ -10,7 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
+
+from ..interrupts import import_trimesh
+
+trimesh = import_trimesh()
 
 __all__ = ["VEHICLE_KINDS", "VehicleMesh", "make_vehicle", "random_vehicle"]
 

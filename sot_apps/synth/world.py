@@ -57,6 +57,7 @@ from ..lidar_sim.scan import Scan, SimObject, simulate_scan
 from ..objects.trajectory import Trajectory, world_from_object, wrap_heading
 from ..lidar_sim.sensors import Sensor, load_sensor
 from .vehicles import random_vehicle
+from ..interrupts import import_trimesh
 
 __all__ = ["WorldObject", "World", "SynthCamera", "make_world", "write_world", "SENSOR_HEIGHT", "BASE_TIME_NS"]
 
@@ -215,7 +216,7 @@ def _box_mesh(extents, centre) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _cylinder_mesh(radius: float, height: float, centre) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
+    trimesh = import_trimesh()
 
     m = trimesh.creation.cylinder(radius=radius, height=height, sections=12)
     return np.asarray(m.vertices) + np.asarray(centre), np.asarray(m.faces)
