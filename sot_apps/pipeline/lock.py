@@ -23,6 +23,15 @@ from ..errors import InputError
 
 __all__ = ["LOCK_NAME", "RunLock"]
 
+
+def _output_error(out: Path, exc: OSError) -> Exception:
+    """The one-line error naming the output directory (an environment fault) or the lock file (anything else)."""
+    from ..io.atomic import is_environment_error, output_error
+
+    if is_environment_error(exc):
+        return output_error(out, exc)
+    return InputError(out / LOCK_NAME, f"cannot lock the output directory ({exc.strerror or exc})")
+
 LOCK_NAME = ".sot-apps-run.lock"
 
 # resolved lock path -> [file descriptor, depth] of the locks this process holds
@@ -40,8 +49,11 @@ class RunLock:
         if held is not None:
             held[1] += 1
             return self
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise _output_error(self.path.parent, exc) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -53,8 +65,13 @@ class RunLock:
             os.close(fd)
             raise InputError(self.path, f"cannot lock the output directory ({exc.strerror})") from None
         stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}, started {stamp}\n".encode(), 0)
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}, started {stamp}\n".encode(), 0)
+        except OSError as exc:  # e.g. a full disk: the run could not write its outputs either
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+            raise _output_error(self.path.parent, exc) from None
         _HELD[self.path] = [fd, 1]
         return self
 
