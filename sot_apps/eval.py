@@ -26,6 +26,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from tracker.config import TrackerConfig, get_preset, preset_names
+from tracker.fixed_lag import refine_fixed_lag
 from tracker.frames import LidarFrame
 from tracker.geometry import Box
 from tracker.ground import GroundParams
@@ -370,10 +371,13 @@ def resolve_presets(names: Sequence[str] | None) -> list[str]:
 def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, presets: Sequence[str] = ("full",),
              offline: bool = False, seeds: Sequence[int] = (0,), config: EvalConfig = EvalConfig(),
              end_frame: int | None = None, progress: Callable[[Iterable], Iterable] | None = None,
-             refine: Callable[..., TrackResult] | None = None, with_shape: bool = True) -> EvalReport:
-    """Evaluate ``presets`` (online, plus offline-refined rows when ``offline``) on ``track_ids``
-    (default: all moving vehicle tracks). ``refine(source, result, config) -> TrackResult`` overrides the
-    offline refinement (default: :func:`tracker.offline.refine_offline`)."""
+             refine: Callable[..., TrackResult] | None = None, with_shape: bool = True,
+             lags: Sequence[int] = ()) -> EvalReport:
+    """Evaluate ``presets`` (online, plus fixed-lag rows ``preset+lagN`` for each N in ``lags`` and
+    offline-refined rows when ``offline``) on ``track_ids`` (default: all moving vehicle tracks).
+    ``refine(source, result, config) -> TrackResult`` overrides the offline refinement (default:
+    :func:`tracker.offline.refine_offline`). A fixed-lag row's ms/frame is the online step plus the window
+    solve when the frame arrived."""
     source = CachedSource(sequence)
     ids = list(track_ids) if track_ids else select_moving_vehicle_tracks(sequence, config, source)
     if not ids:
@@ -384,6 +388,7 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     jobs = [(p, s, spec) for p in presets for s in seeds for spec in specs]
     online: dict[str, list[RunRecord]] = {p: [] for p in presets}
     refined: dict[str, list[RunRecord]] = {p: [] for p in presets}
+    lagged: dict[tuple[str, int], list[RunRecord]] = {(p, n): [] for p in presets for n in lags}
     tracker_configs: dict[str, dict[str, Any]] = {}
     for preset, seed, spec in (progress(jobs) if progress else jobs):
         tconfig = get_preset(preset, seed=int(seed))
@@ -392,6 +397,11 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
         ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
         online[preset].append(RunRecord(preset, int(seed), spec.track_id, _score(spec, result, config), ms,
                                         _flag_counts(result)))
+        for n in lags:
+            smoothed = refine_fixed_lag(source, result, int(n), tconfig)
+            lag_ms = np.array([e.time_ms for e in smoothed.estimates[1:]], dtype=np.float64)
+            lagged[(preset, n)].append(RunRecord(f"{preset}+lag{n}", int(seed), spec.track_id,
+                                                 _score(spec, smoothed, config), lag_ms, _flag_counts(smoothed)))
         if offline:
             t0 = time.perf_counter()
             better = refine(source, result, tconfig)
@@ -401,6 +411,8 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     rows = []
     for preset in presets:
         rows.append(_summarise_row(preset, preset, False, seeds, online[preset], specs))
+        for n in lags:
+            rows.append(_summarise_row(f"{preset}+lag{n}", preset, False, seeds, lagged[(preset, n)], specs))
         if offline:
             rows.append(_summarise_row(f"{preset}+offline", preset, True, seeds, refined[preset], specs))
     return EvalReport(str(sequence.root), config, specs, rows, tracker_configs)

@@ -26,7 +26,8 @@ from .config import TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, points_in_box, transform_points, wrap_angle
 from .ground import GroundParams, ground_mask
-from .motion import MotionPrior
+from .first_frame import explained_points, motion_hypotheses
+from .motion_filter import AverageMotion, CTRVMotion, CTRVParams, HeightFilter
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
 from .terms import ResidualBlock, apply_motion, motion_consistency_block, motion_prior_block, point_pair_block
@@ -55,12 +56,17 @@ class FrameEstimate:
 
 @dataclass
 class TrackResult:
-    """A whole track: one estimate per frame from ``start`` to ``end`` (the start frame is the init box)."""
+    """A whole track: one estimate per frame from ``start`` to ``end`` (the start frame is the init box).
+
+    ``mode``: "online" (each state final when its frame arrives), "lag" (final ``lag`` frames later: fixed-lag
+    refinement, tracker/fixed_lag.py) or "offline" (refined with the whole sequence, tracker/offline.py)."""
 
     estimates: list[FrameEstimate]
     size: np.ndarray          # (length, width, height)
     shape: np.ndarray         # (M, 3) object-frame points
     config: TrackerConfig
+    mode: str = "online"
+    lag: int = 0
 
     @property
     def frames(self) -> list[int]:
@@ -249,7 +255,8 @@ class Tracker:
         self.rng = np.random.default_rng(c.seed)
         self.first_box = box
         self.box = box
-        self.prior = MotionPrior(c.alpha, c.prior_frame)
+        self.motion = self._motion_model(box)
+        self._timestamp_ns = int(frame.timestamp_ns)
         self.shape = ShapeModel(c.voxel_size)
         self.subshape = SubShape(c.subshape_frames if c.use_subshape else 0, c.voxel_size)
         self.steps = 0
@@ -260,6 +267,8 @@ class Tracker:
         local, flags = self._local_points(frame, box, max(c.first_search_scale, c.search_scale))
         height = _ground_height(self._ground_points, box.center[:2], box)
         self._ground_offset = None if height is None else box.z - height
+        self._height = HeightFilter(box.z, height, c.height_drift_sigma, c.height_fit_sigma, c.height_road_sigma,
+                                    c.height_offset_gain)
         self._finish_frame(frame, box, local, keyframe=True)
         self._started = True
         obj = local[points_in_box(local, box, 1.0)]
@@ -402,43 +411,78 @@ class Tracker:
             flags.append("no_shape_inliers")
         return x, info
 
-    def step(self, frame: LidarFrame) -> FrameEstimate:
-        """Estimate the object's state in ``frame`` (the frame after the previous call)."""
-        if not self._started:
-            raise RuntimeError("Tracker.step called before Tracker.start")
-        t0 = time.perf_counter()
+    def _motion_model(self, box: Box) -> AverageMotion | CTRVMotion:
         c = self.config
-        self.steps += 1
-        flags: list[str] = []
-        prev = self.box
-        first = self.steps == 1
+        if c.motion_model == "ctrv":
+            params = CTRVParams(accel_sigma=c.ctrv_accel_sigma, yaw_accel_sigma=c.ctrv_yaw_accel_sigma)
+            return CTRVMotion(box, params, c.ctrv_position_sigma, c.ctrv_heading_sigma, c.travel_heading_sigma,
+                              c.travel_min_distance)
+        return AverageMotion(c.alpha, c.prior_frame, c.coast_yaw_decay, c.prior_per_second)
+
+    def _elapsed(self, frame: LidarFrame) -> float:
+        """Seconds since the previous frame (0.1 s when the timestamps do not advance)."""
+        dt = (int(frame.timestamp_ns) - self._timestamp_ns) * 1e-9
+        self._timestamp_ns = int(frame.timestamp_ns)
+        return dt if dt > 0 else 0.1
+
+    def _search_scale(self, first: bool) -> float:
+        """gamma_in, grown by ``search_growth`` sigmas of the predicted centre (capped)."""
+        c = self.config
         if first:
-            self._first_shape = self.shape.points.copy()
-        prior = self.prior.predict(prev.heading)
-        # coasting (no data) keeps the velocity but lets the turn rate die out
-        prior[3] *= c.coast_yaw_decay ** self._coasting
-        search_scale = c.first_search_scale if first else c.search_scale
-        reach_box = _box_moved(prev, prior)
-        local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale))
-        flags += point_flags
-        x = prior.copy()
-        info: dict = {"crop": 0}
-        if len(local) == 0 or not points_in_box(local, reach_box, search_scale).any():
+            return c.search_scale if c.first_hypotheses > 0 else c.first_search_scale
+        scale = c.search_scale
+        if c.search_growth > 0:
+            margin = c.search_growth * self.motion.search_sigma()
+            scale = max(scale, min(c.max_search_scale, c.search_scale + 2.0 * margin / self.box.length))
+        return scale
+
+    def _first_frame_search(self, target: _Target, local: np.ndarray, flags: list[str]) -> np.ndarray:
+        """Frame 1 (no prior yet): the motion the normal step starts from (see tracker/first_frame.py)."""
+        c = self.config
+        prev = self.box
+        if c.first_hypotheses <= 0:  # one wide ICP-only search from zero motion
+            x, _ = self._estimate(target, np.zeros(4), c.first_search_scale, c.first_icp_iterations, True, None, flags)
+            return x
+        dt = self._last_dt
+        best, best_score = np.zeros(4), -1
+        source = self.prev_points
+        for x0 in motion_hypotheses(prev.heading, c.first_hypotheses, c.first_max_speed * dt,
+                                    c.first_max_speed * dt / 3.0):
+            x, _ = self._estimate(target, x0, c.search_scale, c.first_icp_iterations, True, None, flags)
+            if c.first_max_yaw > 0:
+                x[3] = np.clip(x[3], -c.first_max_yaw, c.first_max_yaw)
+            score = explained_points(local, _box_moved(prev, x), apply_motion(x, source, prev.center), 0.2)
+            if score > best_score:
+                best, best_score = x, score
+        return best
+
+    def _register(self, frame_local: np.ndarray, prior: np.ndarray, search_scale: float, first: bool,
+                  flags: list[str]) -> np.ndarray:
+        """The frame's motion from the data (Algorithm 2), or the prior when there are no data."""
+        c = self.config
+        reach_box = _box_moved(self.box, prior)
+        if len(frame_local) == 0 or not points_in_box(frame_local, reach_box, search_scale).any():
             flags += ["no_points", "prior_only"]
+            return prior.copy()
+        target = _Target(frame_local)
+        if first:
+            x = self._first_frame_search(target, frame_local, flags)
+            reference = x.copy()
         else:
-            target = _Target(local)
-            if first:
-                x, info = self._estimate(target, x, c.first_search_scale, c.first_icp_iterations, True, None, flags)
-                reference = x.copy()
-            else:
-                reference = prior
-            x, info = self._estimate(target, x, c.search_scale, c.outer_iterations, False, reference, flags)
-            if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
-                flags += ["low_points", "prior_only"]
-                x = np.zeros(4) if first else prior.copy()
+            x, reference = prior.copy(), prior
+        x, info = self._estimate(target, x, search_scale, c.outer_iterations, False, reference, flags)
+        if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
+            flags += ["low_points", "prior_only"]
+            return np.zeros(4) if first else prior.copy()
+        return x
+
+    def _limit_motion(self, x: np.ndarray, prior: np.ndarray, first: bool, flags: list[str]) -> np.ndarray:
+        """Caps on the change of turn rate and velocity relative to the prediction (physical limits)."""
+        c = self.config
+        prev = self.box
         if not np.isfinite(x).all():
             flags.append("prior_only")
-            x = prior.copy()
+            return prior.copy()
         if c.max_yaw_change > 0 and not first and abs(x[3] - prior[3]) > c.max_yaw_change:
             flags.append("yaw_clamped")  # a vehicle cannot turn that suddenly: keep the prior's turn rate +- the cap
             x[3] = prior[3] + np.sign(x[3] - prior[3]) * c.max_yaw_change
@@ -452,35 +496,68 @@ class Tracker:
                 flags.append("motion_clamped")
                 along, across = np.clip(along, -cap_along, cap_along), np.clip(across, -cap_across, cap_across)
                 x[:2] = prior[:2] + np.array([ch * along - sh * across, sh * along + ch * across])
+        return x
+
+    def _fuse_motion(self, x: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """The motion model's update with the registered motion (CTRV: heading about the visible points)."""
+        prev = self.box
+        before = self.prev_points[points_in_box(self.prev_points, prev, 1.0)]
+        now = local[points_in_box(local, _box_moved(prev, x), 1.0)]
+        return self.motion.update(prev, x, before.mean(axis=0) if len(before) else None,
+                                  now.mean(axis=0) if len(now) else None, self._last_dt)
+
+    def step(self, frame: LidarFrame) -> FrameEstimate:
+        """Estimate the object's state in ``frame`` (the frame after the previous call)."""
+        if not self._started:
+            raise RuntimeError("Tracker.step called before Tracker.start")
+        t0 = time.perf_counter()
+        c = self.config
+        self.steps += 1
+        flags: list[str] = []
+        prev = self.box
+        first = self.steps == 1
+        if first:
+            self._first_shape = self.shape.points.copy()
+        self._last_dt = self._elapsed(frame)
+        prior = self.motion.predict(prev, self._last_dt, self._coasting)
+        search_scale = self._search_scale(first)
+        local, point_flags = self._local_points(frame, _box_moved(prev, prior), max(search_scale, c.search_scale))
+        flags += point_flags
+        x = self._register(local, prior, search_scale, first, flags)
+        x = self._limit_motion(x, prior, first, flags)
         coasting = "prior_only" in flags
         if c.min_quality > 0 and not coasting and not first:
-            explained, _ = self._explained(local, _box_moved(prev, self._with_z(x, prev)))
+            explained, _ = self._explained(local, _box_moved(prev, x))
             if explained < c.min_quality:  # a poor fit (clutter, a few stray points): trust the prior instead
                 flags += ["low_quality", "prior_only"]
                 coasting = True
                 x = prior.copy()
-        x = self._with_z(x, prev)
+        x = self._with_z(x, prev, fit=not coasting)
+        if coasting:
+            self._coasting += 1  # the motion model is not updated with its own prediction
+        else:
+            self._coasting = 0
+            x = self._fuse_motion(x, local)
         x[3] = wrap_angle(x[3])
         box = _box_moved(prev, x)
         quality = self._quality(local, box)
         obj_world = self._finish_frame(frame, box, local, keyframe=c.shape_update and self.steps % c.keyframe_interval == 0)
         if 0 < len(obj_world) < c.min_points:
             flags.append("low_points")
-        if coasting:
-            self._coasting += 1  # the prior is not updated with its own prediction
-        else:
-            self._coasting = 0
-            self.prior.update(x, prev.heading)
         self.box = box
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)
 
-    def _with_z(self, x: np.ndarray, prev: Box) -> np.ndarray:
-        """The motion with dz set by ``z_mode`` ("ground": keep the start height above the local road)."""
+    def _with_z(self, x: np.ndarray, prev: Box, fit: bool = True) -> np.ndarray:
+        """The motion with dz set by ``z_mode`` ("ground": keep the start height above the local road;
+        "filter": the height filter, fed with the fit's z when ``fit``)."""
         x = x.copy()
         c = self.config
         if c.z_mode == "fixed":
             x[2] = 0.0
+        elif c.z_mode == "filter":
+            road = _ground_height(self._ground_points, prev.center[:2] + x[:2], prev)
+            x[2] = self._height.update(prev.z + x[2] if fit else None, road) - prev.z
         elif c.z_mode == "ground" and self._ground_offset is not None:
             height = _ground_height(self._ground_points, prev.center[:2] + x[:2], prev)
             if height is not None:

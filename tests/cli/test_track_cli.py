@@ -38,7 +38,7 @@ def test_offline_refinement_is_recorded_and_stays_on_the_vehicle(pandaset_root, 
     assert main(base + ["--offline", "--out", str(offline)]) == 0, capsys.readouterr().err
     on, _ = read_track(online)
     off, shape = read_track(offline)
-    assert off.config["mode"] == "offline" and off.config["refined"] is True and "mode" not in on.config
+    assert off.config["mode"] == "offline" and off.config["refined"] is True and on.config["mode"] == "online"
     assert all("offline" in r.flags for r in off.frames) and len(shape) > 50
     from sot_apps.io import open_sequence
     truth = open_sequence(pandaset_root).tracks()[off.object_id]
