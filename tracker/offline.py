@@ -118,8 +118,9 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
                               previous[0], previous[1])
     elif world is None:
         world = frame.points_world()
-    world = world[np.all(np.isfinite(world), axis=1)]
-    local = world[np.all(np.abs(world[:, :2] - box.center[:2]) <= reach, axis=1)]
+    near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
+    local = world[near]
+    local = local[np.all(np.isfinite(local), axis=1)]
     if config.ground_removal and len(local) >= 3:
         local = local[~ground_mask(local, _ground_params(config))]
     return local[points_in_box(local, box, params.region_scale)]
