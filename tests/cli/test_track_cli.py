@@ -53,6 +53,19 @@ def test_offline_refinement_is_recorded_and_stays_on_the_vehicle(pandaset_root, 
 
 
 @pytest.mark.slow
+def test_fixed_lag_mode_is_recorded(pandaset_root, tmp_path, capsys):
+    out = tmp_path / "lag"
+    code = main(["track", str(pandaset_root), "--track-id", "91aa5b5c", "--end-frame", "6", "--lag", "3", "--quiet",
+                 "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    track, _ = read_track(out)
+    assert track.config["mode"] == "lag" and track.config["lag"] == 3 and track.config["refined"] is True
+    assert [r.frame for r in track.frames] == list(range(7)) and all("lag3" in r.flags for r in track.frames[1:])
+    code = main(["track", str(pandaset_root), "--track-id", "91aa5b5c", "--lag", "0", "--out", str(tmp_path / "x")])
+    assert code == 2 and "--lag" in capsys.readouterr().err
+
+
+@pytest.mark.slow
 def test_init_box_with_negative_first_value(pandaset_root, tmp_path, capsys):
     out = tmp_path / "neg"
     code = main(["track", str(pandaset_root), "--init-box", "-5.485,-6.114,0.427,0.7736,4.726,1.969,1.548",
