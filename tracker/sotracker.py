@@ -2,16 +2,19 @@
 
 Per frame k (the paper's Algorithms 1 and 2):
 
-1. predict S^_k = S_{k-1} + dS_prior;
+1. predict S^_k = S_{k-1} + dS_prior (the motion model, tracker/motion_filter.py: the moving average, per
+   frame or per second of elapsed time, or a CTRV filter);
 2. take the sweep's points near the prediction (a cheap radius test in the EGO frame first, so only
    those points are moved to the world — de-skewed if asked), and remove the ground there (GPF);
 3. outer loop: crop the local points with S^_k scaled gamma_in, pair the ICP source (previous-frame
    object points + sub-shape, moved by the current estimate) with the crop by 1-NN, pair the shape
    (placed likewise) with the crop and keep RANSAC's inliers, then minimise the loss over
    [dx, dy, dz, dtheta] (Levenberg–Marquardt, analytic Jacobians); stop when the update is tiny;
-4. keep the object points, grow the shape at key frames and update the motion prior.
+4. keep the object points, grow the shape at key frames and update the motion model; z by ``z_mode``.
 
-Frame 1 has no motion prior: an ICP-only search in the start box scaled 3.0 precedes the normal step.
+Frame 1 has no motion prior: an ICP-only search in the start box scaled 3.0 precedes the normal step, or, with
+``first_hypotheses``, several ICP-only searches from motions along the heading, the one explaining the most
+points winning (tracker/first_frame.py).
 """
 
 from __future__ import annotations
