@@ -23,7 +23,7 @@ from .io.tracks import FrameRecord, Size, TrackFile, write_track
 
 __all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read_shape_growth", "parse_init_box",
            "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence",
-           "refine_track_offline", "track_result_to_trackfile",
+           "refine_track_fixed_lag", "refine_track_offline", "track_result_to_trackfile",
            "write_track_result", "first_box_with_points", "TrackingFailed", "MIN_INIT_POINTS"]
 
 MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box
@@ -148,6 +148,13 @@ def track_result_to_trackfile(seq: Sequence, result: TrackResult, object_id: str
                      frames=records, label=label)
 
 
+def refine_track_fixed_lag(seq: Sequence, result: TrackResult, lag: int) -> TrackResult:
+    """Fixed-lag refinement of an online result (tracker.fixed_lag; the same states as streaming with lag)."""
+    from tracker import refine_fixed_lag
+
+    return refine_fixed_lag(seq, result, lag, result.config)
+
+
 def refine_track_offline(seq: Sequence, result: TrackResult) -> TrackResult:
     """Offline refinement of an online result: all states jointly against the final shape (tracker.offline)."""
     from tracker import refine_offline
@@ -159,9 +166,16 @@ def write_track_result(directory: str | Path, seq: Sequence, result: TrackResult
                        label: str | None = None, offline: bool = False, with_time_ms: bool = True) -> Path:
     """Write ``directory/track.json`` and ``directory/shape.ply``; returns the json path.
 
-    ``offline`` records in the config block that ``result`` was refined offline (``mode: offline``).
+    The config block records the mode: ``mode: online``, ``mode: lag`` with ``lag: N`` (fixed-lag refinement,
+    each state final N frames later) or ``mode: offline`` (``result.mode``; ``offline=True`` forces offline);
+    refined modes also say ``refined: true``.
     """
-    extra = {"mode": "offline", "refined": True} if offline else None
+    mode = "offline" if offline else result.mode
+    extra: dict[str, Any] = {"mode": mode}
+    if mode != "online":
+        extra["refined"] = True
+    if mode == "lag":
+        extra["lag"] = int(result.lag)
     trackfile = track_result_to_trackfile(seq, result, object_id, init_box, label, config_extra=extra,
                                           with_time_ms=with_time_ms)
     return write_track(directory, trackfile, result.shape)

@@ -7,6 +7,7 @@ from .association import NearestNeighbors, RansacResult, fit_rigid_2d, ransac_ri
 from .config import DETECTION_PRESETS, PRESETS, TrackerConfig, get_preset, preset_names
 from .det_baseline import ConstantVelocityFilter
 from .detection import Detections, FrameDetections, align_heading
+from .fixed_lag import FixedLagTracker, refine_fixed_lag, track_fixed_lag
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, make_transform, points_in_box, rotation_z, transform_points, wrap_angle
 from .ground import GroundParams, fit_plane, ground_mask, remove_ground
@@ -33,4 +34,5 @@ __all__ = [
     "PooledMetrics", "TrackletScores", "centre_errors_batch", "iou_3d_batch", "difficulty", "pool_metrics",
     "score_tracklet", "tracklet_metrics", "accuracy", "robustness",
     "DETECTION_PRESETS", "Detections", "FrameDetections", "align_heading", "ConstantVelocityFilter", "iou_bev_batch",
+    "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag",
 ]

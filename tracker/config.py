@@ -79,11 +79,35 @@ class TrackerConfig:
     alpha: float = 0.5                   # prior <- alpha * prior + (1 - alpha) * delta
     prior_frame: str = "world"           # "world" (paper) or "object": average the motion in the box frame
     z_mode: str = "icp"                  # "icp": dz from the loss like dx, dy; "ground": the box keeps its start
-                                         # height above the local road plane; "fixed": dz = 0
+                                         # height above the local road plane; "fixed": dz = 0; "filter": slow
+                                         # estimate from the registration's z with the road as a prior
     max_speed_change: float = 0.0        # > 0: |dx, dy - predicted| capped at this along / half across (m/frame)
     min_quality: float = 0.0             # > 0: a frame whose fit quality is below this continues on the prior
     max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
     coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
+    # --- robust online tracking (issue 12); the defaults keep the paper's behaviour
+    motion_model: str = "average"        # "average": moving-average prior (paper); "ctrv": CTRV Kalman filter over
+                                         # [x, y, heading, speed, turn rate], predicted with the elapsed time (s);
+                                         # the box heading is the filtered one (the box turns about its points)
+    prior_per_second: bool = False       # "average": the prior is a velocity (motion / elapsed time), predicted
+                                         # for the elapsed time (frame gaps); False = per frame (paper)
+    ctrv_accel_sigma: float = 4.0        # m/s^2, acceleration noise of the CTRV filter
+    ctrv_yaw_accel_sigma: float = 3.0    # rad/s^2, turn-rate noise (abrupt steering)
+    ctrv_position_sigma: float = 0.1     # m, noise of the registered centre as a measurement
+    ctrv_heading_sigma: float = 0.05     # rad, noise of the registered heading as a measurement
+    travel_heading_sigma: float = 0.0    # > 0 (ctrv): the direction of travel of the object's points is a heading
+                                         # measurement with this noise floor (rad) (+ position noise / distance)
+    travel_min_distance: float = 0.2     # m: shorter displacements give no travel heading
+    first_hypotheses: int = 0            # > 0: frame-1 search from this many motions along the heading (scored by
+                                         # the points they explain) in the normal search box; 0 = one wide search
+    first_max_speed: float = 30.0        # m/s: the frame-1 hypotheses reach this far forward (a third backwards)
+    first_max_yaw: float = 0.0           # > 0: frame-1 heading change cap (rad)
+    height_drift_sigma: float = 0.02     # z_mode "filter": z random walk per frame (m)
+    height_fit_sigma: float = 0.15       # z_mode "filter": noise of the registration's z (m)
+    height_road_sigma: float = 0.05      # z_mode "filter": noise of road height + offset (m)
+    height_offset_gain: float = 0.05     # z_mode "filter": the height above the road follows the estimate this slowly
+    search_growth: float = 0.0           # > 0 (ctrv): the search box grows by this many sigmas of the predicted centre
+    max_search_scale: float = 4.0        # cap of the grown search scale
     mp_reference: str = "prior"          # "prior" (paper) or "iteration" (upstream: previous outer iteration)
     symmetric_mc: bool = True            # MC on both components; False = upstream's x-only form
     # --- ground removal (GPF, Zermas et al. 2017)
@@ -145,8 +169,10 @@ class TrackerConfig:
     def __post_init__(self) -> None:
         if self.icp_metric not in ("point", "plane"):
             raise ValueError(f"icp_metric must be 'point' or 'plane', not {self.icp_metric!r}")
-        if self.z_mode not in ("icp", "ground", "fixed"):
-            raise ValueError(f"z_mode must be 'icp', 'ground' or 'fixed', not {self.z_mode!r}")
+        if self.z_mode not in ("icp", "ground", "fixed", "filter"):
+            raise ValueError(f"z_mode must be 'icp', 'ground', 'fixed' or 'filter', not {self.z_mode!r}")
+        if self.motion_model not in ("average", "ctrv"):
+            raise ValueError(f"motion_model must be 'average' or 'ctrv', not {self.motion_model!r}")
         if self.prior_frame not in ("world", "object"):
             raise ValueError(f"prior_frame must be 'world' or 'object', not {self.prior_frame!r}")
         if self.method not in ("sot", "det"):
@@ -169,11 +195,14 @@ class TrackerConfig:
 
 DET_WEIGHT = 0.03  # Detection-term weight of det_sot: ~ (sigma_ICP / sigma_Det)^2, docs/detection.md
 
-_FULL = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
+_FULL_V1 = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
                       anderson_depth=3, symmetric_mc=False, prior_frame="object", alpha=0.6, max_yaw_change=0.03,
                       min_target_points=3, max_points=600, gpf_seed_threshold=0.3, gpf_distance_threshold=0.2,
                       z_mode="ground",
-                      preset="full")
+                      preset="full_v1")
+# full = full_v1 + the robust online pieces of issue 12 (each one a field; the full_no_* presets switch one off)
+_FULL = _FULL_V1.replace(first_hypotheses=9, first_max_yaw=0.1, z_mode="filter", prior_per_second=True,
+                         preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
@@ -183,6 +212,7 @@ _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_i
 
 PRESETS: dict[str, TrackerConfig] = {
     "full": _FULL,
+    "full_v1": _FULL_V1,
     "faithful": _FAITHFUL,
     "icp_mp": _FULL.replace(use_shape=False, weight_mc=0.0, preset="icp_mp"),
     "icp_mp_s1": _FULL.replace(shape_update=False, weight_mc=0.0, preset="icp_mp_s1"),

@@ -44,13 +44,13 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from .config import TrackerConfig
-from .frames import FrameSource
+from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, wrap_angle
 from .ground import ground_mask
 from .metrics import voxel_downsample_centres
 from .sotracker import FrameEstimate, TrackResult, deskew_points
 
-__all__ = ["OfflineParams", "OfflineProblem", "gather_frame_points", "refine_states", "refine_offline"]
+__all__ = ["OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states", "refine_offline"]
 
 
 @dataclass(frozen=True)
@@ -75,6 +75,7 @@ class OfflineParams:
     anchor_sigma_xyz: float = 1.0
     anchor_sigma_heading: float = 0.3
     voxel: float = 0.05
+    shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
     min_shape_points: int = 10
     folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
     first_frame_weight: float = 1.0     # data weight of frame 0 (its registration sets the gauge)
@@ -95,33 +96,41 @@ def _box(state: np.ndarray, size: np.ndarray) -> Box:
                float(size[0]), float(size[1]), float(size[2]))
 
 
+def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, params: OfflineParams,
+                        previous: tuple[int, np.ndarray] | None = None,
+                        world: np.ndarray | None = None) -> np.ndarray:
+    """Ground-removed world points of ``frame`` inside ``box`` scaled ``region_scale``.
+
+    ``previous``: (timestamp_ns, world_from_ego) of the frame before (de-skew only); ``world``: the frame's
+    world points when the caller has them cached."""
+    pts_ego = np.asarray(frame.points_ego)
+    reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
+    use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
+                  and len(frame.point_time_offset_ns) == len(pts_ego))
+    if use_deskew:
+        world = deskew_points(pts_ego, frame.point_time_offset_ns, frame.timestamp_ns, frame.world_from_ego,
+                              previous[0], previous[1])
+    elif world is None:
+        world = frame.points_world()
+    near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
+    local = world[near]
+    local = local[np.all(np.isfinite(local), axis=1)]
+    if config.ground_removal and len(local) >= 3:
+        local = local[~ground_mask(local, config.ground_params())]
+    return local[points_in_box(local, box, params.region_scale)]
+
+
 def gather_frame_points(source: FrameSource, result: TrackResult, config: TrackerConfig,
                         params: OfflineParams) -> list[np.ndarray]:
     """Ground-removed world points inside each online box scaled ``region_scale`` (one array per frame)."""
-    ground = config.ground_params()
     out: list[np.ndarray] = []
     previous = None
+    getter = getattr(source, "points_world", None)
     for est in result.estimates:
         frame = source.lidar_frame(est.frame)
-        box = est.box
-        pts_ego = np.asarray(frame.points_ego)
-        reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
-        getter = getattr(source, "points_world", None)
-        use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
-                      and len(frame.point_time_offset_ns) == len(pts_ego))
-        if use_deskew:
-            world = deskew_points(pts_ego, frame.point_time_offset_ns, frame.timestamp_ns, frame.world_from_ego,
-                                  previous[0], previous[1])
-        elif callable(getter):
-            world = getter(est.frame)
-        else:
-            world = frame.points_world()
+        out.append(frame_region_points(frame, est.box, config, params, previous,
+                                       getter(est.frame) if callable(getter) and not config.deskew else None))
         previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
-        world = world[np.all(np.isfinite(world), axis=1)]
-        local = world[np.all(np.abs(world[:, :2] - box.center[:2]) <= reach, axis=1)]
-        if config.ground_removal and len(local) >= 3:
-            local = local[~ground_mask(local, ground)]
-        out.append(local[points_in_box(local, box, params.region_scale)])
     return out
 
 
@@ -131,8 +140,13 @@ def _to_object(points: np.ndarray, state: np.ndarray) -> np.ndarray:
     return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
 
 
-def _rebuild_shape(points: list[np.ndarray], states: np.ndarray, size: np.ndarray, voxel: float) -> np.ndarray:
-    parts = [_to_object(p[points_in_box(p, _box(s, size), 1.0)], s) for p, s in zip(points, states) if len(p)]
+def _rebuild_shape(points: list[np.ndarray], states: np.ndarray, size: np.ndarray, voxel: float,
+                   per_frame: int = 0) -> np.ndarray:
+    def inside(p: np.ndarray, s: np.ndarray) -> np.ndarray:
+        p = p[points_in_box(p, _box(s, size), 1.0)]
+        return p[::-(-len(p) // per_frame)] if per_frame > 0 and len(p) > per_frame else p
+
+    parts = [_to_object(inside(p, s), s) for p, s in zip(points, states) if len(p)]
     return voxel_downsample_centres(np.vstack(parts), voxel) if parts else np.zeros((0, 3))
 
 
@@ -161,8 +175,9 @@ class _Solver:
     """Gauss–Newton over all states with the shape (and its normals) held fixed."""
 
     def __init__(self, points: list[np.ndarray], online: np.ndarray, size: np.ndarray, params: OfflineParams,
-                 rng: np.random.Generator) -> None:
+                 rng: np.random.Generator, fixed: int = 0) -> None:
         self.params = params
+        self.fixed = fixed
         self.size = size
         self.online = online
         self.k = len(online)
@@ -189,7 +204,7 @@ class _Solver:
         frame_fold = np.arange(self.k) % folds
         for f in range(folds):
             others = [pts if frame_fold[k] != f else pts[:0] for k, pts in enumerate(self.raw)]
-            shape = _rebuild_shape(others, states, self.size, p.voxel)
+            shape = _rebuild_shape(others, states, self.size, p.voxel, p.shape_points_per_frame)
             if len(shape) < p.min_shape_points:
                 return False
             self.shapes.append(shape)
@@ -287,7 +302,7 @@ class _Solver:
         g = (grads + grad_p).reshape(-1)
         h = h + sp.diags(1e-9 * (1.0 + h.diagonal()))
         delta = np.zeros(4 * self.k)
-        free = np.arange(4 if self.params.gauge == "fix_first" else 0, 4 * self.k)
+        free = np.arange(4 * self.fixed, 4 * self.k)
         delta[free] = -spsolve(h[free][:, free].tocsc(), g[free])
         if not np.all(np.isfinite(delta)):
             return states
@@ -321,17 +336,26 @@ def _regauge(states: np.ndarray, given_first: np.ndarray) -> np.ndarray:
 
 
 def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.ndarray,
-                  params: OfflineParams = OfflineParams(), seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                  params: OfflineParams = OfflineParams(), seed: int = 0, initial: np.ndarray | None = None,
+                  fixed: int = 0, with_shape: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """Jointly refined states (K, 4) and the shape rebuilt from them (object frame), given each frame's
-    world points (``points[k]``) and the online states; state 0 (the given start box) is kept exactly,
-    by re-gauging after each solve (see :func:`_regauge`)."""
+    world points (``points[k]``) and the online states (the anchors).
+
+    ``initial``: the states to start from (default: the online ones). ``fixed`` > 0: the first ``fixed``
+    states are held (a sliding window behind final states); else state 0 (the given start box) is kept
+    exactly, by re-gauging after each solve (see :func:`_regauge`) or by holding it (``gauge="fix_first"``).
+    ``with_shape=False``: the shape is not rebuilt (None)."""
     online = np.asarray(online_states, dtype=np.float64).copy()
     online[:, 3] = np.unwrap(online[:, 3])
-    states = online.copy()
+    states = online.copy() if initial is None else np.asarray(initial, dtype=np.float64).copy()
+    states[:, 3] = online[:, 3] + wrap_angle(states[:, 3] - online[:, 3])
     size = np.asarray(size, dtype=np.float64)
     if len(states) < 2:
         return states, _rebuild_shape(points, states, size, params.voxel)
-    solver = _Solver(points, online, size, params, np.random.default_rng(seed))
+    regauge = fixed == 0 and params.gauge == "regauge"
+    if fixed == 0 and params.gauge == "fix_first":
+        fixed = 1
+    solver = _Solver(points, online, size, params, np.random.default_rng(seed), fixed)
     for _ in range(params.outer_iterations):
         if not solver.set_shapes(states):
             break
@@ -340,11 +364,11 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
             break
         for _ in range(params.gn_iterations):
             states = solver.step(states)
-        if params.gauge == "regauge":
+        if regauge:
             states = _regauge(states, online[0])
     out = states.copy()
     out[:, 3] = wrap_angle(out[:, 3])
-    return out, _rebuild_shape(points, states, size, params.voxel)
+    return out, _rebuild_shape(points, states, size, params.voxel) if with_shape else None
 
 
 def refine_offline(source: FrameSource, result: TrackResult, config: TrackerConfig | None = None,
@@ -362,4 +386,4 @@ def refine_offline(source: FrameSource, result: TrackResult, config: TrackerConf
         flags = tuple(dict.fromkeys(list(est.flags) + ["offline"]))
         estimates.append(dataclasses.replace(est, state=State.from_array(box.to_array()[:4]), box=box,
                                              num_points=len(obj), points=obj, flags=flags))
-    return TrackResult(estimates, np.asarray(result.size), shape, config)
+    return TrackResult(estimates, np.asarray(result.size), shape, config, mode="offline")

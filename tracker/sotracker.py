@@ -2,16 +2,19 @@
 
 Per frame k (the paper's Algorithms 1 and 2):
 
-1. predict S^_k = S_{k-1} + dS_prior;
+1. predict S^_k = S_{k-1} + dS_prior (the motion model, tracker/motion_filter.py: the moving average, per
+   frame or per second of elapsed time, or a CTRV filter);
 2. take the sweep's points near the prediction (a cheap radius test in the EGO frame first, so only
    those points are moved to the world — de-skewed if asked), and remove the ground there (GPF);
 3. outer loop: crop the local points with S^_k scaled gamma_in, pair the ICP source (previous-frame
    object points + sub-shape, moved by the current estimate) with the crop by 1-NN, pair the shape
    (placed likewise) with the crop and keep RANSAC's inliers, then minimise the loss over
    [dx, dy, dz, dtheta] (Levenberg–Marquardt, analytic Jacobians); stop when the update is tiny;
-4. keep the object points, grow the shape at key frames and update the motion prior.
+4. keep the object points, grow the shape at key frames and update the motion model; z by ``z_mode``.
 
-Frame 1 has no motion prior: an ICP-only search in the start box scaled 3.0 precedes the normal step.
+Frame 1 has no motion prior: an ICP-only search in the start box scaled 3.0 precedes the normal step, or, with
+``first_hypotheses``, several ICP-only searches from motions along the heading, the one explaining the most
+points winning (tracker/first_frame.py), or the authors' Finder (``first_search="finder"``, tracker/finder.py).
 
 With ``weight_det > 0`` (Det+SOT) and the frame's detections passed to ``step``, the detection associated
 with the prediction S^_k (:func:`tracker.detection.associate_detection`) adds the Detection term to the
@@ -31,8 +34,9 @@ from .finder import finder_icp, resample
 from .detection import Detections, FrameDetections, associate_detection, detection_motion
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, points_in_box, transform_points, wrap_angle
+from .first_frame import explained_points, motion_hypotheses
 from .ground import ground_mask
-from .motion import MotionPrior
+from .motion_filter import AverageMotion, CTRVMotion, CTRVParams, HeightFilter
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
 from .sweep_ground import cached_sweep_ground_mask
@@ -64,12 +68,17 @@ class FrameEstimate:
 
 @dataclass
 class TrackResult:
-    """A whole track: one estimate per frame from ``start`` to ``end`` (the start frame is the init box)."""
+    """A whole track: one estimate per frame from ``start`` to ``end`` (the start frame is the init box).
+
+    ``mode``: "online" (each state final when its frame arrives), "lag" (final ``lag`` frames later: fixed-lag
+    refinement, tracker/fixed_lag.py) or "offline" (refined with the whole sequence, tracker/offline.py)."""
 
     estimates: list[FrameEstimate]
     size: np.ndarray          # (length, width, height)
     shape: np.ndarray         # (M, 3) object-frame points
     config: TrackerConfig
+    mode: str = "online"
+    lag: int = 0
 
     @property
     def frames(self) -> list[int]:
@@ -179,6 +188,9 @@ def _ground_height(ground: np.ndarray, centre_xy: np.ndarray, box: Box, min_poin
     return float(coef[2])
 
 
+_NOMINAL_DT = 0.1  # s: the frame interval assumed when timestamps do not advance
+
+
 def _box_moved(box: Box, x: np.ndarray) -> Box:
     return Box(box.x + x[0], box.y + x[1], box.z + x[2], float(wrap_angle(box.heading + x[3])),
                box.length, box.width, box.height)
@@ -265,9 +277,10 @@ class Tracker:
         self.rng = np.random.default_rng(c.seed)
         self.first_box = box
         self.box = box
-        self.prior = MotionPrior(c.alpha, c.prior_frame)
-        if initial_motion is not None:
-            self.prior.update(np.asarray(initial_motion, dtype=np.float64), box.heading)
+        self.motion = self._motion_model(box)
+        if initial_motion is not None:  # a known per-frame motion seeds the motion model
+            self.motion.update(box, np.asarray(initial_motion, dtype=np.float64), None, None, _NOMINAL_DT)
+        self._timestamp_ns = int(frame.timestamp_ns)
         self.shape = ShapeModel(c.voxel_size)
         self.subshape = SubShape(c.subshape_frames if c.use_subshape else 0, c.voxel_size)
         self.steps = 0
@@ -275,11 +288,11 @@ class Tracker:
         self._shape_nn: NearestNeighbors | None = None
         self._shape_nn_size = -1
         self._previous_pose = previous_pose
-        self._last_timestamp_ns = int(frame.timestamp_ns)
-        self._nominal_dt_ns: int | None = None  # the frame interval the motion prior is expressed per
         local, flags = self._local_points(frame, box, max(c.first_search_scale, c.search_scale))
         height = _ground_height(self._ground_points, box.center[:2], box)
         self._ground_offset = None if height is None else box.z - height
+        self._height = HeightFilter(box.z, height, c.height_drift_sigma, c.height_fit_sigma, c.height_road_sigma,
+                                    c.height_offset_gain)
         self._finish_frame(frame, box, local, keyframe=True)
         self._started = True
         obj = local[points_in_box(local, box, 1.0)]
@@ -469,71 +482,97 @@ class Tracker:
         det = associate_detection(prediction, detections, c.det_min_score, c.det_min_iou)
         return None if det is None else detection_motion(self.box, det, prediction.heading)
 
-    def step(self, frame: LidarFrame, detections: FrameDetections | None = None) -> FrameEstimate:
-        """Estimate the object's state in ``frame`` (the frame after the previous call).
+    def _motion_model(self, box: Box) -> AverageMotion | CTRVMotion:
+        c = self.config
+        if c.motion_model == "ctrv":
+            params = CTRVParams(accel_sigma=c.ctrv_accel_sigma, yaw_accel_sigma=c.ctrv_yaw_accel_sigma)
+            return CTRVMotion(box, params, c.ctrv_position_sigma, c.ctrv_heading_sigma, c.travel_heading_sigma,
+                              c.travel_min_distance)
+        return AverageMotion(c.alpha, c.prior_frame, c.coast_yaw_decay, c.prior_per_second)
 
-        The motion prior is scaled by the elapsed time over the nominal frame interval (the first
-        step's). A frame without a sweep (``frame.has_sweep`` False) is a prediction only, flagged
-        ``no_sweep``. ``detections``: the frame's detections (world boxes), used by the Detection term when
-        ``config.weight_det > 0``."""
-        if not self._started:
-            raise RuntimeError("Tracker.step called before Tracker.start")
-        t0 = time.perf_counter()
+    def _elapsed(self, frame: LidarFrame) -> float:
+        """Seconds since the previous frame (0.1 s when the timestamps do not advance)."""
+        dt = (int(frame.timestamp_ns) - self._timestamp_ns) * 1e-9
+        self._timestamp_ns = int(frame.timestamp_ns)
+        return dt if dt > 0 else _NOMINAL_DT
+
+    def _search_scale(self, first: bool) -> float:
+        """gamma_in, grown by ``search_growth`` sigmas of the predicted centre (capped)."""
+        c = self.config
+        if first:
+            return c.search_scale if c.first_hypotheses > 0 else c.first_search_scale
+        scale = c.search_scale
+        if c.search_growth > 0:
+            margin = c.search_growth * self.motion.search_sigma()
+            scale = max(scale, min(c.max_search_scale, c.search_scale + 2.0 * margin / self.box.length))
+        return scale
+
+    def _first_frame_search(self, target: _Target, local: np.ndarray, prior: np.ndarray,
+                            det_target: np.ndarray | None, flags: list[str]) -> np.ndarray:
+        """Frame 1 (no prior yet): the motion the normal step starts from (see tracker/first_frame.py). With an
+        associated detection the search starts from the detection's motion instead of the hypotheses."""
         c = self.config
         prev = self.box
-        dt_ns = int(frame.timestamp_ns) - self._last_timestamp_ns
-        self._last_timestamp_ns = int(frame.timestamp_ns)
-        if self._nominal_dt_ns is None and dt_ns > 0:
-            self._nominal_dt_ns = dt_ns
-        # the prior is a motion per nominal frame interval: scale it by the elapsed time
-        dt_scale = dt_ns / self._nominal_dt_ns if self._nominal_dt_ns and dt_ns > 0 else 1.0
-        if not frame.has_sweep:
-            return self._predict_only(frame, prev, dt_scale, t0)
-        self.steps += 1
-        flags: list[str] = []
-        first = self.steps == 1
-        if first:
-            self._first_shape = self.shape.points.copy()
-        prior = self.prior.predict(prev.heading) * dt_scale
-        # coasting (no data) keeps the velocity but lets the turn rate die out
-        prior[3] *= c.coast_yaw_decay ** self._coasting
-        search_scale = c.first_search_scale if first else c.search_scale
-        reach_box = _box_moved(prev, prior)  # the motion model's prediction S^_k
-        det_target = self.detection_target(reach_box, detections)
+        if c.first_search == "finder":  # the authors' Finder: ICP in a fixed wide crop (tracker/finder.py)
+            return finder_icp(self._start_points, local, prev, self.rng, scale=c.first_search_scale,
+                              iterations=c.first_icp_iterations, max_points=c.max_points, min_points=c.min_points,
+                              solver_iterations=c.solver_iterations)
         if det_target is not None:
-            flags.append("det")
-        local, point_flags = self._local_points(frame, reach_box, max(search_scale, c.search_scale))
-        flags += point_flags
-        x = prior.copy()
-        info: dict = {"crop": 0}
-        if len(local) == 0 or not points_in_box(local, reach_box, search_scale).any():
+            prior = det_target
+        if c.first_hypotheses <= 0 or det_target is not None:  # one ICP-only search from the prediction
+            x, _ = self._estimate(target, prior, c.first_search_scale, c.first_icp_iterations, True, None, flags)
+            return x
+        dt = self._last_dt
+        best, best_score = np.zeros(4), -1
+        source = self.prev_points
+        for x0 in motion_hypotheses(prev.heading, c.first_hypotheses, c.first_max_speed * dt,
+                                    c.first_max_speed * dt / 3.0):
+            x, _ = self._estimate(target, x0, c.search_scale, c.first_icp_iterations, True, None, flags)
+            if c.first_max_yaw > 0:
+                x[3] = np.clip(x[3], -c.first_max_yaw, c.first_max_yaw)
+            score = explained_points(local, _box_moved(prev, x), apply_motion(x, source, prev.center), 0.2)
+            if score > best_score:
+                best, best_score = x, score
+        return best
+
+    def _register(self, frame_local: np.ndarray, prior: np.ndarray, search_scale: float, first: bool,
+                  det_target: np.ndarray | None, flags: list[str]) -> np.ndarray:
+        """The frame's motion from the data (Algorithm 2), or the prior when there are no data (with a
+        detection: the weighted mean of the prior and the detection's motion, flagged ``det_only``)."""
+        c = self.config
+        reach_box = _box_moved(self.box, prior)
+        if len(frame_local) == 0 or not points_in_box(frame_local, reach_box, search_scale).any():
             flags += ["no_points", "prior_only"]
+            return self._data_free_motion(prior, det_target, flags)
+        target = _Target(frame_local)
+        if first:
+            x = self._first_frame_search(target, frame_local, prior, det_target, flags)
+            reference = x.copy()
         else:
-            target = _Target(local)
-            if first and c.first_search == "finder":
-                x = finder_icp(self._start_points, local, prev, self.rng, scale=c.first_search_scale,
-                               iterations=c.first_icp_iterations, max_points=c.max_points, min_points=c.min_points,
-                               solver_iterations=c.solver_iterations)
-                reference = x.copy()
-            elif first:
-                x, info = self._estimate(target, x, c.first_search_scale, c.first_icp_iterations, True, None, flags)
-                reference = x.copy()
-            else:
-                reference = prior
-            x, info = self._estimate(target, x, c.search_scale, c.outer_iterations, False, reference, flags,
-                                     det_target)
-            if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
-                flags.append("low_points")
-                if c.data_free_frames == "prior":
-                    flags.append("prior_only")
-                    x = np.zeros(4) if first else prior.copy()
-        if "prior_only" in flags and det_target is not None:
-            # no points to register: the loss is the motion prior and the Detection term alone
-            flags = [f for f in flags if f != "prior_only"] + ["det_only"]
-            x = (c.weight_mp * prior + c.weight_det * det_target) / (c.weight_mp + c.weight_det)
+            x, reference = prior.copy(), prior
+        x, info = self._estimate(target, x, search_scale, c.outer_iterations, False, reference, flags, det_target)
+        if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
+            flags.append("low_points")
+            if c.data_free_frames == "prior":  # else (upstream) the motion terms alone decided x
+                flags.append("prior_only")
+                return self._data_free_motion(np.zeros(4) if first else prior, det_target, flags)
+        return x
+
+    def _data_free_motion(self, prior: np.ndarray, det_target: np.ndarray | None, flags: list[str]) -> np.ndarray:
+        """No points to register: the prior, or with a detection the minimiser of the prior and Detection terms."""
+        if det_target is None:
+            return prior.copy()
+        c = self.config
+        flags[:] = [f for f in flags if f != "prior_only"] + ["det_only"]
+        return (c.weight_mp * prior + c.weight_det * det_target) / (c.weight_mp + c.weight_det)
+
+    def _limit_motion(self, x: np.ndarray, prior: np.ndarray, first: bool, flags: list[str]) -> np.ndarray:
+        """Caps on the change of turn rate and velocity relative to the prediction (physical limits)."""
+        c = self.config
+        prev = self.box
         if not np.isfinite(x).all():
             flags.append("prior_only")
-            x = prior.copy()
+            return prior.copy()
         if c.max_yaw_change > 0 and not first and abs(x[3] - prior[3]) > c.max_yaw_change:
             flags.append("yaw_clamped")  # a vehicle cannot turn that suddenly: keep the prior's turn rate +- the cap
             x[3] = prior[3] + np.sign(x[3] - prior[3]) * c.max_yaw_change
@@ -547,37 +586,75 @@ class Tracker:
                 flags.append("motion_clamped")
                 along, across = np.clip(along, -cap_along, cap_along), np.clip(across, -cap_across, cap_across)
                 x[:2] = prior[:2] + np.array([ch * along - sh * across, sh * along + ch * across])
+        return x
+
+    def _fuse_motion(self, x: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """The motion model's update with the registered motion (CTRV: heading about the visible points)."""
+        prev = self.box
+        before = self.prev_points[points_in_box(self.prev_points, prev, 1.0)]
+        now = local[points_in_box(local, _box_moved(prev, x), 1.0)]
+        return self.motion.update(prev, x, before.mean(axis=0) if len(before) else None,
+                                  now.mean(axis=0) if len(now) else None, self._last_dt)
+
+    def step(self, frame: LidarFrame, detections: FrameDetections | None = None) -> FrameEstimate:
+        """Estimate the object's state in ``frame`` (the frame after the previous call), as named steps.
+
+        The motion model predicts over the elapsed time. A frame without a sweep (``frame.has_sweep`` False)
+        is a prediction only, flagged ``no_sweep``. ``detections``: the frame's detections (world boxes), used
+        by the Detection term when ``config.weight_det > 0``."""
+        if not self._started:
+            raise RuntimeError("Tracker.step called before Tracker.start")
+        t0 = time.perf_counter()
+        c = self.config
+        prev = self.box
+        self._last_dt = self._elapsed(frame)
+        if not frame.has_sweep:
+            return self._predict_only(frame, prev, t0)
+        self.steps += 1
+        flags: list[str] = []
+        first = self.steps == 1
+        if first:
+            self._first_shape = self.shape.points.copy()
+        prior = self.motion.predict(prev, self._last_dt, self._coasting)
+        prediction = _box_moved(prev, prior)  # the motion model's prediction S^_k
+        det_target = self.detection_target(prediction, detections)
+        if det_target is not None:
+            flags.append("det")
+        search_scale = self._search_scale(first)
+        local, point_flags = self._local_points(frame, prediction, max(search_scale, c.search_scale))
+        flags += point_flags
+        x = self._register(local, prior, search_scale, first, det_target, flags)
+        x = self._limit_motion(x, prior, first, flags)
         coasting = "prior_only" in flags
         if c.min_quality > 0 and not coasting and not first:
-            explained, _ = self._explained(local, _box_moved(prev, self._with_z(x, prev)))
+            explained, _ = self._explained(local, _box_moved(prev, x))
             if explained < c.min_quality:  # a poor fit (clutter, a few stray points): trust the prior instead
                 flags += ["low_quality", "prior_only"]
                 coasting = True
                 x = prior.copy()
-        x = self._with_z(x, prev)
+        x = self._with_z(x, prev, fit=not coasting)
+        if coasting:
+            self._coasting += 1  # the motion model is not updated with its own prediction
+        else:
+            self._coasting = 0
+            x = self._fuse_motion(x, local)
         x[3] = wrap_angle(x[3])
         box = _box_moved(prev, x)
         quality = self._quality(local, box)
         obj_world = self._finish_frame(frame, box, local, keyframe=c.shape_update and self.steps % c.keyframe_interval == 0)
         if 0 < len(obj_world) < c.min_points:
             flags.append("low_points")
-        if coasting:
-            self._coasting += 1  # the prior is not updated with its own prediction
-        else:
-            self._coasting = 0
-            self.prior.update(x / dt_scale, prev.heading)
         self.box = box
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)
 
-    def _predict_only(self, frame: LidarFrame, prev: Box, dt_scale: float, t0: float) -> FrameEstimate:
-        """A frame without a sweep: move the box by the prior over the elapsed time, measure nothing.
+    def _predict_only(self, frame: LidarFrame, prev: Box, t0: float) -> FrameEstimate:
+        """A frame without a sweep: move the box by the motion model over the elapsed time, measure nothing.
 
         The previous object points move with the box (they seed the next frame's registration); the
-        shape, sub-shape and motion prior are left as they are. Flags: ``no_sweep``, ``prior_only``.
+        shape, sub-shape and motion model are left as they are. Flags: ``no_sweep``, ``prior_only``.
         """
-        prior = self.prior.predict(prev.heading) * dt_scale
-        prior[3] *= self.config.coast_yaw_decay ** self._coasting
+        prior = self.motion.predict(prev, self._last_dt, self._coasting)
         box = _box_moved(prev, prior)
         self.prev_points = to_world_frame(to_object_frame(self.prev_points, prev), box)
         self._previous_pose = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
@@ -586,12 +663,16 @@ class Tracker:
         return FrameEstimate(frame.index, box.state, box, 0, 0.0, ("no_sweep", "prior_only"),
                              (time.perf_counter() - t0) * 1e3, np.zeros((0, 3)))
 
-    def _with_z(self, x: np.ndarray, prev: Box) -> np.ndarray:
-        """The motion with dz set by ``z_mode`` ("ground": keep the start height above the local road)."""
+    def _with_z(self, x: np.ndarray, prev: Box, fit: bool = True) -> np.ndarray:
+        """The motion with dz set by ``z_mode`` ("ground": keep the start height above the local road;
+        "filter": the height filter, fed with the fit's z when ``fit``)."""
         x = x.copy()
         c = self.config
         if c.z_mode == "fixed":
             x[2] = 0.0
+        elif c.z_mode == "filter":
+            road = _ground_height(self._ground_points, prev.center[:2] + x[:2], prev)
+            x[2] = self._height.update(prev.z + x[2] if fit else None, road) - prev.z
         elif c.z_mode == "ground" and self._ground_offset is not None:
             height = _ground_height(self._ground_points, prev.center[:2] + x[:2], prev)
             if height is not None:

@@ -6,7 +6,7 @@ the figures are single-threaded. Per preset, every selected track is tracked fro
 ground-truth box over its annotated span (default: the moving vehicle tracks, i.e. the 9 PandaSet
 dev tracks on pandaset_002) with the streaming API; frames are read and cached before timing. The
 main figures are the CPU time of the tracking thread per ``Tracker.step`` (``time.thread_time``), which
-other processes on a shared machine do not inflate; the tracker's own wall-clock ``time_ms`` is shown
+other processes on a shared machine do not inflate; the step's wall-clock time is shown
 too. Frame 1 (with the wide ICP search) is included in median/mean/p90 and also reported alone. The
 load average is printed with the table.
 """
@@ -35,6 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--preset", nargs="+", default=["full"], metavar="NAME",
                         help="tracker presets (default: full; 'all' = every preset)")
     parser.add_argument("--tracks", metavar="ID,...", help="track id prefixes (default: all moving vehicle tracks)")
+    parser.add_argument("--lag", type=int, nargs="+", default=[], metavar="N",
+                        help="also time fixed-lag tracking (streaming, each state final N frames later) per preset")
     parser.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     parser.add_argument("--in-process", action="store_true",
                         help="measure in this process (no single-threaded child; thread variables as they are)")
@@ -44,36 +46,46 @@ def _child_argv(args: argparse.Namespace) -> list[str]:
     argv = ["bench", "tracker", str(args.sequence), "--preset", *args.preset]
     if args.tracks:
         argv += ["--tracks", args.tracks]
+    if args.lag:
+        argv += ["--lag", *(str(n) for n in args.lag)]
     if args.json:
         argv += ["--json", str(args.json)]
     return argv
 
 
-def _time_track(source, spec, config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Run the streaming tracker over a track's span: boxes (n, 7), wall ms and CPU ms per frame k >= 1."""
-    from tracker import Tracker
+def _time_track(source, spec, config, lag: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Run the streaming tracker over a track's span: boxes (n, 7), wall ms and CPU ms per frame k >= 1.
+
+    ``lag`` > 0: the fixed-lag tracker (tracker.fixed_lag); a step's time includes its window solve."""
+    from tracker import FixedLagTracker, Tracker
 
     start = spec.frames[0]
     previous = None
     if config.deskew and start > 0:
         before = source.lidar_frame(start - 1)
         previous = (int(before.timestamp_ns), np.asarray(before.world_from_ego, dtype=np.float64))
-    tracker = Tracker(config)
-    boxes = [tracker.start(source.lidar_frame(start), spec.boxes[0], previous).box.to_array()]
+    tracker = FixedLagTracker(config, lag) if lag else Tracker(config)
+    first = tracker.start(source.lidar_frame(start), spec.boxes[0], previous)
+    boxes = [] if lag else [first.box.to_array()]
     wall, cpu = [], []
     for k in spec.frames[1:]:
         frame = source.lidar_frame(k)
         c0 = time.thread_time()
+        w0 = time.perf_counter()
         estimate = tracker.step(frame)
         cpu.append((time.thread_time() - c0) * 1e3)
-        wall.append(estimate.time_ms)
-        boxes.append(estimate.box.to_array())
+        wall.append((time.perf_counter() - w0) * 1e3)
+        if not lag:
+            boxes.append(estimate.box.to_array())
+    if lag:
+        tracker.finish()
+        boxes = [e.box.to_array() for e in tracker.result().estimates]
     return np.array(boxes), np.array(wall), np.array(cpu)
 
 
-def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | None) -> dict[str, Any]:
-    from tracker import get_preset
-    from tracker import pool_metrics, score_tracklet
+def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | None,
+                  lags: list[int] | None = None) -> dict[str, Any]:
+    from tracker import get_preset, pool_metrics, score_tracklet
 
     from ..evaluation.tracker import CachedSource, prepare_tracks, resolve_presets, select_moving_vehicle_tracks
     from ..io import open_sequence
@@ -87,11 +99,11 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
         for k in spec.frames:
             source.lidar_frame(k)
     rows = []
-    for preset in resolve_presets(presets):
+    for preset, lag in [(p, n) for p in resolve_presets(presets) for n in [0, *(lags or [])]]:
         config = get_preset(preset)
         scores, wall, cpu, first = [], [], [], []
         for spec in specs:
-            boxes, w, c = _time_track(source, spec, config)
+            boxes, w, c = _time_track(source, spec, config, lag)
             scores.append(score_tracklet(spec.track_id, boxes, np.array([b.to_array() for b in spec.boxes])))
             wall.append(w)
             cpu.append(c)
@@ -99,7 +111,7 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
         pooled = pool_metrics(scores)
         w_all, c_all = np.concatenate(wall), np.concatenate(cpu)
         c_later = np.concatenate([c[1:] for c in cpu])
-        rows.append({"row": preset, "acc": pooled.acc, "rob": pooled.rob, "frames": int(c_all.size),
+        rows.append({"row": f"{preset}+lag{lag}" if lag else preset, "acc": pooled.acc, "rob": pooled.rob, "frames": int(c_all.size),
                      "cpu_median_ms": float(np.median(c_all)), "cpu_mean_ms": float(c_all.mean()),
                      "cpu_p90_ms": float(np.percentile(c_all, 90)), "cpu_frame1_mean_ms": float(np.mean(first)),
                      "cpu_median_ms_k2": float(np.median(c_later)) if c_later.size else float("nan"),
@@ -123,7 +135,7 @@ def format_table(result: dict[str, Any]) -> str:
              "", fmt(header), "  ".join("-" * w for w in widths)] + [fmt(b) for b in body]
     lines += ["", "ms per frame = CPU time of the tracking thread in Tracker.step (crop, ground removal, association,",
               "optimisation; sweeps are read before timing), frames k >= 1 with frame 1's wide search included;",
-              "'wall' = the tracker's own wall-clock time_ms (inflated when other processes share the cores).",
+              "'wall' = wall-clock time of the step (inflated when other processes share the cores).",
               "Acc/Rob in % (pooled, frames 1..n-1).",
               "", "machine:", format_machine(result["machine"])]
     return "\n".join(lines)
@@ -138,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io.atomic import write_json
 
     tracks = [t for t in args.tracks.split(",") if t] if args.tracks else None
-    result = run_benchmark(args.sequence, args.preset, tracks)
+    result = run_benchmark(args.sequence, args.preset, tracks, args.lag)
     print(format_table(result))
     if args.json:
         write_json(args.json, result)

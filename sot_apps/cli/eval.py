@@ -28,6 +28,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--preset", nargs="+", action="extend", metavar="NAME",
                         help="tracker presets, one row each (default: full; 'all' = every preset)")
     parser.add_argument("--offline", action="store_true", help="add a row with offline refinement for each preset")
+    parser.add_argument("--lag", type=int, nargs="+", default=[], metavar="N",
+                        help="add a fixed-lag row (each state final N frames later) for each preset and N")
     parser.add_argument("--seeds", type=int, default=1, metavar="N", help="run seeds 0..N-1 and average (default 1)")
     parser.add_argument("--end-frame", type=int, metavar="K", help="stop every track at frame K (default: span end)")
     parser.add_argument("--no-per-track", action="store_true", help="omit the per-track table")
@@ -48,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
     from ..evaluation.tracker import evaluate, format_report, resolve_presets
     from ..io.atomic import write_json
 
+    if any(n < 1 for n in args.lag):
+        raise InputError(None, f"--lag must be at least 1, not {min(args.lag)}")
     if args.seeds < 1:
         raise InputError(None, f"--seeds must be at least 1, not {args.seeds}")
     if args.detections and args.simulate_detections:
@@ -65,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         sequence.check_index(args.end_frame)
     progress = lambda jobs: tqdm(jobs, desc="eval", unit="track", file=sys.stderr, leave=False)  # noqa: E731
     report = evaluate(sequence, ids, presets, offline=args.offline, seeds=list(range(args.seeds)),
-                      end_frame=args.end_frame, progress=progress, detections=detections)
+                      end_frame=args.end_frame, progress=progress, detections=detections, lags=args.lag)
     print(format_report(report, per_track=not args.no_per_track))
     if args.json:
         write_json(args.json, report.to_dict())

@@ -21,7 +21,8 @@ def register(subparsers) -> argparse.ArgumentParser:
         examples=["sot-apps track ../shared/data/pandaset_002 --track-id 8ac00bad --out out/tracks/8ac00bad",
                   "sot-apps track ../shared/data/pandaset_002 --init-box -5.49,-6.11,0.43,0.77,4.73,1.97,1.55 "
                   "--start-frame 0 --end-frame 20 --preset full --out out/car",
-                  "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --offline --out out/tracks/91aa5b5c"])
+                  "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --offline --out out/tracks/91aa5b5c",
+                  "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --lag 10 --out out/tracks/91aa5b5c_lag10"])
     add_sequence_argument(parser)
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--track-id", metavar="ID", help="annotated track id (a unique prefix is enough); the start "
@@ -43,6 +44,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--offline", action="store_true",
                         help="after the online pass, refine all states jointly against the final shape with a "
                              "smoothness prior, and rebuild the shape (docs/evaluation.md)")
+    parser.add_argument("--lag", type=int, metavar="N",
+                        help="fixed-lag refinement: each state is re-optimised with the shape over a sliding window "
+                             "and final N frames later (docs/tracker.md)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_detections_arguments(parser)
     parser.set_defaults(func=run)
@@ -51,8 +55,13 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..tracking import (TrackingFailed, check_vehicle_size, first_box_with_points, init_points, parse_init_box, refine_track_offline,
-                            track_sequence, write_track_result)
+    from ..tracking import (TrackingFailed, check_vehicle_size, first_box_with_points, init_points, parse_init_box,
+                            refine_track_fixed_lag, refine_track_offline, track_sequence, write_track_result)
+
+    if args.lag is not None and args.lag < 1:
+        raise InputError(None, f"--lag must be at least 1, not {args.lag}")
+    if args.lag is not None and args.offline:
+        raise InputError(None, "--lag and --offline are exclusive (offline refines with all frames)")
 
     overrides = {"seed": args.seed}
     if args.deskew is not None:
@@ -95,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
                          "frames continue on the motion prior and are flagged\n")
     if args.offline:
         result = refine_track_offline(seq, result)
+    elif args.lag is not None:
+        result = refine_track_fixed_lag(seq, result, args.lag)
     path = write_track_result(args.out, seq, result, object_id, init_box, label, offline=args.offline)
     flagged = sum(1 for e in result.estimates[1:] if "no_points" in e.flags or "prior_only" in e.flags)
     times = sorted(e.time_ms for e in result.estimates[1:]) or [0.0]

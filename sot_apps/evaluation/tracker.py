@@ -27,7 +27,7 @@ import numpy as np
 
 from tracker import (DETECTION_PRESETS, DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
                      Box, Detections, LidarFrame, PooledMetrics, TrackResult, TrackerConfig, TrackletScores, chamfer_distance,
-                     difficulty, get_preset, mean_points_in_boxes, pool_metrics, preset_names, pseudo_gt_shape,
+                     difficulty, get_preset, refine_fixed_lag, mean_points_in_boxes, pool_metrics, preset_names, pseudo_gt_shape,
                      score_tracklet, track, tracklet_metrics)
 
 from ..errors import InputError
@@ -322,8 +322,10 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
              offline: bool = False, seeds: Sequence[int] = (0,), config: EvalConfig = EvalConfig(),
              end_frame: int | None = None, progress: Callable[[Iterable], Iterable] | None = None,
              refine: Callable[..., TrackResult] | None = None, with_shape: bool = True,
-             detections: Detections | Callable[[int], Detections] | None = None) -> EvalReport:
-    """Evaluate ``presets`` (online, plus offline-refined rows when ``offline``) on ``track_ids``
+             detections: Detections | Callable[[int], Detections] | None = None,
+             lags: Sequence[int] = ()) -> EvalReport:
+    """Evaluate ``presets`` (online, plus fixed-lag rows ``preset+lagN`` for each N in ``lags`` (ms/frame: the
+    online step plus the window solve) and offline-refined rows when ``offline``) on ``track_ids``
     (default: all moving vehicle tracks). ``refine(source, result, config) -> TrackResult`` overrides the
     offline refinement (default: :func:`tracker.offline.refine_offline`). ``detections``: per-frame
     detections for the Det / Det+SOT presets, or a function seed -> detections (e.g. simulated per seed)."""
@@ -344,6 +346,7 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     jobs = [(p, s, spec) for p in presets for s in seeds for spec in specs]
     online: dict[str, list[RunRecord]] = {p: [] for p in presets}
     refined: dict[str, list[RunRecord]] = {p: [] for p in presets}
+    lagged: dict[tuple[str, int], list[RunRecord]] = {(p, n): [] for p in presets for n in lags}
     tracker_configs: dict[str, dict[str, Any]] = {}
     for preset, seed, spec in (progress(jobs) if progress else jobs):
         tconfig = get_preset(preset, seed=int(seed))
@@ -353,6 +356,11 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
         ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
         online[preset].append(RunRecord(preset, int(seed), spec.track_id, _score(spec, result, config), ms,
                                         _flag_counts(result)))
+        for n in lags:
+            smoothed = refine_fixed_lag(source, result, int(n), tconfig)
+            lag_ms = np.array([e.time_ms for e in smoothed.estimates[1:]], dtype=np.float64)
+            lagged[(preset, n)].append(RunRecord(f"{preset}+lag{n}", int(seed), spec.track_id,
+                                                 _score(spec, smoothed, config), lag_ms, _flag_counts(smoothed)))
         if offline:
             t0 = time.perf_counter()
             better = refine(source, result, tconfig)
@@ -362,6 +370,8 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     rows = []
     for preset in presets:
         rows.append(_summarise_row(preset, preset, False, seeds, online[preset], specs))
+        for n in lags:
+            rows.append(_summarise_row(f"{preset}+lag{n}", preset, False, seeds, lagged[(preset, n)], specs))
         if offline:
             rows.append(_summarise_row(f"{preset}+offline", preset, True, seeds, refined[preset], specs))
     return EvalReport(str(sequence.root), config, specs, rows, tracker_configs)

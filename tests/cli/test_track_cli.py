@@ -38,7 +38,7 @@ def test_offline_refinement_is_recorded_and_stays_on_the_vehicle(pandaset_root, 
     assert main(base + ["--offline", "--out", str(offline)]) == 0, capsys.readouterr().err
     on, _ = read_track(online)
     off, shape = read_track(offline)
-    assert off.config["mode"] == "offline" and off.config["refined"] is True and "mode" not in on.config
+    assert off.config["mode"] == "offline" and off.config["refined"] is True and on.config["mode"] == "online"
     assert all("offline" in r.flags for r in off.frames) and len(shape) > 50
     from sot_apps.io import open_sequence
     truth = open_sequence(pandaset_root).tracks()[off.object_id]
@@ -50,6 +50,19 @@ def test_offline_refinement_is_recorded_and_stays_on_the_vehicle(pandaset_root, 
     # the refined states differ from the online ones, and stay on the annotated vehicle
     assert max(abs(a.state.x - b.state.x) for a, b in zip(on.frames, off.frames)) > 1e-4
     assert mean_error(off) < 0.3
+
+
+@pytest.mark.slow
+def test_fixed_lag_mode_is_recorded(pandaset_root, tmp_path, capsys):
+    out = tmp_path / "lag"
+    code = main(["track", str(pandaset_root), "--track-id", "91aa5b5c", "--end-frame", "6", "--lag", "3", "--quiet",
+                 "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    track, _ = read_track(out)
+    assert track.config["mode"] == "lag" and track.config["lag"] == 3 and track.config["refined"] is True
+    assert [r.frame for r in track.frames] == list(range(7)) and all("lag3" in r.flags for r in track.frames[1:])
+    code = main(["track", str(pandaset_root), "--track-id", "91aa5b5c", "--lag", "0", "--out", str(tmp_path / "x")])
+    assert code == 2 and "--lag" in capsys.readouterr().err
 
 
 @pytest.mark.slow

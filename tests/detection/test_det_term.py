@@ -39,8 +39,8 @@ def truth_x(k: int) -> float:
     return SPEED * k
 
 
-def detections(score: float = 0.9, offset: float = 0.0) -> dict[int, FrameDetections]:
-    return {k: FrameDetections(np.array([[truth_x(k) + offset, 0.0, 0.8, 0.0, 4.5, 1.9, 1.6],
+def detections(score: float = 0.9, offset: float = 0.0, lateral: float = 0.0) -> dict[int, FrameDetections]:
+    return {k: FrameDetections(np.array([[truth_x(k) + offset, lateral, 0.8, 0.0, 4.5, 1.9, 1.6],
                                          [truth_x(k) + 30.0, 5.0, 0.8, 0.0, 4.5, 1.9, 1.6]]), np.array([score, 0.95]))
             for k in range(1, FRAMES)}
 
@@ -69,7 +69,8 @@ def test_detections_below_the_score_or_iou_threshold_have_no_effect():
     source = WallSource()
     plain = track(source, START, config=get_preset("full"))
     low_score = track(source, START, config=get_preset("det_sot"), detections=detections(score=0.45))
-    far = track(source, START, config=get_preset("det_sot"), detections=detections(offset=4.4))  # BEV IoU < 0.1
+    # beside the wall, 1.85 m to the side of the truth (width 1.9): BEV IoU < 0.1 with any box on the wall's line
+    far = track(source, START, config=get_preset("det_sot"), detections=detections(lateral=1.85))
     for other in (low_score, far):
         np.testing.assert_array_equal(np.array([b.to_array() for b in other.boxes]),
                                       np.array([b.to_array() for b in plain.boxes]))

@@ -124,16 +124,15 @@ def test_flow_marks_pairs_without_a_sweep(gap_copy, tmp_path):
 
 
 def test_tracker_prior_scales_with_elapsed_time():
-    """A frame twice as far in time is predicted twice as far (no sweep: prediction only)."""
-    from tracker.frames import LidarFrame
-    from tracker.geometry import Box
-    from tracker.sotracker import Tracker
+    """A frame twice as far in time is predicted twice as far (no sweep: prediction only; the motion model
+    keeps its prior per second, ``prior_per_second``, as ``full`` does)."""
+    from tracker import Box, LidarFrame, Tracker, TrackerConfig
 
-    tracker = Tracker()
+    tracker = Tracker(TrackerConfig(prior_per_second=True))
     eye = np.eye(4)
-    tracker.start(LidarFrame(0, 0, np.zeros((0, 3)), eye), Box(0, 0, 0.8, 0, 4, 2, 1.6))
-    tracker.prior.update(np.array([1.0, 0.0, 0.0, 0.0]))  # 1 m per nominal frame
-    tracker._nominal_dt_ns = 100_000_000
+    # 1 m per 0.1 s frame as the known initial motion
+    tracker.start(LidarFrame(0, 0, np.zeros((0, 3)), eye), Box(0, 0, 0.8, 0, 4, 2, 1.6),
+                  initial_motion=np.array([1.0, 0.0, 0.0, 0.0]))
     one = tracker.step(LidarFrame(1, 100_000_000, np.zeros((0, 3)), eye, has_sweep=False))
     three = tracker.step(LidarFrame(2, 300_000_000, np.zeros((0, 3)), eye, has_sweep=False))
     assert one.flags == ("no_sweep", "prior_only") and one.box.x == pytest.approx(1.0)

@@ -1,0 +1,158 @@
+"""Fixed-lag refinement: an online mode whose states are final ``lag`` frames after their frame arrives.
+
+At every frame the online tracker (the front end, :class:`~tracker.sotracker.Tracker`) gives a state; then the
+last ``lag + 1`` states are re-optimised jointly with the shape, as a sliding-window smoother (as SLAM
+systems do): the same joint problem as the offline refinement (tracker/offline.py: data term against the
+shape of the other frames, second-difference smoothness, a weak pull to the online states) over a window of
+``context`` already-final frames (held fixed: they tie the window to the past and add points to the shape)
+followed by the ``lag + 1`` free frames. Each free state starts from its previous refinement, so every state
+is refined ``lag + 1`` times with a few Gauss–Newton steps before it leaves the window and becomes final.
+Until the first state after the start box becomes final (the first ``lag + 1`` frames) the window is solved
+as the offline problem is (all states free, re-gauged to the start box), so with ``lag`` covering the whole
+sequence the result approaches the offline refinement's (warm-started solves with fewer iterations each).
+
+The front end is not changed by the smoother (its predictions come from its own states), so the result is
+a function of the online result and the points: :func:`refine_fixed_lag` computes it from a finished online
+TrackResult, :class:`FixedLagTracker` streams it, and both give the same states.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .config import TrackerConfig
+from .frames import FrameSource, LidarFrame
+from .geometry import Box, State, points_in_box
+from .offline import OfflineParams, _box, _rebuild_shape, frame_region_points, refine_states
+from .sotracker import FrameEstimate, Tracker, TrackResult
+
+__all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag"]
+
+# per window solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started); the
+# window's shapes from at most 300 points per frame in 10 cm voxels (the offline problem's cost is in its shapes)
+LAG_PARAMS = OfflineParams(outer_iterations=1, gn_iterations=2, voxel=0.1, shape_points_per_frame=300)
+
+
+class FixedLagSmoother:
+    """Sliding-window refinement of online estimates; ``add`` returns the estimates that became final."""
+
+    def __init__(self, config: TrackerConfig, lag: int, size: np.ndarray, params: OfflineParams = LAG_PARAMS,
+                 context: int = 5) -> None:
+        if lag < 1:
+            raise ValueError(f"lag must be at least 1, not {lag}")
+        self.config, self.lag, self.params, self.context = config, int(lag), params, int(context)
+        self.size = np.asarray(size, dtype=np.float64)
+        self.online: list[FrameEstimate] = []
+        self.points: list[np.ndarray] = []
+        self.states = np.zeros((0, 4))      # current (refined) state of every frame so far
+        self.extra_ms: list[float] = []     # smoother time spent when each frame arrived
+        self.emitted = 0
+        self.shape = np.zeros((0, 3))
+        self._previous: tuple[int, np.ndarray] | None = None
+
+    def add(self, frame: LidarFrame, estimate: FrameEstimate, world: np.ndarray | None = None) -> list[FrameEstimate]:
+        """Add frame k's online estimate; returns the estimates that are now final (frame k - lag, or none)."""
+        t0 = time.perf_counter()
+        self.points.append(frame_region_points(frame, estimate.box, self.config, self.params, self._previous, world))
+        self._previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+        self.online.append(estimate)
+        self.states = np.vstack([self.states, estimate.state.to_array()[None]])
+        k = len(self.online)
+        first_free = max(0, k - self.lag - 1)
+        begin = max(0, first_free - self.context)
+        if k >= 2:  # frames before first_free are final (held); with none, frame 0 is re-gauged as offline
+            online = np.array([e.state.to_array() for e in self.online[begin:]])
+            refined, _ = refine_states(self.points[begin:], online, self.size, self.params,
+                                       seed=self.config.seed + k, initial=self.states[begin:],
+                                       fixed=first_free - begin, with_shape=False)
+            self.states[first_free:] = refined[first_free - begin:]
+        self.extra_ms.append((time.perf_counter() - t0) * 1e3)
+        return self._emit(max(1, k - self.lag))  # the start box is final at once
+
+    def finish(self) -> list[FrameEstimate]:
+        """The estimates not yet final (the last ``lag`` frames), as they stand; builds the shape (all frames)."""
+        self.shape = _rebuild_shape(self.points, self.states, self.size, OfflineParams().voxel)
+        return self._emit(len(self.online))
+
+    def _emit(self, upto: int) -> list[FrameEstimate]:
+        out = []
+        for j in range(self.emitted, upto):
+            est = self.online[j]
+            if j == 0:
+                out.append(dataclasses.replace(est, time_ms=est.time_ms + self.extra_ms[j]))
+                continue
+            box = _box(self.states[j], self.size)
+            obj = self.points[j][points_in_box(self.points[j], box, 1.0)]
+            flags = tuple(dict.fromkeys(list(est.flags) + [f"lag{self.lag}"]))
+            out.append(dataclasses.replace(est, state=State.from_array(box.to_array()[:4]), box=box,
+                                           num_points=len(obj), points=obj, flags=flags,
+                                           time_ms=est.time_ms + self.extra_ms[j]))
+        self.emitted = max(self.emitted, upto)
+        return out
+
+
+class FixedLagTracker:
+    """Streaming fixed-lag tracking: ``start`` / ``step`` return the estimates that became final
+    (state k is final after frame k + lag); ``finish`` returns the rest; ``result`` the whole TrackResult."""
+
+    def __init__(self, config: TrackerConfig, lag: int, params: OfflineParams = LAG_PARAMS, context: int = 5) -> None:
+        self.config, self.lag, self.params, self.context = config, lag, params, context
+        self.front = Tracker(config)
+        self.final: list[FrameEstimate] = []
+
+    def start(self, frame: LidarFrame, box: Box, previous_pose: tuple[int, np.ndarray] | None = None) -> list[FrameEstimate]:
+        estimate = self.front.start(frame, box, previous_pose)
+        self.smoother = FixedLagSmoother(self.config, self.lag, box.size, self.params, self.context)
+        self.smoother._previous = previous_pose
+        return self._keep(self.smoother.add(frame, estimate))
+
+    def step(self, frame: LidarFrame) -> list[FrameEstimate]:
+        return self._keep(self.smoother.add(frame, self.front.step(frame)))
+
+    def finish(self) -> list[FrameEstimate]:
+        return self._keep(self.smoother.finish())
+
+    def _keep(self, estimates: list[FrameEstimate]) -> list[FrameEstimate]:
+        self.final += estimates
+        return estimates
+
+    def result(self) -> TrackResult:
+        return TrackResult(list(self.final), self.smoother.size, self.smoother.shape, self.config, mode="lag",
+                           lag=self.lag)
+
+
+def refine_fixed_lag(source: FrameSource, result: TrackResult, lag: int, config: TrackerConfig | None = None,
+                     params: OfflineParams = LAG_PARAMS, context: int = 5) -> TrackResult:
+    """The fixed-lag result of a finished online ``result`` (the same states as streaming with
+    :class:`FixedLagTracker`)."""
+    config = config or result.config
+    smoother = FixedLagSmoother(config, lag, np.asarray(result.size), params, context)
+    getter = getattr(source, "points_world", None)
+    if config.deskew and result.estimates and result.estimates[0].frame > 0:
+        before = source.lidar_frame(result.estimates[0].frame - 1)
+        smoother._previous = (int(before.timestamp_ns), np.asarray(before.world_from_ego, dtype=np.float64))
+    final: list[FrameEstimate] = []
+    for est in result.estimates:
+        world = getter(est.frame) if callable(getter) and not config.deskew else None
+        final += smoother.add(source.lidar_frame(est.frame), est, world)
+    final += smoother.finish()
+    return TrackResult(final, np.asarray(result.size), smoother.shape, config, mode="lag", lag=lag)
+
+
+def track_fixed_lag(source: FrameSource, init_box: Box, start: int, end: int, config: TrackerConfig, lag: int,
+                    progress=None) -> TrackResult:
+    """Track with fixed-lag refinement from ``init_box`` at frame ``start`` through ``end`` (inclusive)."""
+    tracker = FixedLagTracker(config, lag)
+    previous = None
+    if config.deskew and start > 0:
+        before = source.lidar_frame(start - 1)
+        previous = (int(before.timestamp_ns), np.asarray(before.world_from_ego, dtype=np.float64))
+    tracker.start(source.lidar_frame(start), init_box, previous)
+    frames = range(start + 1, end + 1)
+    for k in (progress(frames) if progress else frames):
+        tracker.step(source.lidar_frame(k))
+    tracker.finish()
+    return tracker.result()
