@@ -91,6 +91,12 @@ def run(args: argparse.Namespace) -> int:
     summary = result.mcap
     print(f"{len(tracks)} objects, {summary.frames} frames, {total} samples ({invalid} invalid); "
           f"{summary.messages} MCAP messages")
+    if source == "tracks":   # how each track's states were made (track.json; also in the MCAP metadata)
+        modes: dict[str, int] = {}
+        for t in tracks:
+            mode = str((t.config or {}).get("tracker", {}).get("mode", "online"))
+            modes[mode] = modes.get(mode, 0) + 1
+        print("tracker states: " + ", ".join(f"{n} {mode}" for mode, n in sorted(modes.items())))
     for kind, path in result.outputs.items():
         print(f"wrote {kind}: {path}")
     sys.stdout.flush()

@@ -102,7 +102,7 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
         size = track.size.to_array()
         trajectory = Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS)
         out.append(TrackedObject(track.object_id, track.label or "", trajectory, shape, mesh_for(shape, size, mesh_method),
-                                 size, f"track:{Path(directory)}"))
+                                 size, f"track ({track.mode}):{Path(directory)}"))
     return out
 
 

@@ -98,6 +98,12 @@ class TrackFile:
     label: str | None = None
     shape: str = "shape.ply"
 
+    @property
+    def mode(self) -> str:
+        """How the states were made: "online", "lag N" (fixed-lag refinement) or "offline" (track.json's config)."""
+        mode = str(self.config.get("mode", "online"))
+        return f"lag {self.config.get('lag')}" if mode == "lag" else mode
+
     def box_at_record(self, record: FrameRecord) -> Box:
         """The WORLD box of a frame record (state + the track's size)."""
         return Box(record.state.x, record.state.y, record.state.z, record.state.heading,

@@ -147,7 +147,8 @@ def entry_from_track_dir(bank_root: Path, track_dir: str | Path, mirror: bool = 
     if len(shape) < 3:
         raise InputError(track_dir, f"shape has only {len(shape)} points; cannot build a bank entry")
     quality = float(np.mean([f.quality for f in track.frames])) if track.frames else 0.0
-    source = {"kind": "track", "sequence": track.sequence, "track": track.object_id, "path": str(track_dir)}
+    source = {"kind": "track", "sequence": track.sequence, "track": track.object_id, "path": str(track_dir),
+              "tracker_mode": track.mode}
     return entry_from_points(bank_root, f"{track.sequence}_{track.object_id}", shape, source, quality,
                              track.label, mirror, params,
                              size=(track.size.length, track.size.width, track.size.height))
@@ -254,7 +255,7 @@ def bank_summary_rows(bank: Bank) -> list[list[str]]:
     for e in bank.entries:
         s = e.size
         rows.append([e.id, e.label or "-", f"{s['length']:.2f}x{s['width']:.2f}x{s['height']:.2f}",
-                     str(e.point_count), f"{e.quality:.2f}", str(e.source.get("kind", "")),
+                     str(e.point_count), f"{e.quality:.2f}", str(e.source.get("kind", "")) + (f" ({e.source['tracker_mode']})" if e.source.get("tracker_mode") else ""),
                      str(e.source.get("sequence", e.source.get("path", ""))), str(e.source.get("track", "-"))])
     return rows
 

@@ -86,6 +86,10 @@ class TrackStage:
     # annotated objects: "first_with_points" starts at the first annotated frame whose box holds at least
     # min_init_points non-ground points; "first_annotated" always starts at the first annotated frame
     start: str = "first_with_points"
+    # data generation wants the best states: "offline" (default) refines every state with the whole sequence,
+    # "lag" re-optimises each state over a sliding window of ``lag`` frames, "online" keeps the streaming states
+    mode: str = "offline"
+    lag: int = 10
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ def test_every_output_of_two_sequences_by_three_objects(reference_run, tiny_worl
     from mcap.reader import make_reader
 
     from tracker.config import get_preset
+    from tracker import refine_offline
     from tracker.sotracker import track as track_api
 
     from sot_apps.io import open_sequence
@@ -46,8 +47,11 @@ def test_every_output_of_two_sequences_by_three_objects(reference_run, tiny_worl
             track, shape = read_track(out / name / "tracks" / obj)
             assert track.object_id == obj and [r.frame for r in track.frames] == list(range(6))
             assert len(shape) > 0
-            # the pipeline's track is the tracker API's result from the annotated start box
+            # the pipeline's track is the tracker API's result from the annotated start box, refined offline
+            # (the track stage's default mode for data generation)
             direct = track_api(seq, gt[obj].box_at(0), 0, 5, get_preset("full"))
+            direct = refine_offline(seq, direct, direct.config)
+            assert track.config["mode"] == "offline"
             assert np.allclose([[r.state.x, r.state.y, r.state.z, r.state.heading] for r in track.frames],
                                [[e.state.x, e.state.y, e.state.z, e.state.heading] for e in direct.estimates])
             assert [r.num_points for r in track.frames] == [e.num_points for e in direct.estimates]
@@ -224,7 +228,7 @@ def test_annotated_object_starts_at_its_first_box_with_enough_points(tiny_worlds
     obj, expected, threshold = choices[0]
     doc = {"out": str(tmp_path / "out"), "sequences": [{"path": str(tiny_worlds[0]),
                                                          "objects": {"from": "annotations", "track_ids": [obj]}}],
-           "stages": {"track": {"min_init_points": threshold}, "bank": {"enabled": False},
+           "stages": {"track": {"min_init_points": threshold, "mode": "online"}, "bank": {"enabled": False},
                       "motion": {"enabled": False}, "flow": {"enabled": False}, "scans": {"enabled": False}}}
     result = run_pipeline(PipelineConfig.from_json(doc), ExecutorSpec("inline"), progress=False)
     assert result.failed == []
