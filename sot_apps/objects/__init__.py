@@ -1,0 +1,1 @@
+"""Shared object knowledge (motion profiles, ...), used by apps that never import each other."""

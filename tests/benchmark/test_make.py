@@ -1,0 +1,98 @@
+"""``benchmark make`` on a small synthetic background: ground truth, placement, determinism, resume, list."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from sot_apps.benchmark.lists import read_list
+from sot_apps.io import open_sequence
+from sot_apps.objects.motion_profiles import PROFILES
+from tracker.geometry import points_in_box, transform_points
+from tracker.metrics import bev_corners_batch, bev_intersection_area_batch
+
+from .conftest import SMALL, make_small
+
+
+def _copies(root: Path) -> list[Path]:
+    return sorted(p.parent for p in root.glob("*/inserted.json"))
+
+
+def test_list_validates_and_has_every_profile(small_benchmark):
+    entries = read_list(small_benchmark / "benchmark.json")  # validated against data_schema/benchmark
+    assert len(entries) == SMALL["tracklets"]
+    assert {t.profile for t in entries} == set(PROFILES)
+    n = SMALL["frames"][1] - SMALL["frames"][0]
+    assert all(t.frame_range == (0, n - 1) and t.difficulty in ("easy", "medium", "hard") for t in entries)
+    for level in ("easy", "medium", "hard"):
+        assert [e.id for e in read_list(small_benchmark / f"{level}.json")] == \
+            [e.id for e in entries if e.difficulty == level]
+    made = json.loads((small_benchmark / "make.json").read_text())
+    assert sum(made["counts"]["profile"].values()) == SMALL["tracklets"]
+
+
+def test_every_box_holds_95_percent_of_its_simulated_points(small_benchmark):
+    checked = 0
+    for copy in _copies(small_benchmark):
+        seq = open_sequence(copy)
+        ids = [v["id"] for v in json.loads((copy / "inserted.json").read_text())["vehicles"]]
+        for k in range(len(seq)):
+            instance = np.load(copy / "labels" / f"{k:06d}.npz")["instance"]
+            world = seq.points_world(k)
+            assert len(instance) == len(world)
+            boxes = {a.track_id: a.box for a in seq.annotations[k]}
+            for i, vid in enumerate(ids):
+                mine = world[instance == i]
+                if len(mine) == 0:
+                    continue
+                inside = points_in_box(mine, boxes[vid]).mean()
+                assert inside >= 0.95, f"{copy.name} frame {k} {vid}: {inside:.3f} of {len(mine)} points in its box"
+                checked += 1
+    assert checked > 20
+
+
+def test_no_inserted_vehicle_overlaps_a_real_object_or_another_inserted_one(small_benchmark, background):
+    real_seq = open_sequence(background)
+    for copy in _copies(small_benchmark):
+        seq = open_sequence(copy)
+        inserted_ids = {v["id"] for v in json.loads((copy / "inserted.json").read_text())["vehicles"]}
+        for k in range(len(seq)):
+            anns = seq.annotations[k]
+            assert {a.track_id for a in anns} - inserted_ids == {a.track_id for a in real_seq.annotations[k]}
+            boxes = np.array([a.box.to_array() for a in anns])
+            ins = np.array([a.track_id in inserted_ids for a in anns])
+            pairs = [(i, j) for i in np.flatnonzero(ins) for j in range(len(anns)) if j != i]
+            a = bev_corners_batch(boxes[[i for i, _ in pairs]])
+            b = bev_corners_batch(boxes[[j for _, j in pairs]])
+            assert np.all(bev_intersection_area_batch(a, b) < 1e-9), f"{copy.name} frame {k}: boxes overlap"
+
+
+def test_same_seed_same_bytes_and_rerun_resumes(small_benchmark, background, bank, tmp_path):
+    make_small(background, bank, tmp_path / "again")
+    files = sorted(p.relative_to(small_benchmark) for p in small_benchmark.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(tmp_path / "again") for p in (tmp_path / "again").rglob("*") if p.is_file())
+    for rel in files:
+        if rel.name == "make.json":  # carries the run time
+            continue
+        assert (small_benchmark / rel).read_bytes() == (tmp_path / "again" / rel).read_bytes(), rel
+    stamps = {p: p.stat().st_mtime_ns for p in (tmp_path / "again").rglob("points/*.npz")}
+    make_small(background, bank, tmp_path / "again")  # done copies are skipped
+    assert stamps == {p: p.stat().st_mtime_ns for p in (tmp_path / "again").rglob("points/*.npz")}
+    other = tmp_path / "seed1"
+    make_small(background, bank, other, seed=1)
+    assert (other / "benchmark.json").read_bytes() != (small_benchmark / "benchmark.json").read_bytes()
+
+
+def test_inserted_points_sit_where_the_ground_truth_says(small_benchmark):
+    """Point counts in the list match the sequences (the difficulty statistic is the sweep's own)."""
+    entries = read_list(small_benchmark / "benchmark.json")
+    for t in entries:
+        seq = open_sequence(small_benchmark / t.segment_name)
+        track = seq.tracks()[t.id]
+        counts = [int(points_in_box(seq.points_world(k), track.box_at(k)).sum()) for k in range(min(10, len(seq)))]
+        assert abs(np.mean(counts) - t.extra["mean_points_first10"]) < 0.01
+        centre = track.box_at(0).center
+        sensor = transform_points(seq.frames[0].world_from_ego, np.zeros((1, 3)))[0]
+        assert 3.0 < np.hypot(*(centre - sensor)[:2]) < 45.0
