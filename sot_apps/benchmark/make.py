@@ -98,16 +98,25 @@ def _context(seq: Sequence, frames: list[int], config: MakeConfig) -> PlacementC
     return PlacementContext(ground, times, np.array(sensor_xyh), real, config.range_m)
 
 
-def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, entry, profile: str, entries
-                    ) -> list[InsertedVehicle] | None:
+def box_size(bank: Bank, entry, sigma: float) -> tuple[float, float, float]:
+    """The ground-truth box size of a bank entry: its (annotated) size, grown where needed to cover the mesh
+    plus three range-noise sigmas on each side (a mesh file's size is its exact bounds, which noisy returns
+    leave half the time)."""
+    vertices, _ = bank.mesh(entry.id)
+    extent = 2.0 * np.abs(vertices).max(axis=0) + 6.0 * sigma
+    return tuple(round(float(max(a, b)), 3) for a, b in zip(entry.box_size(), extent))  # type: ignore[return-value]
+
+
+def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, entry, profile: str, entries,
+                    sizes: dict) -> list[InsertedVehicle] | None:
     """The tracklet's vehicle (and, for ``occluded``, its occluder: up to 6 target places are tried)."""
     for _ in range(6 if profile == "occluded" else 1):
-        vehicle = place_vehicle(ctx, rng, vid, entry.id, entry.label or "Car", entry.box_size(), profile)
+        vehicle = place_vehicle(ctx, rng, vid, entry.id, entry.label or "Car", sizes[entry.id], profile)
         if vehicle is None or profile != "occluded":
             return None if vehicle is None else [vehicle]
         occ = entries[int(rng.integers(len(entries)))]
         occluder = place_occluder(ctx, rng, vehicle, vid.replace("ins_", "occ_"), occ.id, occ.label or "Car",
-                                  occ.box_size())
+                                  sizes[occ.id])
         if occluder is not None:
             return [vehicle, occluder]
         ctx.placed.pop()
@@ -123,6 +132,8 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
     plans: list[CopyPlan] = []
     queue = list(profiles)
     entries = sorted(bank.entries, key=lambda e: e.id)
+    sigma = load_sensor(config.sensor).range_noise_sigma
+    sizes = {e.id: box_size(bank, e, sigma) for e in entries}
     bar = tqdm(total=len(queue), desc="placing", unit="tracklet", disable=not progress, leave=False)
     base = _context(seq, frames, config)
     while queue:
@@ -137,7 +148,7 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
                 continue
             entry = entries[int(crng.integers(len(entries)))]
             vid = f"ins_c{c:02d}_{len(vehicles):02d}"
-            placed = _place_tracklet(ctx, crng, vid, entry, profile, entries)
+            placed = _place_tracklet(ctx, crng, vid, entry, profile, entries, sizes)
             if placed is None:
                 left.append(profile)
                 continue

@@ -36,7 +36,7 @@ def bank(tmp_path_factory) -> Path:
     return root
 
 
-def make_small(background: Path, bank: Path, out: Path, seed: int = 0) -> dict:
+def _make_small(background: Path, bank: Path, out: Path, seed: int = 0) -> dict:
     from sot_apps.benchmark.make import MakeConfig, make_benchmark
 
     config = MakeConfig(str(background), str(bank), SMALL["tracklets"], SMALL["frames"], seed, str(out),
@@ -45,7 +45,18 @@ def make_small(background: Path, bank: Path, out: Path, seed: int = 0) -> dict:
 
 
 @pytest.fixture(scope="session")
+def make_small():
+    """``make_small(background, bank, out, seed=0)``: the small benchmark's ``make`` (8 tracklets, 6 frames)."""
+    return _make_small
+
+
+@pytest.fixture(scope="session")
+def small_config() -> dict:
+    return dict(SMALL)
+
+
+@pytest.fixture(scope="session")
 def small_benchmark(background, bank, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("bench") / "b"
-    make_small(background, bank, out)
+    _make_small(background, bank, out)
     return out

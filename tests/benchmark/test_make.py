@@ -13,44 +13,48 @@ from sot_apps.objects.motion_profiles import PROFILES
 from tracker.geometry import points_in_box, transform_points
 from tracker.metrics import bev_corners_batch, bev_intersection_area_batch
 
-from .conftest import SMALL, make_small
-
 
 def _copies(root: Path) -> list[Path]:
     return sorted(p.parent for p in root.glob("*/inserted.json"))
 
 
-def test_list_validates_and_has_every_profile(small_benchmark):
+def test_list_validates_and_has_every_profile(small_benchmark, small_config):
     entries = read_list(small_benchmark / "benchmark.json")  # validated against data_schema/benchmark
-    assert len(entries) == SMALL["tracklets"]
+    assert len(entries) == small_config["tracklets"]
     assert {t.profile for t in entries} == set(PROFILES)
-    n = SMALL["frames"][1] - SMALL["frames"][0]
+    n = small_config["frames"][1] - small_config["frames"][0]
     assert all(t.frame_range == (0, n - 1) and t.difficulty in ("easy", "medium", "hard") for t in entries)
     for level in ("easy", "medium", "hard"):
         assert [e.id for e in read_list(small_benchmark / f"{level}.json")] == \
             [e.id for e in entries if e.difficulty == level]
     made = json.loads((small_benchmark / "make.json").read_text())
-    assert sum(made["counts"]["profile"].values()) == SMALL["tracklets"]
+    assert sum(made["counts"]["profile"].values()) == small_config["tracklets"]
 
 
 def test_every_box_holds_95_percent_of_its_simulated_points(small_benchmark):
-    checked = 0
+    """Except where a vehicle straddles the scan's seam: its two ends are then seen a whole sweep (0.1 s) apart,
+    as a real spinning LiDAR sees them, and no single box holds both (those are counted, and rare)."""
+    checked = seams = 0
     for copy in _copies(small_benchmark):
         seq = open_sequence(copy)
         ids = [v["id"] for v in json.loads((copy / "inserted.json").read_text())["vehicles"]]
         for k in range(len(seq)):
             instance = np.load(copy / "labels" / f"{k:06d}.npz")["instance"]
             world = seq.points_world(k)
+            times = seq.sweep(k).time_offset_ns
             assert len(instance) == len(world)
             boxes = {a.track_id: a.box for a in seq.annotations[k]}
             for i, vid in enumerate(ids):
                 mine = world[instance == i]
                 if len(mine) == 0:
                     continue
+                if np.ptp(times[instance == i]) > 50_000_000:
+                    seams += 1
+                    continue
                 inside = points_in_box(mine, boxes[vid]).mean()
                 assert inside >= 0.95, f"{copy.name} frame {k} {vid}: {inside:.3f} of {len(mine)} points in its box"
                 checked += 1
-    assert checked > 20
+    assert checked > 20 and seams <= 0.1 * checked
 
 
 def test_no_inserted_vehicle_overlaps_a_real_object_or_another_inserted_one(small_benchmark, background):
@@ -69,7 +73,7 @@ def test_no_inserted_vehicle_overlaps_a_real_object_or_another_inserted_one(smal
             assert np.all(bev_intersection_area_batch(a, b) < 1e-9), f"{copy.name} frame {k}: boxes overlap"
 
 
-def test_same_seed_same_bytes_and_rerun_resumes(small_benchmark, background, bank, tmp_path):
+def test_same_seed_same_bytes_and_rerun_resumes(small_benchmark, background, bank, make_small, tmp_path):
     make_small(background, bank, tmp_path / "again")
     files = sorted(p.relative_to(small_benchmark) for p in small_benchmark.rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(tmp_path / "again") for p in (tmp_path / "again").rglob("*") if p.is_file())
