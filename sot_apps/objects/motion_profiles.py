@@ -167,6 +167,8 @@ def integrate_motion(spec: MotionSpec, duration_s: float, dt: float = 0.01,
         t = i * dt
         out[i] = (t, x, y, psi, v, a)
         a_cmd, d_cmd = _commands(spec, t, v, psi, state, limits)
+        if a_cmd > 0.0:  # ease off before the top speed, as the brake eases off before a stop
+            a_cmd = min(a_cmd, math.sqrt(limits.max_jerk * max(limits.max_speed - v, 0.0)))
         a += float(np.clip(a_cmd - a, -limits.max_jerk * dt, limits.max_jerk * dt))
         a = min(max(a, -limits.max_decel), limits.max_accel)
         delta += float(np.clip(d_cmd - delta, -limits.max_steer_rate * dt, limits.max_steer_rate * dt))
@@ -179,8 +181,6 @@ def integrate_motion(spec: MotionSpec, duration_s: float, dt: float = 0.01,
         if v_new <= 0.0:  # stopped: no reversing
             v_new, a = 0.0, max(a, 0.0)
         v = min(v_new, limits.max_speed)
-        if v >= limits.max_speed and a > 0:
-            a = 0.0
     return MotionPath(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4], out[:, 5])
 
 
