@@ -32,7 +32,7 @@ from tracker.geometry import Box, invert_transform, points_in_box, transform_poi
 from ..io.sequence import Sequence
 from .deps import Sensor, Trajectory
 
-__all__ = ["GroundMap", "build_ground_map", "fit_scan_start", "fitted_sensor", "sensor_path", "to_states",
+__all__ = ["GroundMap", "build_ground_map", "fit_scan_start", "fitted_sensor", "sensor_path", "ego_from_sensor", "to_states",
            "STANDING_MIN_M", "STANDING_MAX_M"]
 
 STANDING_MIN_M = 0.3
@@ -145,16 +145,25 @@ def to_states(matrices: np.ndarray) -> np.ndarray:
                           axis=-1)
 
 
-def sensor_path(seq: Sequence, k: int) -> tuple[np.ndarray, Trajectory]:
+def ego_from_sensor(seq: Sequence, origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """The simulated sensor (the optical centre: ``origin`` in the LiDAR frame) in the ego frame."""
+    lidar_from_sensor = np.eye(4)
+    lidar_from_sensor[:3, 3] = origin
+    return seq.ego_from_lidar @ lidar_from_sensor
+
+
+def sensor_path(seq: Sequence, k: int, origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+                ) -> tuple[np.ndarray, Trajectory]:
     """``world_from_sensor`` at frame k's time and the sensor's trajectory over the sweep in THAT frame.
 
     The poses of frames k-1, k, k+1 (those that exist) relative to frame k, as x, y, z, yaw (roll and
-    pitch change by hundredths of a degree over a sweep).
+    pitch change by hundredths of a degree over a sweep). ``origin``: the optical centre in the LiDAR frame.
     """
-    world_from_sensor = seq.frames[k].world_from_ego @ seq.ego_from_lidar
+    mount = ego_from_sensor(seq, origin)
+    world_from_sensor = seq.frames[k].world_from_ego @ mount
     sensor_from_world = invert_transform(world_from_sensor)
     ks = [j for j in (k - 1, k, k + 1) if 0 <= j < len(seq)]
-    rel = np.array([sensor_from_world @ seq.frames[j].world_from_ego @ seq.ego_from_lidar for j in ks])
+    rel = np.array([sensor_from_world @ seq.frames[j].world_from_ego @ mount for j in ks])
     states = to_states(rel)
     states[:, 3] = np.unwrap(states[:, 3])
     return world_from_sensor, Trajectory(np.array([seq.frames[j].timestamp_ns for j in ks], dtype=np.int64), states)

@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 from tracker.geometry import Box, invert_transform, transform_points
 
 from ..io.sequence import Sequence
-from .background import sensor_path, to_states
+from .background import ego_from_sensor, sensor_path, to_states
 from .deps import (
     OCCLUDER_MARGIN_M,
     RaycastScene,
@@ -157,11 +157,14 @@ def vehicle_scenes(vehicles: list[InsertedVehicle], meshes: dict[str, tuple[np.n
 
 def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[InsertedVehicle],
                    meshes: dict[str, tuple[np.ndarray, np.ndarray]], realism: Realism,
-                   scenes: dict[str, RaycastScene] | None = None) -> InsertedFrame:
+                   scenes: dict[str, RaycastScene] | None = None,
+                   origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> InsertedFrame:
     """Insert ``vehicles`` into frame ``k`` of ``seq`` (see the module doc); ``scenes`` from
-    :func:`vehicle_scenes` (built here when not given)."""
+    :func:`vehicle_scenes` (built here when not given); ``origin``: the optical centre in the LiDAR frame
+    (PandaSet's pose origin is not: ``bench realism --origin-z 1.6``, docs/lidar_sim.md)."""
     t_k = int(seq.frames[k].timestamp_ns)
-    world_from_sensor, path = sensor_path(seq, k)
+    world_from_sensor, path = sensor_path(seq, k, origin)
+    mount = ego_from_sensor(seq, origin)
     sensor_from_world = invert_transform(world_from_sensor)
     scenes = scenes if scenes is not None else vehicle_scenes(vehicles, meshes)
     objects = [_in_sensor_frame(v, meshes[v.bank_id], sensor_from_world, t_k, i) for i, v in enumerate(vehicles)]
@@ -170,8 +173,7 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
     scan = simulate_scan(sensor, [o for o, _ in objects], path, t_k, realism, static_scene=RaycastScene())
 
     sweep = seq.sweep(k)
-    lidar_from_ego = invert_transform(seq.ego_from_lidar)
-    real = transform_points(lidar_from_ego, sweep.xyz)
+    real = transform_points(invert_transform(mount), sweep.xyz)
     real_offsets = (sweep.time_offset_ns if sweep.time_offset_ns is not None
                     else np.zeros(len(real), dtype=np.int64))
     real_t = t_k + real_offsets
@@ -191,7 +193,7 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
     intensity_real = (sweep.intensity if sweep.intensity is not None else np.zeros(len(real), np.float32))
     scale = 255.0 if intensity_real.size and float(intensity_real.max()) > 1.5 else 1.0
     xyz_sensor = np.vstack([real[kept_real], sim[keep_sim]])
-    xyz_ego = transform_points(seq.ego_from_lidar, xyz_sensor).astype(np.float32)
+    xyz_ego = transform_points(mount, xyz_sensor).astype(np.float32)
     box_times = _centre_times(vehicles, sensor, sensor_from_world, t_k) if vehicles else np.zeros(0, np.int64)
     boxes = []
     for v, t in zip(vehicles, box_times):

@@ -38,7 +38,7 @@ from ..io.canonical import write_sequence
 from ..io.sequence import BoxAnnotation, FrameInfo, Sequence, Sweep
 from ..objects.motion_profiles import PROFILES
 from ..schemas import validate
-from .background import boxes_array, build_ground_map, fitted_sensor
+from .background import boxes_array, build_ground_map, ego_from_sensor, fitted_sensor
 from .deps import Bank, Realism, load_sensor, read_bank
 from .insert import simulate_frame, vehicle_scenes
 from .placement import InsertedVehicle, PlacementContext, place_occluder, place_vehicle
@@ -61,6 +61,7 @@ class MakeConfig:
     range_m: tuple[float, float] = (5.0, 80.0)
     drop_random: float = 0.0
     workers: int = 1
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)   # the optical centre in the LiDAR frame
 
 
 @dataclass(frozen=True)
@@ -204,7 +205,7 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
     removed = [0, 0]
     for i, k in enumerate(tqdm(frames, desc=plan.name, unit="frame", disable=not progress, leave=False)):
         realism = Realism(drop_random=config.drop_random, seed=config.seed * 1_000_003 + plan.index * 1_009 + k)
-        frame = simulate_frame(seq, k, sensor, plan.vehicles, meshes, realism, scenes)
+        frame = simulate_frame(seq, k, sensor, plan.vehicles, meshes, realism, scenes, config.origin)
         if i == 0:
             first_boxes = frame.boxes
         sweeps.append(Sweep(frame.xyz, frame.intensity, frame.time_offset_ns))
@@ -234,7 +235,7 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
         if not v.listed:
             continue
         mean10 = float(counts[:n, j].mean())
-        sensor_xy = (seq.frames[frames[0]].world_from_ego @ seq.ego_from_lidar)[:2, 3]
+        sensor_xy = (seq.frames[frames[0]].world_from_ego @ ego_from_sensor(seq, config.origin))[:2, 3]
         r0 = float(np.hypot(*(first_boxes[j].center[:2] - sensor_xy)))
         tracklets.append({"id": v.id, "type": TYPE_VEHICLE, "segment_name": plan.name,
                           "frame_range": [0, len(frames) - 1], "difficulty": difficulty(mean10, DIFFICULTY_THRESHOLDS),

@@ -36,7 +36,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "build: LiDAR-SOT-style lists from annotated sequences with the paper's criteria. realism: points "
                     "in box versus range of inserted and real vehicles (table + PNG). See docs/benchmark.md.",
         examples=["sot-apps benchmark make --background ../shared/data/pandaset_002 --bank bank --tracklets 200 "
-                  "--frames 0:40 --seed 0 --out out/bench",
+                  "--frames 0:40 --seed 0 --origin 0 0 1.6 --out out/bench",
                   "sot-apps eval --benchmark out/bench/benchmark.json --preset full faithful --seeds 3",
                   "sot-apps benchmark build ../shared/data/pandaset_002 --min-frames 20 --out out/lists",
                   "sot-apps benchmark realism out/bench --plot docs/images/benchmark_points_vs_range.png"])
@@ -57,6 +57,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                       help="initial range of the tracklets in metres (default 5:80, log-uniform)")
     make.add_argument("--drop", type=float, default=0.0, help="random ray drop probability (default 0)")
     make.add_argument("--workers", type=int, default=1, help="processes simulating copies (default 1)")
+    make.add_argument("--origin", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
+                      help="the optical centre in the LiDAR frame (m; default 0 0 0). PandaSet's pose origin is not "
+                           "its optical centre: use 0 0 1.6 as `bench realism --origin-z 1.6` (docs/lidar_sim.md)")
     make.set_defaults(action_run=_run_make)
 
     build = sub.add_parser("build", help="LiDAR-SOT-style lists from annotated sequences")
@@ -94,7 +97,8 @@ def _run_make(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise InputError(None, "--workers must be >= 1")
     config = MakeConfig(str(args.background), str(args.bank), args.tracklets, tuple(args.frames), args.seed,
-                        str(args.out), args.per_copy, args.sensor, tuple(args.range), args.drop, args.workers)
+                        str(args.out), args.per_copy, args.sensor, tuple(args.range), args.drop, args.workers,
+                        tuple(args.origin))
     report = make_benchmark(config, progress=sys.stderr.isatty())
     counts = report["counts"]
     print(f"{report['tracklets']} tracklets in {report['copies']} copies -> {Path(args.out) / 'benchmark.json'}")
