@@ -53,10 +53,12 @@ class GroundMap:
 
     def index(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Row, column and in-map flag of (N, 2) world points."""
-        ij = np.floor((np.asarray(xy)[..., :2] - self.origin) / self.cell).astype(np.int64)
-        inside = (ij[..., 0] >= 0) & (ij[..., 0] < self.ground.shape[1]) & (ij[..., 1] >= 0) & \
-            (ij[..., 1] < self.ground.shape[0])
-        return np.clip(ij[..., 1], 0, self.ground.shape[0] - 1), np.clip(ij[..., 0], 0, self.ground.shape[1] - 1), inside
+        col = ((xy[:, 0] - self.origin[0]) * (1.0 / self.cell)).astype(np.int64)  # truncation: >= 0 inside
+        row = ((xy[:, 1] - self.origin[1]) * (1.0 / self.cell)).astype(np.int64)
+        h, w = self.ground.shape
+        inside = (col >= 0) & (col < w) & (row >= 0) & (row < h) & (xy[:, 0] >= self.origin[0]) & \
+            (xy[:, 1] >= self.origin[1])
+        return np.where(inside, row, 0), np.where(inside, col, 0), inside
 
     def free(self, xy: np.ndarray) -> np.ndarray:
         r, c, inside = self.index(xy)

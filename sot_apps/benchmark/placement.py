@@ -19,6 +19,7 @@ the road. Ground height: the median ground of the footprint at each frame (runni
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -26,7 +27,7 @@ import numpy as np
 
 from tracker.metrics import bev_corners_batch, bev_intersection_area_batch
 
-from ..objects.motion_profiles import MotionSpec, integrate_motion, place_path, sample_motion
+from ..objects.motion_profiles import MotionSpec, integrate_motion, place_path, place_states, sample_motion
 from .background import GroundMap
 
 __all__ = ["InsertedVehicle", "PlacementContext", "place_vehicle", "place_occluder", "EGO_SIZE", "STEP_S"]
@@ -92,13 +93,19 @@ class PlacementContext:
         return (int(self.frame_times_ns[-1]) - self.path_start_ns()) * 1e-9 + 0.1
 
 
-def _footprint_points(xyh: np.ndarray, size: tuple[float, float, float], margin: float) -> np.ndarray:
-    """(F, P, 2) points every <= 0.5 m over the enlarged footprint at each frame."""
-    length, width = size[0] + 2 * margin, size[1] + 2 * margin
+@functools.lru_cache(maxsize=64)
+def _footprint_offsets(length: float, width: float) -> np.ndarray:
+    """(P, 2) object-frame points every <= 0.5 m over a length x width rectangle."""
     u = np.linspace(-length / 2, length / 2, max(2, int(math.ceil(length / 0.5)) + 1))
     v = np.linspace(-width / 2, width / 2, max(2, int(math.ceil(width / 0.5)) + 1))
-    uu, vv = (a.ravel() for a in np.meshgrid(u, v))
+    return np.stack([a.ravel() for a in np.meshgrid(u, v)], axis=1)
+
+
+def _footprint_points(xyh: np.ndarray, size: tuple[float, float, float], margin: float) -> np.ndarray:
+    """(F, P, 2) points every <= 0.5 m over the enlarged footprint at each frame."""
+    offsets = _footprint_offsets(round(size[0] + 2 * margin, 4), round(size[1] + 2 * margin, 4))
     c, s = np.cos(xyh[:, 2])[:, None], np.sin(xyh[:, 2])[:, None]
+    uu, vv = offsets[:, 0], offsets[:, 1]
     return np.stack([xyh[:, 0:1] + c * uu - s * vv, xyh[:, 1:2] + s * uu + c * vv], axis=-1)
 
 
@@ -116,6 +123,9 @@ def _clear(ctx: PlacementContext, xyh: np.ndarray, size: tuple[float, float, flo
     """(F, 7) enlarged boxes when the frame-time poses ``xyh`` are a valid placement, else None."""
     d = np.hypot(xyh[:, 0] - ctx.sensor_xyh[:, 0], xyh[:, 1] - ctx.sensor_xyh[:, 1])
     if d.min() < ctx.min_sensor_distance:
+        return None
+    coarse = xyh[:: max(1, len(xyh) // 4)]  # a few frames first: most candidates fail there, cheaply
+    if ctx.ground.blocked_at(_footprint_points(coarse, size, ctx.margin).reshape(-1, 2)).any():
         return None
     foot = _footprint_points(xyh, size, ctx.margin).reshape(-1, 2)
     if ctx.ground.blocked_at(foot).any() or ctx.ground.free(foot).mean() < MIN_GROUND_FRACTION:
@@ -158,27 +168,29 @@ def _path(ctx: PlacementContext, spec: MotionSpec):
 
 
 def place_vehicle(ctx: PlacementContext, rng: np.random.Generator, vid: str, bank_id: str, label: str,
-                  size: tuple[float, float, float], profile: str, attempts: int = 600) -> InsertedVehicle | None:
+                  size: tuple[float, float, float], profile: str, attempts: int = 1000) -> InsertedVehicle | None:
     """Place one listed vehicle with a motion of ``profile``; None if no place.
 
-    The motion is redrawn every 40 attempts with its initial speed scaled down by 5 % more each time
+    The motion is redrawn every 50 attempts with its initial speed scaled down by 5 % more each time
     (down to 30 %): the realised speeds are reported per tracklet (``motion.speed0``)."""
     lo, hi = math.log(ctx.range_m[0]), math.log(ctx.range_m[1])
     sh = ctx.sensor_xyh[0, 2]
     for attempt in range(attempts):
-        if attempt % 40 == 0:  # a new draw, slower each time (fast paths need long stretches of free road)
+        if attempt % 50 == 0:  # a new draw, slower each time (fast paths need long stretches of free road)
             spec = sample_motion(profile, rng, ctx.duration_s())
-            spec = replace(spec, speed0=spec.speed0 * max(0.3, 1.0 - 0.05 * (attempt // 40)))
+            spec = replace(spec, speed0=spec.speed0 * max(0.3, 1.0 - 0.05 * (attempt // 50)))
             path, times_ns, frame_idx = _path(ctx, spec)
+            at_frames = path.states()[frame_idx]
         r0 = math.exp(rng.uniform(lo, hi))  # a free cell at about r0 from the sensor
         a, b = np.searchsorted(ctx.free_range, [r0 - max(1.0, 0.05 * r0), r0 + max(1.0, 0.05 * r0)])
         if b <= a:
             continue
         x0, y0 = ctx.free_xy[int(rng.integers(a, b))]
         for turn in rng.permutation([0.0, math.pi, math.pi / 2, -math.pi / 2]):
-            world = place_path(path, x0, y0, sh + turn + rng.normal(0.0, 0.01))
-            boxes = _clear(ctx, world[frame_idx], size)
+            heading = sh + turn + rng.normal(0.0, 0.01)
+            boxes = _clear(ctx, place_states(at_frames, x0, y0, heading), size)
             if boxes is not None:
+                world = place_path(path, x0, y0, heading)
                 return _finish(ctx, vid, bank_id, label, size, spec, world, times_ns, boxes, True, None)
     return None
 

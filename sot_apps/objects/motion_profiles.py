@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["PROFILES", "VehicleLimits", "MotionSpec", "MotionPath", "sample_motion", "integrate_motion",
-           "place_path"]
+           "place_path", "place_states"]
 
 PROFILES: tuple[str, ...] = ("constant_speed", "hard_brake", "strong_accel", "stop_and_go", "lane_change", "turn",
                              "u_turn", "occluded")
@@ -184,8 +184,13 @@ def integrate_motion(spec: MotionSpec, duration_s: float, dt: float = 0.01,
     return MotionPath(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4], out[:, 5])
 
 
+def place_states(local: np.ndarray, x0: float, y0: float, heading0: float) -> np.ndarray:
+    """(T, 3) world x, y, heading of local (T, 3) x, y, heading states started at (x0, y0) heading ``heading0``."""
+    c, s = math.cos(heading0), math.sin(heading0)
+    return np.stack([x0 + c * local[:, 0] - s * local[:, 1], y0 + s * local[:, 0] + c * local[:, 1],
+                     (local[:, 2] + heading0 + np.pi) % (2 * np.pi) - np.pi], axis=1)
+
+
 def place_path(path: MotionPath, x0: float, y0: float, heading0: float) -> np.ndarray:
     """(T, 3) world x, y, heading of a local path started at (x0, y0) heading ``heading0``."""
-    c, s = math.cos(heading0), math.sin(heading0)
-    return np.stack([x0 + c * path.x - s * path.y, y0 + s * path.x + c * path.y,
-                     (path.heading + heading0 + np.pi) % (2 * np.pi) - np.pi], axis=1)
+    return place_states(path.states(), x0, y0, heading0)
