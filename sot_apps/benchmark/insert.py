@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tracker.geometry import Box, invert_transform, transform_points
+from tracker.geometry import Box, invert_transform, points_in_box, transform_points
 
 from ..io.sequence import Sequence
 from .background import ego_from_sensor, sensor_path, to_states
@@ -71,8 +71,11 @@ def _rot_z(h: np.ndarray) -> np.ndarray:
 def _in_sensor_frame(vehicle: InsertedVehicle, mesh: tuple[np.ndarray, np.ndarray], sensor_from_world: np.ndarray,
                      t_ns: int, instance: int) -> tuple[SimObject, np.ndarray]:
     """The vehicle as a SimObject of the sensor frame (mesh tilted by the sensor's roll/pitch) and the tilt."""
-    window = (vehicle.times_ns >= t_ns - _WINDOW_NS[0]) & (vehicle.times_ns <= t_ns + _WINDOW_NS[1])
-    times, states = vehicle.times_ns[window], vehicle.states[window]
+    lo = max(0, int(np.searchsorted(vehicle.times_ns, t_ns - _WINDOW_NS[0])) - 1)
+    hi = int(np.searchsorted(vehicle.times_ns, t_ns + _WINDOW_NS[1], side="right")) + 1
+    times, states = vehicle.times_ns[lo:hi], vehicle.states[lo:hi]
+    if len(times) < 2:  # one sample (the sweep is beyond the path's ends): still a moving object, held still
+        times, states = np.array([times[0], times[0] + 1], dtype=np.int64), np.repeat(states, 2, axis=0)
     world_from_object = state_to_matrix(states)
     rel = sensor_from_world @ world_from_object
     rel_states = to_states(rel)
@@ -158,10 +161,11 @@ def vehicle_scenes(vehicles: list[InsertedVehicle], meshes: dict[str, tuple[np.n
 def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[InsertedVehicle],
                    meshes: dict[str, tuple[np.ndarray, np.ndarray]], realism: Realism,
                    scenes: dict[str, RaycastScene] | None = None,
-                   origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> InsertedFrame:
+                   origin: tuple[float, float, float] = (0.0, 0.0, 0.0), cut: list[Box] = ()) -> InsertedFrame:
     """Insert ``vehicles`` into frame ``k`` of ``seq`` (see the module doc); ``scenes`` from
     :func:`vehicle_scenes` (built here when not given); ``origin``: the optical centre in the LiDAR frame
-    (PandaSet's pose origin is not: ``bench realism --origin-z 1.6``, docs/lidar_sim.md)."""
+    (PandaSet's pose origin is not: ``bench realism --origin-z 1.6``, docs/lidar_sim.md); ``cut``: world boxes
+    whose real points are removed first (grown 0.75 m at each end for the rolling-scan smear, 0.3 m at the sides)."""
     t_k = int(seq.frames[k].timestamp_ns)
     world_from_sensor, path = sensor_path(seq, k, origin)
     mount = ego_from_sensor(seq, origin)
@@ -173,8 +177,13 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
     scan = simulate_scan(sensor, [o for o, _ in objects], path, t_k, realism, static_scene=RaycastScene())
 
     sweep = seq.sweep(k)
-    real = transform_points(invert_transform(mount), sweep.xyz)
-    real_offsets = (sweep.time_offset_ns if sweep.time_offset_ns is not None
+    keep = np.ones(len(sweep.xyz), dtype=bool)
+    if cut:
+        world_pts = transform_points(seq.frames[k].world_from_ego, sweep.xyz)
+        for b in cut:
+            keep &= ~points_in_box(world_pts, b, scale=((b.length + 1.5) / b.length, (b.width + 0.6) / b.width, 1.05))
+    real = transform_points(invert_transform(mount), sweep.xyz[keep])
+    real_offsets = (sweep.time_offset_ns[keep] if sweep.time_offset_ns is not None
                     else np.zeros(len(real), dtype=np.int64))
     real_t = t_k + real_offsets
     real_origins = path.at(real_t)[:, :3]
@@ -190,7 +199,7 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
     blocked = _blocked_by_real(rd / np.maximum(rr, 1e-9)[:, None], rr, sd / np.maximum(sr, 1e-9)[:, None], sr, sensor)
     keep_sim = ~blocked
 
-    intensity_real = (sweep.intensity if sweep.intensity is not None else np.zeros(len(real), np.float32))
+    intensity_real = (sweep.intensity[keep] if sweep.intensity is not None else np.zeros(len(real), np.float32))
     scale = 255.0 if intensity_real.size and float(intensity_real.max()) > 1.5 else 1.0
     xyz_sensor = np.vstack([real[kept_real], sim[keep_sim]])
     xyz_ego = transform_points(mount, xyz_sensor).astype(np.float32)

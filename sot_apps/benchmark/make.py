@@ -36,7 +36,7 @@ from ..io import open_sequence
 from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
 from ..io.sequence import BoxAnnotation, FrameInfo, Sequence, Sweep
-from ..objects.motion_profiles import PROFILES
+from ..objects.motion_profiles import PROFILES, MotionSpec
 from ..schemas import validate
 from .background import boxes_array, build_ground_map, ego_from_sensor, fitted_sensor
 from .deps import Bank, Realism, load_sensor, read_bank
@@ -62,6 +62,7 @@ class MakeConfig:
     drop_random: float = 0.0
     workers: int = 1
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)   # the optical centre in the LiDAR frame
+    replicas: tuple[str, ...] = ()   # instead of profiles: copies of these real tracks (bank entries of theirs)
 
 
 @dataclass(frozen=True)
@@ -124,9 +125,37 @@ def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, e
     return None
 
 
+def _plan_replicas(seq: Sequence, bank: Bank, config: MakeConfig, frames: list[int]) -> list[CopyPlan]:
+    """One copy in which each real track of ``config.replicas`` is replaced by its bank vehicle on the real path
+    (the real car's points are cut, the copy is simulated): same ranges, headings and occluders (realism check)."""
+    sigma = load_sensor(config.sensor).range_noise_sigma
+    tracks = seq.tracks()
+    vehicles = []
+    for prefix in config.replicas:
+        tid = seq.resolve_track_id(prefix)
+        entry = next((e for e in bank.entries if e.source.get("track") == tid), None)
+        if entry is None:
+            raise InputError(Path(config.bank) / "index.json", f"no bank entry built from track {tid}")
+        trk = tracks[tid]
+        ks = [k for k in frames if trk.box_at(k) is not None]
+        run = ks[: next((i + 1 for i, (a, b) in enumerate(zip(ks, ks[1:])) if b != a + 1), len(ks))]
+        if len(run) < 2:
+            raise InputError(seq.root, f"track {tid} has fewer than 2 frames in --frames")
+        boxes = [trk.box_at(k) for k in run]
+        states = np.array([[b.x, b.y, b.z, b.heading] for b in boxes])
+        states[:, 3] = np.unwrap(states[:, 3])
+        times = np.array([seq.frames[k].timestamp_ns for k in run], dtype=np.int64)
+        vehicles.append(InsertedVehicle(f"rep_{tid[:8]}", entry.id, entry.label or "Car", box_size(bank, entry, sigma),
+                                        MotionSpec("replica", 0.0), times, states, True, None,
+                                        (run[0] - frames[0], run[-1] - frames[0]), tid))
+    return [CopyPlan(0, f"{seq.id}_replicas", vehicles)]
+
+
 def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = False) -> list[CopyPlan]:
     """Every copy's inserted vehicles (deterministic in ``config.seed``)."""
     frames = _frames(seq, config.frames)
+    if config.replicas:
+        return _plan_replicas(seq, bank, config, frames)
     rng = np.random.default_rng(config.seed)
     profiles = [PROFILES[i % len(PROFILES)] for i in range(config.tracklets)]
     profiles = [profiles[i] for i in rng.permutation(len(profiles))]
@@ -205,14 +234,14 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
     removed = [0, 0]
     for i, k in enumerate(tqdm(frames, desc=plan.name, unit="frame", disable=not progress, leave=False)):
         realism = Realism(drop_random=config.drop_random, seed=config.seed * 1_000_003 + plan.index * 1_009 + k)
-        frame = simulate_frame(seq, k, sensor, plan.vehicles, meshes, realism, scenes, config.origin)
-        if i == 0:
-            first_boxes = frame.boxes
+        replaced = {v.replaces for v in plan.vehicles if v.replaces}
+        real = [a for a in (seq.annotations[k] if seq.annotations else []) if a.track_id not in replaced]
+        cut = [a.box for a in (seq.annotations[k] if seq.annotations else []) if a.track_id in replaced]
+        frame = simulate_frame(seq, k, sensor, plan.vehicles, meshes, realism, scenes, config.origin, cut)
         sweeps.append(Sweep(frame.xyz, frame.intensity, frame.time_offset_ns))
         write_npz(out / "labels" / f"{i:06d}.npz", instance=frame.instance)
         info = seq.frames[k]
         infos.append(FrameInfo(i, info.timestamp_ns, info.world_from_ego, Path(f"points/{i:06d}.npz")))
-        real = list(seq.annotations[k]) if seq.annotations else []
         annotations.append(real + [BoxAnnotation(v.id, v.label, b, stationary=False)
                                    for v, b in zip(plan.vehicles, frame.boxes)])
         world = transform_points(info.world_from_ego, frame.xyz)
@@ -234,14 +263,16 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
     for j, v in enumerate(plan.vehicles):
         if not v.listed:
             continue
-        mean10 = float(counts[:n, j].mean())
-        sensor_xy = (seq.frames[frames[0]].world_from_ego @ ego_from_sensor(seq, config.origin))[:2, 3]
-        r0 = float(np.hypot(*(first_boxes[j].center[:2] - sensor_xy)))
+        a, b = v.span if v.span is not None else (0, len(frames) - 1)
+        mean10 = float(counts[a:a + n, j].mean())
+        sensor_xy = (seq.frames[frames[a]].world_from_ego @ ego_from_sensor(seq, config.origin))[:2, 3]
+        r0 = float(np.hypot(*(annotations[a][len(annotations[a]) - len(plan.vehicles) + j].box.center[:2] - sensor_xy)))
         tracklets.append({"id": v.id, "type": TYPE_VEHICLE, "segment_name": plan.name,
-                          "frame_range": [0, len(frames) - 1], "difficulty": difficulty(mean10, DIFFICULTY_THRESHOLDS),
+                          "frame_range": [a, b], "difficulty": difficulty(mean10, DIFFICULTY_THRESHOLDS),
                           "profile": v.motion.profile, "mean_points_first10": round(mean10, 2),
                           "initial_range_m": round(r0, 2), "bank_id": v.bank_id, "motion": v.motion.to_dict(),
-                          "min_points": int(counts[:, j].min()), "mean_points": round(float(counts[:, j].mean()), 2)})
+                          "min_points": int(counts[a:b + 1, j].min()),
+                          "mean_points": round(float(counts[a:b + 1, j].mean()), 2)})
     summary = {"digest": digest, "tracklets": tracklets, "removed_real_points": removed[0],
                "removed_inserted_points": removed[1]}
     write_json(out / "done.json", summary)
@@ -255,7 +286,7 @@ def make_benchmark(config: MakeConfig, progress: bool = True) -> dict:
     bank = read_bank(config.bank)
     if not bank.entries:
         raise InputError(Path(config.bank) / "index.json", "the bank has no entries")
-    if config.tracklets < 1 or config.per_copy < 1:
+    if (config.tracklets < 1 and not config.replicas) or config.per_copy < 1:
         raise InputError(None, "--tracklets and --per-copy must be >= 1")
     plans = plan_copies(seq, bank, config, progress)
     planned = time.perf_counter() - start
@@ -277,7 +308,8 @@ def make_benchmark(config: MakeConfig, progress: bool = True) -> dict:
     for level in ("easy", "medium", "hard"):
         write_json(out / f"{level}.json", [e for e in entries if e["difficulty"] == level])
     counts = {"difficulty": {d: sum(e["difficulty"] == d for e in entries) for d in ("easy", "medium", "hard")},
-              "profile": {p: sum(e["profile"] == p for e in entries) for p in PROFILES}}
+              "profile": {p: sum(e["profile"] == p for e in entries)
+                          for p in list(PROFILES) + sorted({e["profile"] for e in entries} - set(PROFILES))}}
     report = {"config": asdict(config), "copies": len(plans), "tracklets": len(entries), "counts": counts,
               "removed_real_points": sum(s["removed_real_points"] for s in summaries),
               "removed_inserted_points": sum(s["removed_inserted_points"] for s in summaries),

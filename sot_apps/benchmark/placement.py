@@ -50,6 +50,8 @@ class InsertedVehicle:
     states: np.ndarray
     listed: bool = True
     occluder_of: str | None = None
+    span: tuple[int, int] | None = None   # listed frames (indices into the copy's frames); None: all
+    replaces: str | None = None           # a real track this vehicle stands in for (its points are cut)
 
     def states_at(self, t_ns: np.ndarray) -> np.ndarray:
         t = np.asarray(t_ns, dtype=np.float64)
@@ -144,7 +146,8 @@ def _clear(ctx: PlacementContext, xyh: np.ndarray, size: tuple[float, float, flo
 
 
 def _finish(ctx: PlacementContext, vid: str, bank_id: str, label: str, size, spec: MotionSpec, world: np.ndarray,
-            times_ns: np.ndarray, boxes: np.ndarray, listed: bool, occluder_of: str | None) -> InsertedVehicle:
+            times_ns: np.ndarray, boxes: np.ndarray, listed: bool, occluder_of: str | None,
+            span: tuple[int, int] | None = None) -> InsertedVehicle:
     at_frames = np.stack([np.interp(ctx.frame_times_ns.astype(np.float64), times_ns.astype(np.float64), world[:, i])
                           for i in range(2)], axis=1)
     foot = _footprint_points(np.column_stack([at_frames, np.interp(ctx.frame_times_ns.astype(np.float64),
@@ -157,7 +160,7 @@ def _finish(ctx: PlacementContext, vid: str, bank_id: str, label: str, size, spe
     states = np.column_stack([world[:, 0], world[:, 1], z, world[:, 2]])
     ctx.placed.append(boxes)
     return InsertedVehicle(vid, bank_id, label, tuple(float(s) for s in size), spec, times_ns, states, listed,
-                           occluder_of)
+                           occluder_of, span)
 
 
 def _path(ctx: PlacementContext, spec: MotionSpec):
@@ -216,3 +219,4 @@ def place_occluder(ctx: PlacementContext, rng: np.random.Generator, target: Inse
         if boxes is not None:
             return _finish(ctx, vid, bank_id, label, size, spec, world, times_ns, boxes, False, target.id)
     return None
+

@@ -60,6 +60,11 @@ def register(subparsers) -> argparse.ArgumentParser:
     make.add_argument("--origin", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
                       help="the optical centre in the LiDAR frame (m; default 0 0 0). PandaSet's pose origin is not "
                            "its optical centre: use 0 0 1.6 as `bench realism --origin-z 1.6` (docs/lidar_sim.md)")
+    make.add_argument("--replicas", nargs="+", default=(), metavar="TRACK_ID",
+                      help="realism check instead of profiles: one copy in which each of these real tracks is "
+                           "replaced by its bank vehicle on its own path (real points cut, vehicle simulated; same "
+                           "ranges, headings, occluders), listed over the track's annotated frames; compare "
+                           "`eval --benchmark` with `eval SEQUENCE --tracks`")
     make.set_defaults(action_run=_run_make)
 
     build = sub.add_parser("build", help="LiDAR-SOT-style lists from annotated sequences")
@@ -98,7 +103,7 @@ def _run_make(args: argparse.Namespace) -> int:
         raise InputError(None, "--workers must be >= 1")
     config = MakeConfig(str(args.background), str(args.bank), args.tracklets, tuple(args.frames), args.seed,
                         str(args.out), args.per_copy, args.sensor, tuple(args.range), args.drop, args.workers,
-                        tuple(args.origin))
+                        tuple(args.origin), tuple(args.replicas))
     report = make_benchmark(config, progress=sys.stderr.isatty())
     counts = report["counts"]
     print(f"{report['tracklets']} tracklets in {report['copies']} copies -> {Path(args.out) / 'benchmark.json'}")

@@ -100,3 +100,30 @@ def test_inserted_points_sit_where_the_ground_truth_says(small_benchmark):
         centre = track.box_at(0).center
         sensor = transform_points(seq.frames[0].world_from_ego, np.zeros((1, 3)))[0]
         assert 3.0 < np.hypot(*(centre - sensor)[:2]) < 45.0
+
+
+def test_replicas_stand_in_for_real_tracks_on_their_own_path(background, tmp_path):
+    """--replicas: the real car's points are cut and its bank vehicle is simulated on the real path."""
+    from sot_apps.benchmark.make import MakeConfig, make_benchmark
+    from sot_apps.lidar_sim.bank import Bank, entries_from_annotations, write_bank_index
+
+    seq = open_sequence(background)
+    tid = sorted(t for t in seq.tracks() if t.startswith("veh_"))[0]
+    bank = Bank(tmp_path / "bank", [])
+    entries, _ = entries_from_annotations(bank.root, seq, [tid])
+    bank.entries = entries
+    write_bank_index(bank)
+    out = tmp_path / "rep"
+    make_benchmark(MakeConfig(str(background), str(bank.root), 0, (0, 6), 0, str(out), replicas=(tid,)), progress=False)
+    (entry,) = read_list(out / "benchmark.json")
+    assert entry.profile == "replica" and entry.frame_range == (0, 5)
+    copy = open_sequence(out / entry.segment_name)
+    for k in range(len(copy)):
+        ids = {a.track_id for a in copy.annotations[k]}
+        assert tid not in ids and entry.id in ids  # the real track is replaced, not doubled
+        real_box = seq.tracks()[tid].box_at(k)
+        assert np.linalg.norm(copy.tracks()[entry.id].box_at(k).center[:2] - real_box.center[:2]) < 0.5
+        instance = np.load(out / entry.segment_name / "labels" / f"{k:06d}.npz")["instance"]
+        pts = copy.points_world(k)
+        assert points_in_box(pts[instance < 0], real_box).sum() == 0  # no real point of the car is left
+        assert (instance == 0).sum() > 50
