@@ -29,6 +29,7 @@ from tracker.metrics import bev_corners_batch, bev_intersection_area_batch
 
 from ..objects.motion_profiles import MotionSpec, integrate_motion, place_path, place_states, sample_motion
 from .background import GroundMap
+from .deps import Trajectory
 
 __all__ = ["InsertedVehicle", "PlacementContext", "place_vehicle", "place_occluder", "EGO_SIZE", "STEP_S"]
 
@@ -53,13 +54,9 @@ class InsertedVehicle:
     span: tuple[int, int] | None = None   # listed frames (indices into the copy's frames); None: all
     replaces: str | None = None           # a real track this vehicle stands in for (its points are cut)
 
-    def states_at(self, t_ns: np.ndarray) -> np.ndarray:
-        t = np.asarray(t_ns, dtype=np.float64)
-        times = self.times_ns.astype(np.float64)
-        heading = np.unwrap(self.states[:, 3])
-        out = np.stack([np.interp(t, times, self.states[:, i]) for i in range(3)] + [np.interp(t, times, heading)], -1)
-        out[..., 3] = (out[..., 3] + np.pi) % (2 * np.pi) - np.pi
-        return out
+    def states_at(self, t_ns: np.ndarray | int) -> np.ndarray:
+        """(..., 4) x, y, z, heading at the given times (linear between samples, held outside)."""
+        return Trajectory(self.times_ns, self.states).at(t_ns)
 
 
 @dataclass

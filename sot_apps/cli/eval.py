@@ -30,6 +30,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="evaluate a tracklet list instead: a list file (benchmark.json of `benchmark make`, "
                              "bench_list.json of `benchmark build`) or folder, or 'lidar-sot' with --lists and "
                              "SEQUENCE = the Waymo data directory; tables per difficulty and per motion profile")
+    parser.add_argument("--first", type=int, metavar="N", help="with --benchmark: only the list's first N tracklets "
+                                                                 "(a generated list is ordered copy by copy)")
     parser.add_argument("--lists", metavar="DIR", help="with --benchmark lidar-sot: LiDAR-SOT's list folder "
                                                        "(bench_list.json, easy/medium/hard.json)")
     which = parser.add_mutually_exclusive_group()
@@ -94,6 +96,10 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
     else:
         source = Path(args.benchmark)
     tracklets = read_lists(source)
+    if args.first is not None:
+        if args.first < 1:
+            raise InputError(None, f"--first must be >= 1, not {args.first}")
+        tracklets = tracklets[: args.first]
     list_dir = source if source.is_dir() else source.parent
     resolve = default_resolver(list_dir, Path(args.sequence) if args.sequence else None)
 
