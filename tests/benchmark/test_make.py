@@ -127,3 +127,18 @@ def test_replicas_stand_in_for_real_tracks_on_their_own_path(background, tmp_pat
         pts = copy.points_world(k)
         assert points_in_box(pts[instance < 0], real_box).sum() == 0  # no real point of the car is left
         assert (instance == 0).sum() > 50
+
+
+def test_realism_curve_and_plot(small_benchmark, tmp_path, capsys):
+    from sot_apps.cli.main import main
+
+    png = tmp_path / "curve.png"
+    assert main(["benchmark", "realism", str(small_benchmark), "--plot", str(png), "--json", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    assert "| range (m) | real vehicles | inserted vehicles |" in out
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert sum(b["n"] for b in doc["inserted"]) >= 8 * 6 and sum(b["n"] for b in doc["real"]) > 0
+    import cv2
+
+    image = cv2.imread(str(png))
+    assert image is not None and image.shape[0] > 300 and image.shape[1] > 600
