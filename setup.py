@@ -1,7 +1,7 @@
-"""Build the optional compiled ray-casting loop (sot_apps/lidar_sim/_embree_trace.c).
+"""Build the optional compiled ray-casting loop (sot_apps/raycast/_embree_trace.c).
 
 Everything else is in pyproject.toml. The extension is optional: without a C compiler the install still
-succeeds and ray casting falls back to embreex (sot_apps.lidar_sim.raycast). It is a plain shared library
+succeeds and ray casting falls back to embreex (sot_apps.raycast). It is a plain shared library
 loaded with ctypes; it finds Embree at run time in the embreex wheel, so nothing links against it here.
 """
 
@@ -10,8 +10,8 @@ from setuptools import Extension, setup
 setup(
     ext_modules=[
         Extension(
-            "sot_apps.lidar_sim._embree_trace",
-            sources=["sot_apps/lidar_sim/_embree_trace.c"],
+            "sot_apps.raycast._embree_trace",
+            sources=["sot_apps/raycast/_embree_trace.c"],
             libraries=["dl", "m"],
             extra_compile_args=["-O3", "-fvisibility=hidden", "-std=c99"],
             optional=True,

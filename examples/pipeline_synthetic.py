@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sot_apps.lidar_sim.synth import write_world
+from sot_apps.synth import write_world
 from sot_apps.pipeline.config import (FlowStage, ObjectSource, PipelineConfig, ScanStage, SequenceConfig, Stages,
                                       TrackStage)
 from sot_apps.pipeline.executors import ExecutorSpec

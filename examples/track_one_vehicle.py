@@ -25,7 +25,7 @@ def main() -> None:
         sequence_path, prefix = sys.argv[1], sys.argv[2]
         out = Path(sys.argv[3] if len(sys.argv) > 3 else f"out/{prefix}")
     else:
-        from sot_apps.lidar_sim.synth import write_world
+        from sot_apps.synth import write_world
 
         sequence_path = write_world(Path(tempfile.mkdtemp()) / "world", frames=10, vehicles=3, sensor="vlp16", seed=4)
         prefix, out = "veh_001", Path("out/track_one_vehicle")

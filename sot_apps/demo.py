@@ -39,7 +39,7 @@ class DemoResult:
 
 def make_world(out: Path, size: DemoSize = DEFAULT_SIZE, progress: bool = True) -> Path:
     """The synthetic world (LiDAR, front camera, ground truth) as a canonical sequence in ``out``."""
-    from .lidar_sim.synth import write_world
+    from .synth import write_world
 
     return write_world(out, frames=size.frames, vehicles=size.vehicles, sensor=size.sensor, seed=size.seed,
                        cameras=True, camera_size=size.camera_size, progress=progress)

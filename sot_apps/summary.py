@@ -1,39 +1,24 @@
 """What ``sot-apps info`` reports about a sequence: frames, timing, points, cameras, annotated tracks.
 
-Motion rule (documented in docs/data-formats.md): a track is *moving* when its GT box centre gets at
-least ``MOVING_MIN_DISPLACEMENT_M`` (1.0 m) away from its first position in the ground plane, or
-when its first-to-last displacement is at least ``MOVING_MIN_SHORT_DISPLACEMENT_M`` (0.3 m, above
-annotation jitter) at a mean speed of at least ``MOVING_MIN_SPEED_MPS`` (1 m/s) — this catches
-tracks only a few frames long. Otherwise it is *parked* (vehicles) or *static* (anything else).
-Dataset flags such as PandaSet's ``stationary`` are reported but not used.
+Vehicle and motion rules: :mod:`sot_apps.objects.selection` (the same rule as planning, ``bank build
+--all`` and ``eval --all-moving``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import points_in_box
+from tracker import points_in_box
 
 from .io.sequence import AnnotatedTrack, Sequence
+from .objects.selection import DEFAULT_SELECTION, Selection
 
-__all__ = ["TrackSummary", "CameraSummary", "SequenceSummary", "summarize_sequence", "summarize_tracks",
-           "is_vehicle", "motion_of", "MOVING_MIN_DISPLACEMENT_M"]
-
-MOVING_MIN_DISPLACEMENT_M = 1.0
-MOVING_MIN_SHORT_DISPLACEMENT_M = 0.3
-MOVING_MIN_SPEED_MPS = 1.0
-_VEHICLE_WORDS = ("car", "truck", "bus", "van", "vehicle", "motorcycle", "trailer", "tram")
-
-
-def is_vehicle(label: str) -> bool:
-    """True for vehicle classes (car, truck, bus, van, motorcycle, trailer, tram, 'Other Vehicle - ...')."""
-    words = label.lower().replace("-", " ").replace("_", " ").split()
-    return any(w.startswith(v) for w in words for v in _VEHICLE_WORDS)
-
+__all__ = ["TrackSummary", "CameraSummary", "SequenceSummary", "summarize_sequence", "summarize_tracks"]
 
 @dataclass(frozen=True)
 class TrackSummary:
@@ -71,6 +56,8 @@ class SequenceSummary:
     points_min: int | None
     points_median: float | None
     points_max: int | None
+    missing_sweeps: list[int]
+    empty_sweeps: list[int] | None
     cameras: list[CameraSummary]
     tracks: list[TrackSummary]
 
@@ -78,28 +65,16 @@ class SequenceSummary:
         return asdict(self)
 
 
-def motion_of(track: AnnotatedTrack, timestamps_ns: np.ndarray) -> tuple[bool, float, float]:
-    """(moving, first-to-last displacement, max displacement from the first centre), metres in xy."""
-    centres = np.array([[b.x, b.y] for b in track.boxes])
-    distances = np.linalg.norm(centres - centres[0], axis=1)
-    displacement = float(distances[-1])
-    max_displacement = float(distances.max())
-    duration_s = (int(timestamps_ns[track.frames[-1]]) - int(timestamps_ns[track.frames[0]])) * 1e-9
-    speed = displacement / duration_s if duration_s > 0 else 0.0
-    moving = max_displacement >= MOVING_MIN_DISPLACEMENT_M or (
-        displacement >= MOVING_MIN_SHORT_DISPLACEMENT_M and speed >= MOVING_MIN_SPEED_MPS)
-    return moving, displacement, max_displacement
-
-
 def _mean_points_first_frames(seq: Sequence, tracks: dict[str, AnnotatedTrack], first_n: int,
                               progress: bool) -> dict[str, float]:
     """Mean number of points inside each track's GT box over its first ``first_n`` annotated frames.
 
-    Reads only the frames needed (the union of those first frames), each once.
+    Reads only the frames needed (the union of those first frames), each once; frames without a
+    sweep do not count.
     """
     needed: dict[int, list[str]] = {}
     for tid, track in tracks.items():
-        for k in track.frames[:first_n]:
+        for k in [k for k in track.frames if seq.frames[k].has_sweep][:first_n]:
             needed.setdefault(k, []).append(tid)
     counts: dict[str, list[int]] = {tid: [] for tid in tracks}
     for k in tqdm(sorted(needed), desc="points in boxes", unit="frame", disable=not progress, leave=False):
@@ -115,14 +90,14 @@ def _mean_points_first_frames(seq: Sequence, tracks: dict[str, AnnotatedTrack], 
 
 
 def summarize_tracks(seq: Sequence, first_n: int = 10, vehicles_only: bool = False,
-                     progress: bool = True) -> list[TrackSummary]:
+                     progress: bool = True, selection: Selection = DEFAULT_SELECTION) -> list[TrackSummary]:
     """Annotated tracks, vehicles first, then moving first, then by mean points (descending).
 
     Reads only the sweeps of each track's first ``first_n`` frames.
     """
     tracks = seq.tracks()
     if vehicles_only:
-        tracks = {tid: t for tid, t in tracks.items() if is_vehicle(t.label)}
+        tracks = {tid: t for tid, t in tracks.items() if selection.is_vehicle(t.label)}
     stationary: dict[str, list[bool]] = {}
     for annotations in seq.annotations or []:
         for ann in annotations:
@@ -132,8 +107,8 @@ def summarize_tracks(seq: Sequence, first_n: int = 10, vehicles_only: bool = Fal
     stamps = seq.timestamps_ns
     out = []
     for tid, track in tracks.items():
-        moving, displacement, max_displacement = motion_of(track, stamps)
-        vehicle = is_vehicle(track.label)
+        moving, displacement, max_displacement = dataclasses.astuple(selection.track_motion(track, stamps))
+        vehicle = selection.is_vehicle(track.label)
         flags = stationary.get(tid)
         out.append(TrackSummary(
             track_id=tid, label=track.label, vehicle=vehicle, num_frames=len(track.frames),
@@ -147,15 +122,24 @@ def summarize_tracks(seq: Sequence, first_n: int = 10, vehicles_only: bool = Fal
 
 def summarize_sequence(seq: Sequence, point_stats: bool = True, vehicles_only: bool = False,
                        progress: bool = True) -> SequenceSummary:
-    """Everything ``sot-apps info`` prints. ``point_stats`` reads every sweep (with a progress bar)."""
+    """Everything ``sot-apps info`` prints. ``point_stats`` reads every sweep (with a progress bar).
+
+    ``missing_sweeps``: frames without a sweep (from the reader, no sweep read); ``empty_sweeps``:
+    frames whose sweep has zero points (None without ``point_stats``).
+    """
     stamps = seq.timestamps_ns
     span = (int(stamps[-1]) - int(stamps[0])) * 1e-9 if len(stamps) else 0.0
     rate = (len(stamps) - 1) / span if span > 0 else 0.0
     pmin = pmed = pmax = None
+    missing = seq.missing_sweeps()
+    empty = None
     if point_stats:
-        counts = np.array([len(seq.sweep(k)) for k in tqdm(range(len(seq)), desc="reading sweeps", unit="frame",
-                                                            disable=not progress, leave=False)])
-        pmin, pmed, pmax = int(counts.min()), float(np.median(counts)), int(counts.max())
+        with_sweep = [k for k in range(len(seq)) if seq.frames[k].has_sweep]
+        counts = np.array([len(seq.sweep(k)) for k in tqdm(with_sweep, desc="reading sweeps", unit="frame",
+                                                            disable=not progress, leave=False)], dtype=np.int64)
+        empty = [k for k, n in zip(with_sweep, counts) if n == 0]
+        if len(counts):
+            pmin, pmed, pmax = int(counts.min()), float(np.median(counts)), int(counts.max())
     cameras = []
     for name, cam in seq.cameras.items():
         offsets = [(cf.timestamp_ns - seq.frames[k].timestamp_ns) * 1e-6 for k, cf in enumerate(cam.frames)]
@@ -163,5 +147,6 @@ def summarize_sequence(seq: Sequence, point_stats: bool = True, vehicles_only: b
                                      mean_offset_to_lidar_ms=float(np.mean(offsets)) if offsets else 0.0))
     tracks = summarize_tracks(seq, vehicles_only=vehicles_only, progress=progress)
     return SequenceSummary(id=seq.id, format=seq.format, root=str(seq.root), num_frames=len(seq), time_span_s=span,
-                           rate_hz=rate, points_min=pmin, points_median=pmed, points_max=pmax, cameras=cameras,
+                           rate_hz=rate, points_min=pmin, points_median=pmed, points_max=pmax,
+                           missing_sweeps=missing, empty_sweeps=empty, cameras=cameras,
                            tracks=tracks)

@@ -1,4 +1,4 @@
-"""sot_apps.eval and the ``eval`` / ``bench`` commands."""
+"""sot_apps.evaluation.tracker and the ``eval`` / ``bench`` commands."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from sot_apps.cli.main import main
-from sot_apps.eval import annotated_span, select_moving_vehicle_tracks
+from sot_apps.evaluation.tracker import select_moving_vehicle_tracks
+from sot_apps.objects.selection import annotated_span
 
 DEV_TRACKS = {"20d13d1d", "8ac00bad", "0d238564", "f0b32b02", "91aa5b5c", "71a404f3", "8febbea0", "1a46fa13",
               "b09e1c68"}

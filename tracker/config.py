@@ -11,6 +11,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from .ground import GroundParams
+
 __all__ = ["TrackerConfig", "PRESETS", "get_preset", "preset_names"]
 
 
@@ -88,6 +90,12 @@ class TrackerConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    def ground_params(self) -> GroundParams:
+        """The ground-removal settings (the ``gpf_*`` fields) as :class:`~tracker.ground.GroundParams`."""
+        return GroundParams(lpr_count=self.gpf_lpr_count, seed_threshold=self.gpf_seed_threshold,
+                            distance_threshold=self.gpf_distance_threshold, iterations=self.gpf_iterations,
+                            segment_length=self.gpf_segment_length, outlier_depth=self.gpf_outlier_depth)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "TrackerConfig":

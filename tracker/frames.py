@@ -27,6 +27,8 @@ class LidarFrame:
         world_from_ego: 4x4 ego pose at ``timestamp_ns``.
         point_time_offset_ns: optional (N,) int64 capture time of each point relative to
             ``timestamp_ns`` (negative = before). Used to de-skew sweeps that are not motion-compensated.
+        has_sweep: False when the sweep of this frame is missing (its pose and time are known): the
+            tracker predicts through it without measuring and flags the estimate ``no_sweep``.
     """
 
     index: int
@@ -34,6 +36,7 @@ class LidarFrame:
     points_ego: np.ndarray
     world_from_ego: np.ndarray
     point_time_offset_ns: np.ndarray | None = None
+    has_sweep: bool = True
 
     def points_world(self) -> np.ndarray:
         """(N, 3) float64 points in the world frame (no de-skew)."""

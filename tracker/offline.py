@@ -46,7 +46,7 @@ from scipy.spatial import cKDTree
 from .config import TrackerConfig
 from .frames import FrameSource
 from .geometry import Box, State, points_in_box, wrap_angle
-from .ground import GroundParams, ground_mask
+from .ground import ground_mask
 from .metrics import voxel_downsample_centres
 from .sotracker import FrameEstimate, TrackResult, deskew_points
 
@@ -90,12 +90,6 @@ class OfflineProblem:
     size: np.ndarray
 
 
-def _ground_params(config: TrackerConfig) -> GroundParams:
-    return GroundParams(lpr_count=config.gpf_lpr_count, seed_threshold=config.gpf_seed_threshold,
-                        distance_threshold=config.gpf_distance_threshold, iterations=config.gpf_iterations,
-                        segment_length=config.gpf_segment_length, outlier_depth=config.gpf_outlier_depth)
-
-
 def _box(state: np.ndarray, size: np.ndarray) -> Box:
     return Box(float(state[0]), float(state[1]), float(state[2]), float(wrap_angle(state[3])),
                float(size[0]), float(size[1]), float(size[2]))
@@ -104,7 +98,7 @@ def _box(state: np.ndarray, size: np.ndarray) -> Box:
 def gather_frame_points(source: FrameSource, result: TrackResult, config: TrackerConfig,
                         params: OfflineParams) -> list[np.ndarray]:
     """Ground-removed world points inside each online box scaled ``region_scale`` (one array per frame)."""
-    ground = _ground_params(config)
+    ground = config.ground_params()
     out: list[np.ndarray] = []
     previous = None
     for est in result.estimates:

@@ -10,24 +10,14 @@ from collections import deque
 import numpy as np
 
 from .geometry import Box, transform_points
+from .metrics import voxel_downsample_centres
 
 __all__ = ["voxel_downsample", "to_object_frame", "to_world_frame", "ShapeModel", "SubShape"]
 
 
 def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
     """One point per occupied voxel, at the voxel centre (sorted by voxel index: deterministic)."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(points) == 0:
-        return points
-    idx = np.floor(points / voxel_size).astype(np.int64)
-    lo = idx.min(axis=0)
-    span = idx.max(axis=0) - lo + 1
-    key = ((idx[:, 0] - lo[0]) * span[1] + (idx[:, 1] - lo[1])) * span[2] + (idx[:, 2] - lo[2])
-    ukey = np.unique(key)  # 1-D unique is much faster than unique rows
-    iz = ukey % span[2]
-    rest = ukey // span[2]
-    unique = np.column_stack([rest // span[1] + lo[0], rest % span[1] + lo[1], iz + lo[2]])
-    return (unique + 0.5) * voxel_size
+    return voxel_downsample_centres(points, voxel_size)
 
 
 def to_object_frame(points_world: np.ndarray, box: Box) -> np.ndarray:

@@ -25,7 +25,7 @@ from .association import NearestNeighbors, random_subset, ransac_rigid_2d
 from .config import TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, invert_transform, points_in_box, transform_points, wrap_angle
-from .ground import GroundParams, ground_mask
+from .ground import ground_mask
 from .motion import MotionPrior
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
@@ -40,7 +40,8 @@ class FrameEstimate:
 
     ``num_points``: object points (ground removed) in the estimated box; ``points``: those points (N, 3);
     ``quality``: 0..1 (share of those points that the registration explains, scaled down when sparse);
-    ``flags``: e.g. "init", "no_points", "prior_only", "low_points", "nan_points", "no_shape_inliers".
+    ``flags``: e.g. "init", "no_points", "prior_only", "low_points", "nan_points", "no_shape_inliers",
+    "no_sweep" (the frame has no sweep: a prediction only, see :meth:`Tracker.step`).
     """
 
     frame: int
@@ -181,9 +182,7 @@ class Tracker:
     def __init__(self, config: TrackerConfig | None = None) -> None:
         self.config = config or TrackerConfig()
         c = self.config
-        self.ground_params = GroundParams(lpr_count=c.gpf_lpr_count, seed_threshold=c.gpf_seed_threshold,
-                                          distance_threshold=c.gpf_distance_threshold, iterations=c.gpf_iterations,
-                                          segment_length=c.gpf_segment_length, outlier_depth=c.gpf_outlier_depth)
+        self.ground_params = c.ground_params()
         self._started = False
 
     # ------------------------------------------------------------------ points
@@ -191,6 +190,7 @@ class Tracker:
         """Non-ground world points near ``box`` (BEV radius of the box scaled by ``scale`` plus a margin)."""
         c = self.config
         flags: list[str] = []
+        self._ground_points = np.zeros((0, 3))
         pts = np.asarray(frame.points_ego)
         if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
             return np.zeros((0, 3)), flags
@@ -222,7 +222,6 @@ class Tracker:
         v = np.abs(d @ np.array([-sa, ca]))
         gscale = scale + 0.5
         world = world[(u <= 0.5 * box.length * gscale + c.gpf_margin) & (v <= 0.5 * box.width * gscale + c.gpf_margin)]
-        self._ground_points = np.zeros((0, 3))
         if c.ground_removal and len(world) >= 3:
             is_ground = ground_mask(world, self.ground_params)
             self._ground_points = world[is_ground]
@@ -246,6 +245,8 @@ class Tracker:
         values = box.to_array()
         if not np.isfinite(values).all() or min(box.length, box.width, box.height) <= 0:
             raise ValueError(f"init box must be finite with positive size, got {box}")
+        if not frame.has_sweep:
+            raise ValueError(f"cannot start a track at frame {frame.index}: it has no sweep")
         self.rng = np.random.default_rng(c.seed)
         self.first_box = box
         self.box = box
@@ -257,6 +258,8 @@ class Tracker:
         self._shape_nn: NearestNeighbors | None = None
         self._shape_nn_size = -1
         self._previous_pose = previous_pose
+        self._last_timestamp_ns = int(frame.timestamp_ns)
+        self._nominal_dt_ns: int | None = None  # the frame interval the motion prior is expressed per
         local, flags = self._local_points(frame, box, max(c.first_search_scale, c.search_scale))
         height = _ground_height(self._ground_points, box.center[:2], box)
         self._ground_offset = None if height is None else box.z - height
@@ -403,18 +406,31 @@ class Tracker:
         return x, info
 
     def step(self, frame: LidarFrame) -> FrameEstimate:
-        """Estimate the object's state in ``frame`` (the frame after the previous call)."""
+        """Estimate the object's state in ``frame`` (the frame after the previous call).
+
+        The motion prior is scaled by the elapsed time over the nominal frame interval (the first
+        step's). A frame without a sweep (``frame.has_sweep`` False) is a prediction only, flagged
+        ``no_sweep``.
+        """
         if not self._started:
             raise RuntimeError("Tracker.step called before Tracker.start")
         t0 = time.perf_counter()
         c = self.config
+        prev = self.box
+        dt_ns = int(frame.timestamp_ns) - self._last_timestamp_ns
+        self._last_timestamp_ns = int(frame.timestamp_ns)
+        if self._nominal_dt_ns is None and dt_ns > 0:
+            self._nominal_dt_ns = dt_ns
+        # the prior is a motion per nominal frame interval: scale it by the elapsed time
+        dt_scale = dt_ns / self._nominal_dt_ns if self._nominal_dt_ns and dt_ns > 0 else 1.0
+        if not frame.has_sweep:
+            return self._predict_only(frame, prev, dt_scale, t0)
         self.steps += 1
         flags: list[str] = []
-        prev = self.box
         first = self.steps == 1
         if first:
             self._first_shape = self.shape.points.copy()
-        prior = self.prior.predict(prev.heading)
+        prior = self.prior.predict(prev.heading) * dt_scale
         # coasting (no data) keeps the velocity but lets the turn rate die out
         prior[3] *= c.coast_yaw_decay ** self._coasting
         search_scale = c.first_search_scale if first else c.search_scale
@@ -470,10 +486,26 @@ class Tracker:
             self._coasting += 1  # the prior is not updated with its own prediction
         else:
             self._coasting = 0
-            self.prior.update(x, prev.heading)
+            self.prior.update(x / dt_scale, prev.heading)
         self.box = box
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)
+
+    def _predict_only(self, frame: LidarFrame, prev: Box, dt_scale: float, t0: float) -> FrameEstimate:
+        """A frame without a sweep: move the box by the prior over the elapsed time, measure nothing.
+
+        The previous object points move with the box (they seed the next frame's registration); the
+        shape, sub-shape and motion prior are left as they are. Flags: ``no_sweep``, ``prior_only``.
+        """
+        prior = self.prior.predict(prev.heading) * dt_scale
+        prior[3] *= self.config.coast_yaw_decay ** self._coasting
+        box = _box_moved(prev, prior)
+        self.prev_points = to_world_frame(to_object_frame(self.prev_points, prev), box)
+        self._previous_pose = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+        self._coasting += 1
+        self.box = box
+        return FrameEstimate(frame.index, box.state, box, 0, 0.0, ("no_sweep", "prior_only"),
+                             (time.perf_counter() - t0) * 1e3, np.zeros((0, 3)))
 
     def _with_z(self, x: np.ndarray, prev: Box) -> np.ndarray:
         """The motion with dz set by ``z_mode`` ("ground": keep the start height above the local road)."""

@@ -21,11 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..evaluation import DEV_TRACKS
 
 __all__ = ["register", "time_dense_flow", "format_speed_table", "format_quality_tables"]
-
-DEV_TRACKS = ("20d13d1d", "8ac00bad", "0d238564", "f0b32b02", "91aa5b5c", "71a404f3", "8febbea0", "1a46fa13",
-              "b09e1c68")
 
 
 def _pin_one_core() -> str:
@@ -38,7 +36,7 @@ def _pin_one_core() -> str:
 
 def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int = 3) -> dict:
     """Per object and pair: best-of-``repeats`` dense-flow time (ms) and its pixel count."""
-    from ..flow.annotate import FlowOptions, _write_outputs, build_pair, compute_pair
+    from ..flow.annotate import FlowOptions, write_pair_outputs, build_pair, compute_pair
     from ..flow.dense import RayCache
 
     camera = seq.cameras[camera_name]
@@ -62,7 +60,7 @@ def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int =
         whole = compute_pair(setup, flow_objects, "dense", cache)
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
-            _write_outputs(Path(tmp), k, whole, camera.frames[k].image_path, True)
+            write_pair_outputs(Path(tmp), k, whole, camera.frames[k].image_path, True)
             writing.append((time.perf_counter() - t0) * 1e3)
     return {"camera": camera_name, "width": camera.width, "height": camera.height, "rows": rows,
             "pair_overhead_ms": float(np.mean(overhead)) if overhead else 0.0,
@@ -171,7 +169,7 @@ def _quality_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_quality(args: argparse.Namespace) -> int:
-    from ..flow.quality import photometric_quality, synthetic_quality, tracker_objects
+    from ..evaluation.flow import photometric_quality, synthetic_quality, tracker_objects
     from ..flow.objects import objects_from_annotations
     from ..io import open_sequence
     from ..io.atomic import write_json

@@ -28,7 +28,7 @@ EXECUTOR_NAMES = {"inline": "in process", "local": "local processes", "dask": "D
 
 def _warm(sequence: str) -> int:
     import sot_apps.pipeline.stages  # noqa: F401 - the import is the warm-up
-    import tracker.sotracker  # noqa: F401
+    import tracker  # noqa: F401
     from sot_apps.pipeline.plan import open_cached
 
     open_cached(sequence, None)   # as the planner already did in this process
@@ -53,7 +53,9 @@ def measure(sequence: Path, configs: list[tuple[str, int]], objects: int | None,
                 "annotations", max_objects=objects)),), stages)
             start = time.perf_counter()
             with ExecutorSession(spec) as session:
-                if kind != "inline" and not (kind == "local" and workers <= 1):
+                if kind == "dask":
+                    session.on_every_worker(_warm, str(sequence))
+                elif kind != "inline" and not (kind == "local" and workers <= 1):
                     session.run([Task(f"warm/{i}", _warm, (str(sequence),)) for i in range(2 * workers)], "warm-up",
                                 False)
                 startup = time.perf_counter() - start
@@ -109,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="sot_bench_world_") as tmp:
         sequence = Path(args.sequence) if args.sequence else None
         if sequence is None:
-            from ..lidar_sim.synth import write_world
+            from ..synth import write_world
 
             sequence = write_world(Path(tmp) / "world", frames=12, vehicles=4, sensor="pandar64", seed=3)
         rows = measure(sequence, configs, args.objects, args.max_frames)

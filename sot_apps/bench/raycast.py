@@ -35,7 +35,7 @@ def _pin_one_core() -> str:
 
 def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[float], list[int]]:
     """(meshes, meshing seconds per vehicle, points per vehicle)."""
-    from ..lidar_sim.meshing import surfel_mesh
+    from ..objects.meshes import surfel_mesh
 
     meshes, seconds, npoints = [], [], []
     if bank_dir:
@@ -55,7 +55,7 @@ def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.nda
         return meshes, seconds, npoints
     import trimesh
 
-    from ..lidar_sim.vehicles import random_vehicle
+    from ..synth.vehicles import random_vehicle
 
     rng = np.random.default_rng(0)
     for _ in range(count):
@@ -71,7 +71,7 @@ def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.nda
 
 def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int = 20, sensor_name: str = "waymo_top") -> dict:
     from ..lidar_sim.noise import Realism
-    from ..lidar_sim.raycast import RaycastScene
+    from ..raycast import RaycastScene
     from ..lidar_sim.scan import SimObject, Trajectory, simulate_scan
     from ..lidar_sim.sensors import load_sensor
 

@@ -51,7 +51,7 @@ def _child_argv(args: argparse.Namespace) -> list[str]:
 
 def _time_track(source, spec, config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Run the streaming tracker over a track's span: boxes (n, 7), wall ms and CPU ms per frame k >= 1."""
-    from tracker.sotracker import Tracker
+    from tracker import Tracker
 
     start = spec.frames[0]
     previous = None
@@ -72,10 +72,10 @@ def _time_track(source, spec, config) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | None) -> dict[str, Any]:
-    from tracker.config import get_preset
-    from tracker.metrics import pool_metrics, score_tracklet
+    from tracker import get_preset
+    from tracker import pool_metrics, score_tracklet
 
-    from ..eval import CachedSource, prepare_tracks, resolve_presets, select_moving_vehicle_tracks
+    from ..evaluation.tracker import CachedSource, prepare_tracks, resolve_presets, select_moving_vehicle_tracks
     from ..io import open_sequence
 
     pinned = pin_one_core()

@@ -1,16 +1,16 @@
 """Everything the benchmark takes from other apps, in one place (to re-point when shared code moves).
 
 - the sensor model and scan simulation (lidar_sim: sensors, noise, scan, raycast, bank);
-- the tracker evaluation pieces (sot_apps.eval).
+- the tracker evaluation pieces (sot_apps.evaluation.tracker).
 """
 
 from __future__ import annotations
 
-from ..eval import CachedSource, EvalConfig, TrackSpec, resolve_presets
-from ..eval import _ground_params, _score
+from ..evaluation.tracker import CachedSource, EvalConfig, TrackSpec, resolve_presets
+from ..evaluation.tracker import _score
 from ..lidar_sim.bank import Bank, BankEntry, read_bank
 from ..lidar_sim.noise import Realism
-from ..lidar_sim.raycast import RaycastScene
+from ..raycast import RaycastScene
 from ..lidar_sim.scan import Scan, SimObject, Trajectory, invert_transform_batch, simulate_scan, state_to_matrix
 from ..lidar_sim.scene import OCCLUDER_MARGIN_M
 from ..lidar_sim.sensors import Sensor, load_sensor
@@ -19,7 +19,7 @@ def eval_ground_params():
     """The ground removal ``sot-apps eval`` uses for pseudo-ground-truth shapes (default tracker settings)."""
     from tracker.config import TrackerConfig
 
-    return _ground_params(TrackerConfig())
+    return TrackerConfig().ground_params()
 
 
 eval_score = _score  # one tracklet's scores exactly as ``sot-apps eval`` computes them

@@ -78,7 +78,7 @@ def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSp
     if any(box is None for box in boxes):
         missing = [k for k, box in zip(frames, boxes) if box is None]
         raise InputError(seq.root, f"tracklet {t.id}: no box at frame {missing[0]} of {a}..{b}")
-    n = min(config.difficulty_frames, len(frames))
+    n = min(config.selection.difficulty_frames, len(frames))
     mean10 = mean_points_in_boxes(source, frames[:n], boxes[:n])
     level = t.difficulty or difficulty(mean10, DIFFICULTY_THRESHOLDS)
     pgt = pseudo_gt_shape(source, frames, boxes, eval_ground_params(), config.shape_voxel_m, config.pgt_ground_margin_m)

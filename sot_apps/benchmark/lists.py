@@ -27,7 +27,7 @@ from tracker.metrics import DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty
 from ..errors import InputError
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated
-from .deps import EvalConfig
+from ..objects.selection import DEFAULT_SELECTION, annotated_span
 
 __all__ = ["Tracklet", "ListCriteria", "read_list", "read_lists", "build_lists", "SequenceResolver",
            "default_resolver", "write_lists", "LIST_FILES", "type_of_label"]
@@ -41,7 +41,7 @@ _CYCLISTS = ("cyclist", "bicycle", "motorcyclist", "motorcycle")
 def type_of_label(label: str) -> int | None:
     """Waymo Label.Type of a sequence label (None: not a tracked class)."""
     low = label.lower()
-    if low in EvalConfig().vehicle_labels:
+    if DEFAULT_SELECTION.is_vehicle(label):
         return TYPE_VEHICLE
     if low in _PEDESTRIANS:
         return TYPE_PEDESTRIAN
@@ -150,13 +150,7 @@ def build_lists(sequences: list[tuple[Sequence, str]], criteria: ListCriteria = 
             kind = type_of_label(trk.label)
             if kind not in criteria.types:
                 continue
-            frames = sorted(trk.frames)
-            end = frames[0]
-            for f in frames[1:]:
-                if f != end + 1:
-                    break
-                end = f
-            start = frames[0]
+            start, end = annotated_span(trk.frames)
             if criteria.max_frames is not None:
                 end = min(end, start + criteria.max_frames - 1)
             if end - start + 1 < criteria.min_frames:

@@ -37,6 +37,7 @@ from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
 from ..io.sequence import BoxAnnotation, FrameInfo, Sequence, Sweep
 from ..objects.motion_profiles import PROFILES, MotionSpec
+from ..objects.selection import annotated_span
 from ..schemas import validate
 from .background import boxes_array, build_ground_map, ego_from_sensor, fitted_sensor
 from .deps import Bank, Realism, load_sensor, read_bank
@@ -138,7 +139,8 @@ def _plan_replicas(seq: Sequence, bank: Bank, config: MakeConfig, frames: list[i
             raise InputError(Path(config.bank) / "index.json", f"no bank entry built from track {tid}")
         trk = tracks[tid]
         ks = [k for k in frames if trk.box_at(k) is not None]
-        run = ks[: next((i + 1 for i, (a, b) in enumerate(zip(ks, ks[1:])) if b != a + 1), len(ks))]
+        first, last = annotated_span(ks) if ks else (0, -1)
+        run = list(range(first, last + 1))
         if len(run) < 2:
             raise InputError(seq.root, f"track {tid} has fewer than 2 frames in --frames")
         boxes = [trk.box_at(k) for k in run]

@@ -1,6 +1,6 @@
 """Realism of a generated benchmark: points in the ground-truth box versus range, inserted against real vehicles.
 
-Real: every annotated vehicle box (``sot-apps eval``'s vehicle labels) of the background over the benchmark's
+Real: every annotated vehicle box (:mod:`sot_apps.objects.selection`'s vehicle rule) of the background over the benchmark's
 frames, in the background's own sweeps. Inserted: every inserted vehicle's box in the copies' sweeps (the first
 ``max_copies`` copies). Both count the sweep points inside the box (the LiDAR-SOT difficulty statistic), against
 the box centre's horizontal distance from the sensor. Occlusion is part of both (real cars hide behind real
@@ -19,7 +19,7 @@ from tracker.geometry import points_in_box, transform_points
 
 from ..errors import InputError
 from ..io import open_sequence
-from .deps import EvalConfig
+from ..objects.selection import DEFAULT_SELECTION
 
 __all__ = ["RangeCurves", "points_versus_range", "format_realism", "write_plot", "RANGE_BINS_M"]
 
@@ -46,10 +46,10 @@ class RangeCurves:
 
 
 def _box_samples(seq, frames, ids=None) -> list[tuple[float, int]]:
-    labels = {label.lower() for label in EvalConfig().vehicle_labels}
     out = []
     for k in frames:
-        anns = [a for a in seq.annotations[k] if (a.track_id in ids if ids is not None else a.label.lower() in labels)]
+        anns = [a for a in seq.annotations[k]
+                if (a.track_id in ids if ids is not None else DEFAULT_SELECTION.is_vehicle(a.label))]
         if not anns:
             continue
         pts = seq.points_world(k)

@@ -29,7 +29,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     build.add_argument("--from-annotations", metavar="SEQUENCE", help="build from annotated tracks of this sequence")
     build.add_argument("--track-id", action="append", default=[], metavar="PREFIX",
                        help="annotated track id (or unique prefix); repeatable")
-    build.add_argument("--all", action="store_true", help="every annotated vehicle track (with --from-annotations)")
+    build.add_argument("--all", action="store_true", help="every annotated vehicle track (sot_apps.objects.selection; with --from-annotations)")
     build.add_argument("--min-points", type=int, default=200,
                        help="skip annotated tracks with fewer aggregated points (default 200)")
     build.add_argument("--mirror", action="store_true", help="mirror-complete about the length axis (y -> -y)")
@@ -41,11 +41,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     return parser
 
 
-VEHICLE_WORDS = ("car", "truck", "van", "bus", "vehicle", "pickup")
-
-
 def run_build(args: argparse.Namespace) -> int:
     from ..io import open_sequence
+    from ..objects.selection import DEFAULT_SELECTION
     from ..lidar_sim.bank import (entries_from_annotations, entry_from_mesh_file, entry_from_track_dir,
                                   is_track_dir, read_bank, write_bank_index)
 
@@ -69,7 +67,7 @@ def run_build(args: argparse.Namespace) -> int:
     if args.from_annotations:
         seq = open_sequence(args.from_annotations)
         if args.all:
-            ids = [tid for tid, t in seq.tracks().items() if any(w in t.label.lower() for w in VEHICLE_WORDS)]
+            ids = DEFAULT_SELECTION.vehicles(seq)
         else:
             ids = [seq.resolve_track_id(p) for p in args.track_id]
         entries, skipped = entries_from_annotations(out, seq, ids, mirror=args.mirror, min_points=args.min_points,

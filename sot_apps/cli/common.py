@@ -9,7 +9,7 @@ from ..io.sequence import Sequence
 
 
 def add_sequence_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("sequence", metavar="SEQUENCE", help="sequence directory (canonical or PandaSet)")
+    parser.add_argument("sequence", metavar="SEQUENCE", help="sequence: canonical or PandaSet directory, Waymo v1 .tfrecord or v2 directory/component .parquet, Argoverse 2 log, nuScenes root (DIR#scene), KITTI tracking (label_02/SSSS.txt or DIR#SSSS), KITTI object / View-of-Delft folder")
     parser.add_argument("--format", choices=FORMATS, default=None, help="force the reader (default: auto-detect)")
 
 

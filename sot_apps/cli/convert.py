@@ -11,11 +11,13 @@ from .common import add_sequence_argument, add_subcommand, load_sequence
 
 def register(subparsers) -> argparse.ArgumentParser:
     parser = add_subcommand(
-        subparsers, "convert", help="convert a sequence (e.g. PandaSet) to the canonical format",
+        subparsers, "convert", help="convert a sequence (PandaSet, AV2, nuScenes, KITTI, ...) to the canonical format",
         description="Write SEQUENCE in the canonical format (sequence.json + points/*.npz + camera images, see "
                     "docs/data-formats.md). Files are written atomically and sequence.json last; rerunning after an "
                     "interruption resumes (point files that already hold the right points are kept).",
-        examples=["sot-apps convert ../shared/data/pandaset_002 --out out/pandaset_002"])
+        examples=["sot-apps convert ../shared/data/pandaset_002 --out out/pandaset_002",
+                  "sot-apps convert ../shared/data/readers/kitti_tracking_labels/training/label_02/0012.txt --out out/kitti_0012",
+                  "sot-apps convert ../shared/data/readers/av2_sensor_test/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede --out out/av2"])
     add_sequence_argument(parser)
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.set_defaults(func=run)

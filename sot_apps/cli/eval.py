@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..errors import InputError
-    from ..eval import evaluate, format_report, resolve_presets
+    from ..evaluation.tracker import evaluate, format_report, resolve_presets
     from ..io.atomic import write_json
 
     if args.seeds < 1:

@@ -36,7 +36,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     source.add_argument("--from-annotations", action="store_true",
                         help="use ground-truth boxes; shapes from the ground-removed points inside them")
     parser.add_argument("--track-id", nargs="+", metavar="ID", help="with --from-annotations: only these track ids (prefixes)")
-    parser.add_argument("--moving-only", action="store_true", help="with --from-annotations: skip objects that never move 0.5 m")
+    parser.add_argument("--moving-only", action="store_true", help="with --from-annotations: skip objects that do not move (sot_apps.objects.selection)")
     parser.add_argument("--box-time", choices=("points", "frame"), default="points",
                         help="time of a box/track state = median capture time of the LiDAR points inside it (default; "
                              "PandaSet boxes and tracker states fit unmotion-compensated sweeps) or the frame "
@@ -63,7 +63,7 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from ..flow.annotate import FlowOptions, annotate_camera
-    from ..flow.objects import objects_from_annotations, objects_from_tracks
+    from ..flow.objects import objects_for_pairs, objects_from_annotations
     from ..flow.scene import OcclusionParams
 
     if args.track_id and not args.from_annotations:
@@ -81,9 +81,7 @@ def run(args: argparse.Namespace) -> int:
                                            mesh_method=args.mesh, box_time=args.box_time, progress=not args.quiet)
         source = "annotations"
     else:
-        a, b = args.pairs or (0, len(seq.frames) - 1)
-        objects = objects_from_tracks(args.tracks, mesh_method=args.mesh, seq=seq, box_time=args.box_time,
-                                      frames=range(max(a - 2, 0), b + 3))
+        objects = objects_for_pairs(seq, args.tracks, args.pairs, mesh_method=args.mesh, box_time=args.box_time)
         source = "tracks"
     if not objects:
         raise InputError(seq.root, "no objects to annotate")

@@ -8,7 +8,8 @@ import sys
 
 from ..errors import InputError
 from ..io import FORMATS, open_sequence
-from ..summary import MOVING_MIN_DISPLACEMENT_M, SequenceSummary, summarize_sequence
+from ..objects.selection import DEFAULT_SELECTION
+from ..summary import SequenceSummary, summarize_sequence
 from .common import add_subcommand
 
 
@@ -17,11 +18,11 @@ def register(subparsers) -> argparse.ArgumentParser:
         subparsers, "info", help="summarise a sequence: frames, points, cameras, annotated tracks",
         description="Summarise a sequence: frames, time span, points per frame, cameras (timing offset to the "
                     "lidar), and annotated tracks with mean points in the box over their first 10 frames, "
-                    f"displacement and motion (moving = the box centre gets >= {MOVING_MIN_DISPLACEMENT_M:g} m from "
+                    f"displacement and motion (moving = the box centre gets >= {DEFAULT_SELECTION.min_displacement_m:g} m from "
                     "its first position, or a short track moves >= 0.3 m at >= 1 m/s; see docs/data-formats.md).",
         examples=["sot-apps info --tiny", "sot-apps info ../shared/data/pandaset_002 --vehicles-only",
                   "sot-apps info out/pandaset_002_canonical --json > info.json"])
-    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence directory (canonical or PandaSet)")
+    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", help="sequence: canonical or PandaSet directory, Waymo v1 .tfrecord or v2 directory/component .parquet, Argoverse 2 log, nuScenes root (DIR#scene), KITTI tracking (label_02/SSSS.txt or DIR#SSSS), KITTI object / View-of-Delft folder")
     parser.add_argument("--format", choices=FORMATS, default=None, help="force the reader (default: auto-detect)")
     parser.add_argument("--tiny", action="store_true",
                         help="use the built-in tiny synthetic sequence (generated into ~/.cache/sot-apps)")
@@ -60,11 +61,29 @@ def _table(headers: list[str], rows: list[list[str]], right: set[int]) -> list[s
     return [line(headers)] + [line(r) for r in rows]
 
 
+def _frame_list(frames: list[int]) -> str:
+    """``[3, 4, 5, 9]`` -> ``"3-5, 9"`` (``"none"`` when empty)."""
+    if not frames:
+        return "none"
+    runs: list[list[int]] = []
+    for k in frames:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
+
+
 def format_summary(s: SequenceSummary) -> str:
     out = [f"sequence  {s.id}  ({s.format}: {s.root})",
            f"frames    {s.num_frames}, time span {s.time_span_s:.3f} s ({s.rate_hz:.2f} Hz)"]
     if s.points_min is not None:
         out.append(f"points    per frame: min {s.points_min}, median {s.points_median:.0f}, max {s.points_max}")
+        if s.points_max == 0:
+            out.append("          no points in any frame: the source holds no lidar data (e.g. a Waymo file without "
+                       "range images)")
+    out.append(f"sweeps    {s.num_frames - len(s.missing_sweeps)} of {s.num_frames} frames; missing: "
+               f"{_frame_list(s.missing_sweeps)}" + ("" if s.empty_sweeps is None else f"; empty: {_frame_list(s.empty_sweeps)}"))
     if s.cameras:
         out += ["", "cameras"]
         out += ["  " + r for r in _table(

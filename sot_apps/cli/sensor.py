@@ -47,7 +47,7 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run_fit(args: argparse.Namespace) -> int:
-    from tracker.geometry import invert_transform, transform_points
+    from tracker import invert_transform, transform_points
 
     from ..io.atomic import write_json
     from ..lidar_sim.fit import compare_to_preset, fit_sensor, points_at_capture_pose

@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         ground = args.ground_z if args.ground_z is not None else (None if background is not None else -1.8)
         bg_xyz = None
         if background is not None:
-            from tracker.geometry import invert_transform, transform_points
+            from tracker import invert_transform, transform_points
 
             bg_xyz = transform_points(invert_transform(background.ego_from_lidar), background.sweep(args.frame).xyz)
         spec = random_scene(bank, args.random, args.seed, load_sensor(args.sensor or "pandar64"), ground_z=ground,

@@ -45,7 +45,7 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..lidar_sim.synth import write_world
+    from ..synth import write_world
 
     if args.frames < 1 or args.vehicles < 0:
         raise InputError(None, "--frames must be >= 1 and --vehicles >= 0")

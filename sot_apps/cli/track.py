@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tracker.config import get_preset, preset_names
+from tracker import get_preset, preset_names
 
 from ..errors import InputError
 from .common import add_sequence_argument, add_subcommand, load_sequence
@@ -45,7 +45,8 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..tracking import init_points, parse_init_box, refine_track_offline, track_sequence, write_track_result
+    from ..tracking import (TrackingFailed, first_box_with_points, init_points, parse_init_box, refine_track_offline,
+                            track_sequence, write_track_result)
 
     overrides = {"seed": args.seed}
     if args.deskew is not None:
@@ -61,6 +62,12 @@ def run(args: argparse.Namespace) -> int:
         end = annotated.frames[-1] if args.end_frame is None else args.end_frame
         if not 0 <= start < len(seq):
             raise InputError(seq.root, f"start frame {start} is out of range: the sequence has frames 0..{len(seq) - 1}")
+        if args.start_frame is None:   # the pipeline's rule: the first annotated box the tracker can start on
+            boxes = [(k, annotated.box_at(k)) for k in annotated.frames if k <= end]
+            try:
+                start, _ = first_box_with_points(seq, boxes, config)
+            except TrackingFailed:
+                pass   # none: start at the first annotated box anyway (the warning below says it is empty)
         init_box = annotated.box_at(start)
         if init_box is None:
             raise InputError(seq.root, f"track {object_id} has no box at frame {start} "

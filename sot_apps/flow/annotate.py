@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import invert_transform, transform_points
+from tracker import invert_transform, transform_points
 
 from ..errors import InputError
 from ..io.atomic import write_bytes, write_json
@@ -31,10 +31,11 @@ from .objects import TrackedObject
 from .occlusion import ProjectedPoints, project_lidar
 from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup
 from .sparse import sparse_flow
-from .states import interpolate_pose
+from ..objects.trajectory import interpolate_pose
 from .visualize import flow_to_color, overlay
 
-__all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "STATS_VERSION"]
+__all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "write_pair_outputs",
+           "STATS_VERSION"]
 
 STATS_VERSION = 1
 SUBDIRS = ("flow_occ", "flow_noc", "flo", "instances", "vis", "pairs")
@@ -139,7 +140,8 @@ def _write_png(path: Path, image: np.ndarray) -> None:
     write_bytes(path, data.tobytes())
 
 
-def _write_outputs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> None:
+def write_pair_outputs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> None:
+    """The files of pair k under ``root``: KITTI flow_occ / flow_noc PNGs, .flo, the instance PNG, vis/."""
     name = f"{k:06d}"
     write_kitti_flow(root / "flow_occ" / f"{name}.png", result.flow, result.valid_occ)
     write_kitti_flow(root / "flow_noc" / f"{name}.png", result.flow, result.valid_noc)
@@ -204,8 +206,12 @@ def annotate_camera(seq: Sequence, camera_name: str, objects: list[TrackedObject
         setup, flow_objects = build_pair(seq, camera, k, objects, options, lidar_cache)
         result = compute_pair(setup, flow_objects, options.mode, ray_cache)
         elapsed = (time.perf_counter() - start) * 1e3
-        _write_outputs(root, k, result, camera.frames[k].image_path, options.write_vis)
-        write_json(record_path, _pair_record(k, camera, result, elapsed))
+        write_pair_outputs(root, k, result, camera.frames[k].image_path, options.write_vis)
+        record = _pair_record(k, camera, result, elapsed)
+        missing = [j for j in (k, k + 1) if j < len(seq.frames) and not seq.frames[j].has_sweep]
+        if missing:  # no sweep: no lidar occluders at that frame (the flow itself comes from the object states)
+            record["no_lidar_sweep"] = missing
+        write_json(record_path, record)
     return write_stats(root, seq.id, camera_name, options.mode, source, mapping)
 
 

@@ -17,12 +17,13 @@ from typing import Iterable
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import Box, points_in_box, transform_points
+from tracker import Box, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from .meshing import Mesh, box_mesh, mesh_from_points, voxel_downsample
-from .states import ObjectTrajectory
+from ..objects.selection import DEFAULT_SELECTION
+from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample
+from ..objects.trajectory import ObjectTrajectory
 
 __all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]
 
@@ -103,6 +104,16 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
     return out
 
 
+def objects_for_pairs(seq: Sequence, track_dirs: Iterable[str | Path], pairs: tuple[int, int] | None,
+                      mesh_method: str = "hull", box_time: str = "points") -> list[TrackedObject]:
+    """Objects from track directories for the flow of image ``pairs`` (inclusive; None = every frame): the
+    states of the sweeps around the pairs (2 frames of margin) re-stamped as ``box_time`` says. ``sot-apps
+    flow --tracks`` and the pipeline's flow stage both call this, so they give the same flow."""
+    a, b = pairs if pairs is not None else (0, len(seq.frames) - 1)
+    return objects_from_tracks(track_dirs, mesh_method=mesh_method, seq=seq, box_time=box_time,
+                               frames=range(max(a - 2, 0), b + 3))
+
+
 def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, frames: Iterable[int] | None = None,
                              moving_only: bool = False, mesh_method: str = "hull", ground_clearance: float = 0.2,
                              voxel: float = 0.05, box_time: str = "points", extend_to_ground: bool = False,
@@ -150,8 +161,7 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
         ks = [k for k in track.frames if k in frame_list]
         if not ks:
             continue
-        if moving_only and all(
-                np.linalg.norm(track.box_at(k).center - track.box_at(ks[0]).center) < 0.5 for k in ks):
+        if moving_only and not DEFAULT_SELECTION.track_motion(track, seq.timestamps_ns).moving:
             continue
         stamps = [times[tid].get(k, seq.frames[k].timestamp_ns) for k in ks]
         boxes: list[Box] = [track.box_at(k) for k in ks]
@@ -181,7 +191,7 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
     """
     from dataclasses import replace
 
-    from ..motion_export.kinematics import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, ObjectTrack, smooth_track
+    from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, ObjectTrack, smooth_track
 
     config = ANNOTATION_SMOOTHER if source == "annotations" else TRACKER_SMOOTHER
     out = []

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lidar_sim.raycast import RaycastScene
-from .meshing import Mesh
+from ..raycast import RaycastScene
+from ..objects.meshes import Mesh
 
 __all__ = ["MultiMeshScene"]
 

@@ -6,10 +6,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker.geometry import invert_transform
+from tracker import invert_transform
 
 from .camera import CameraModel, apply_transform, project
-from .meshing import Mesh
+from ..objects.meshes import Mesh
 from .occlusion import ProjectedPoints
 
 __all__ = ["FlowObject", "OcclusionParams", "PairSetup", "ObjectPairStats", "PairFlow", "image_roi"]

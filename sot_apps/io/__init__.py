@@ -10,29 +10,67 @@ from .sequence import AnnotatedTrack, BoxAnnotation, Camera, CameraFrame, FrameI
 __all__ = ["open_sequence", "detect_format", "FORMATS", "Sequence", "Sweep", "FrameInfo", "Camera",
            "CameraFrame", "BoxAnnotation", "AnnotatedTrack"]
 
-FORMATS = ("sequence", "pandaset")
+FORMATS = ("sequence", "pandaset", "waymo_v1", "waymo_v2",
+           # dataset readers of issue 14 (av2.py, nuscenes.py, kitti.py)
+           "av2", "nuscenes", "kitti_tracking", "kitti_object")
 
 
 def detect_format(path: str | Path) -> str:
-    """Name of the format of the sequence directory ``path`` (see FORMATS)."""
+    """Name of the format of the sequence at ``path`` (see FORMATS)."""
     from .pandaset import is_pandaset
 
+    from .convert_util import split_selector
+
     path = Path(path)
+    base, name = split_selector(path)
+    if name is not None:
+        from .dataset_readers import detect_dataset
+
+        if base.exists() and detect_dataset(base):
+            return detect_dataset(base)
     if not path.exists():
         raise InputError(path, "no such file or directory")
     if path.is_file() and path.name == "sequence.json":
         return "sequence"
+    waymo = _detect_waymo(path) if path.is_file() else None
+    if waymo:
+        return waymo
     if not path.is_dir():
+        from .dataset_readers import detect_dataset
+
+        found = detect_dataset(path)  # a dataset may name a sequence by one of its files
+        if found:
+            return found
         raise InputError(path, "not a sequence directory")
     if (path / "sequence.json").is_file():
         return "sequence"
     if is_pandaset(path):
         return "pandaset"
-    raise InputError(path, "unknown sequence format: expected sequence.json (canonical) or lidar/poses.json with lidar/NN.npz|.pkl.gz (PandaSet)")
+    waymo = _detect_waymo(path)
+    if waymo:
+        return waymo
+    from .dataset_readers import detect_dataset
+
+    found = detect_dataset(path)
+    if found:
+        return found
+    raise InputError(path, "unknown sequence format: expected sequence.json (canonical), lidar/poses.json with "
+                           "lidar/NN.npz|.pkl.gz (PandaSet), a Waymo v1 .tfrecord, Waymo v2 component parquet files, "
+                           "or another dataset layout of docs/data-formats.md")
+
+
+def _detect_waymo(path: Path) -> str | None:
+    from .waymo import is_waymo_v1, is_waymo_v2
+
+    if is_waymo_v1(path):
+        return "waymo_v1"
+    if is_waymo_v2(path):
+        return "waymo_v2"
+    return None
 
 
 def open_sequence(path: str | Path, format: str | None = None) -> Sequence:
-    """Open a sequence; ``format`` forces a reader ("sequence" or "pandaset")."""
+    """Open a sequence; ``format`` forces a reader (one of FORMATS)."""
     path = Path(path)
     fmt = format or detect_format(path)
     if fmt == "pandaset":
@@ -43,4 +81,12 @@ def open_sequence(path: str | Path, format: str | None = None) -> Sequence:
         from .canonical import read_sequence
 
         return read_sequence(path.parent if path.name == "sequence.json" else path)
+    if fmt in ("waymo_v1", "waymo_v2"):
+        from .waymo import read_waymo_v1, read_waymo_v2
+
+        return (read_waymo_v1 if fmt == "waymo_v1" else read_waymo_v2)(path)
+    from .dataset_readers import DATASET_READERS
+
+    if fmt in DATASET_READERS:
+        return DATASET_READERS[fmt](path)
     raise InputError(path, f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")

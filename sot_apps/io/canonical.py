@@ -4,7 +4,7 @@ Layout (docs/data-formats.md)::
 
     DIR/sequence.json            validated against data_schema/sequence.schema.json
     DIR/points/000000.npz        xyz float32 (N,3) EGO frame; optional intensity float32 (N,),
-                                 time_offset_ns int64 (N,)
+                                 time_offset_ns int64 (N,); a frame without "points" has no sweep
     DIR/cameras/<name>/000000.jpg
 
 Reading validates ``sequence.json`` and checks that every referenced file exists; points are read
@@ -102,7 +102,8 @@ def read_sequence(root: str | Path) -> Sequence:
         frames.append(FrameInfo(
             index=k, timestamp_ns=int(frame["timestamp_ns"]),
             world_from_ego=_check_rigid(_matrix(frame["world_from_ego"], (4, 4)), json_path, f"frames[{k}].world_from_ego"),
-            points_path=_resolve(root, frame["points"], json_path, f"frames[{k}].points")))
+            points_path=_resolve(root, frame["points"], json_path, f"frames[{k}].points") if "points" in frame else None,
+            has_sweep="points" in frame))
     stamps = np.array([f.timestamp_ns for f in frames], dtype=np.int64)
     if np.any(np.diff(stamps) <= 0):
         k = int(np.argmax(np.diff(stamps) <= 0)) + 1
@@ -172,8 +173,9 @@ def sequence_to_json(seq: Sequence) -> dict[str, Any]:
     """The ``sequence.json`` document for ``seq`` as written by :func:`write_sequence`."""
     frames = []
     for k, info in enumerate(seq.frames):
-        frame: dict[str, Any] = {"timestamp_ns": int(info.timestamp_ns), "world_from_ego": np.asarray(info.world_from_ego).tolist(),
-                                 "points": _points_name(k)}
+        frame: dict[str, Any] = {"timestamp_ns": int(info.timestamp_ns), "world_from_ego": np.asarray(info.world_from_ego).tolist()}
+        if info.has_sweep:
+            frame["points"] = _points_name(k)
         if seq.annotations is not None:
             frame["boxes"] = [_box_json(a) for a in seq.annotations[k]]
         frames.append(frame)
@@ -263,6 +265,9 @@ def write_sequence(seq: Sequence, out_dir: str | Path, progress: bool = True) ->
     jobs = len(seq.frames) + sum(len(c.frames) for c in seq.cameras.values())
     with tqdm(total=jobs, desc=f"writing {seq.id}", unit="file", disable=not progress, leave=False) as bar:
         for k in range(len(seq.frames)):
+            if not seq.frames[k].has_sweep:  # a missing sweep stays missing (no "points" entry)
+                bar.update()
+                continue
             arrays = _sweep_arrays(seq.sweep(k))
             target = out_dir / _points_name(k)
             if not _same_points(target, arrays):

@@ -20,7 +20,10 @@ PandaSet's quirks end here. The reader converts to the project's conventions:
 - boxes: heading = yaw + pi/2 (PandaSet's yaw = 0 points the length along +y), length =
   ``dimensions.y``, width = ``dimensions.x``; rows with ``cuboids.sensor_id == 1`` (the PandarGT
   duplicate of an object in the lidars' overlap) are dropped;
-- only the Pandar64 (``d == 0``) points are kept unless ``lidar_ids`` says otherwise.
+- only the Pandar64 (``d == 0``) points are kept unless ``lidar_ids`` says otherwise;
+- frames run from 00 to the last frame with a point file or a cuboid file; a frame in between
+  without ``lidar/NN.npz`` (PandaSet 002's release lacks 56-58 and 71) is a frame without a sweep
+  (``FrameInfo.has_sweep`` False) whose pose, time, boxes and images are still read.
 """
 
 from __future__ import annotations
@@ -115,9 +118,9 @@ def _load_lidar_columns(path: Path) -> dict[str, np.ndarray]:
     return {k: frame[k].to_numpy() for k in frame.columns}
 
 
-def _sweep_loader(files: list[Path], frames: list[FrameInfo], lidar_ids: tuple[int, ...]):
+def _sweep_loader(frames: list[FrameInfo], lidar_ids: tuple[int, ...]):
     def load(index: int) -> Sweep:
-        path = files[index]
+        path = frames[index].points_path
         cols = _load_lidar_columns(path)
         missing = [c for c in ("x", "y", "z") if c not in cols]
         if missing:
@@ -260,12 +263,16 @@ def read_pandaset(root: str | Path, lidar_ids: tuple[int, ...] = (0,)) -> Sequen
     stamps = _load_json(lidar / "timestamps.json")
     if not isinstance(poses, list) or not isinstance(stamps, list):
         raise InputError(lidar / "poses.json", "poses.json and timestamps.json must be lists")
-    if len(poses) < len(files) or len(stamps) < len(files):
-        raise InputError(lidar, f"{len(files)} sweeps but {len(poses)} poses and {len(stamps)} timestamps")
+    by_index = {int(p.name.split(".")[0]): p for p in files}
+    cuboid_dir = root / "annotations" / "cuboids"
+    cuboid_files = _frame_files(cuboid_dir, (".csv", ".pkl.gz")) if cuboid_dir.is_dir() else []
+    cuboid_by_index = {int(p.name.split(".")[0]): p for p in cuboid_files}
+    # frames run to the last one with a sweep or boxes; a frame in between without NN.npz has a missing sweep
+    num_frames = max(max(by_index), max(cuboid_by_index, default=-1)) + 1
+    if len(poses) < num_frames or len(stamps) < num_frames:
+        raise InputError(lidar, f"{num_frames} frames but {len(poses)} poses and {len(stamps)} timestamps")
     frames: list[FrameInfo] = []
-    for k, path in enumerate(files):
-        if int(path.name.split(".")[0]) != k:
-            raise InputError(path, f"expected frame {k:02d}: frame files must be numbered 00, 01, ... without gaps")
+    for k in range(num_frames):
         try:
             stamp = float(stamps[k])
         except (TypeError, ValueError) as exc:
@@ -274,14 +281,10 @@ def read_pandaset(root: str | Path, lidar_ids: tuple[int, ...] = (0,)) -> Sequen
             raise InputError(lidar / "timestamps.json", f"frame {k}: non-finite timestamp")
         frames.append(FrameInfo(index=k, timestamp_ns=seconds_to_ns(stamp),
                                 world_from_ego=pose_to_matrix(poses[k], lidar / "poses.json", f"frame {k}"),
-                                points_path=path))
+                                points_path=by_index.get(k), has_sweep=k in by_index))
     annotations = None
-    cuboid_dir = root / "annotations" / "cuboids"
-    if cuboid_dir.is_dir():
-        cuboid_files = _frame_files(cuboid_dir, (".csv", ".pkl.gz"))
-        if cuboid_files:
-            by_index = {int(p.name.split(".")[0]): p for p in cuboid_files}
-            annotations = [_read_cuboids(by_index[k]) if k in by_index else [] for k in range(len(frames))]
+    if cuboid_by_index:
+        annotations = [_read_cuboids(cuboid_by_index[k]) if k in cuboid_by_index else [] for k in range(num_frames)]
     return Sequence(id=root.resolve().name, root=root, format="pandaset", frames=frames,
-                    load_sweep=_sweep_loader(files, frames, lidar_ids), ego_from_lidar=np.eye(4),
+                    load_sweep=_sweep_loader(frames, lidar_ids), ego_from_lidar=np.eye(4),
                     cameras=_read_cameras(root, len(frames)), annotations=annotations)

@@ -47,12 +47,18 @@ class Sweep:
 
 @dataclass(frozen=True)
 class FrameInfo:
-    """Per-frame metadata (cheap: no points)."""
+    """Per-frame metadata (cheap: no points).
+
+    ``has_sweep`` is False for a frame whose sweep is missing (real logs drop sweeps while poses,
+    boxes and images continue); such a frame has no ``points_path`` and reads as an empty sweep.
+    An *empty* sweep (a file with zero points) is a different event: ``has_sweep`` stays True.
+    """
 
     index: int
     timestamp_ns: int
     world_from_ego: np.ndarray
-    points_path: Path
+    points_path: Path | None
+    has_sweep: bool = True
 
 
 @dataclass(frozen=True)
@@ -83,12 +89,16 @@ class Camera:
 
 @dataclass(frozen=True)
 class BoxAnnotation:
-    """A ground-truth box of one object at one frame (world frame)."""
+    """A ground-truth box of one object at one frame (world frame).
+
+    ``num_points``: the dataset's own count of lidar points in the box, when it has one.
+    """
 
     track_id: str
     label: str
     box: Box
     stationary: bool | None = None
+    num_points: int | None = None
 
 
 @dataclass(frozen=True)
@@ -137,9 +147,15 @@ class Sequence:
             raise InputError(self.root, f"frame {index} is out of range: the sequence has frames 0..{len(self.frames) - 1}")
         return index
 
+    def missing_sweeps(self) -> list[int]:
+        """Indices of the frames that have no sweep (see :attr:`FrameInfo.has_sweep`)."""
+        return [f.index for f in self.frames if not f.has_sweep]
+
     def sweep(self, index: int) -> Sweep:
-        """The frame's points in the ego frame (read on first use)."""
+        """The frame's points in the ego frame (read on first use); a frame without a sweep gives 0 points."""
         self.check_index(index)
+        if not self.frames[index].has_sweep:
+            return Sweep(xyz=np.zeros((0, 3), dtype=np.float32))
         if index in self._cache:
             self._cache.move_to_end(index)
             return self._cache[index]
@@ -158,7 +174,8 @@ class Sequence:
         sweep = self.sweep(index)
         info = self.frames[index]
         return LidarFrame(index=index, timestamp_ns=info.timestamp_ns, points_ego=sweep.xyz,
-                          world_from_ego=info.world_from_ego, point_time_offset_ns=sweep.time_offset_ns)
+                          world_from_ego=info.world_from_ego, point_time_offset_ns=sweep.time_offset_ns,
+                          has_sweep=info.has_sweep)
 
     @property
     def timestamps_ns(self) -> np.ndarray:

@@ -1,1 +1,1 @@
-"""LiDAR simulation: sensors, Embree ray casting, realism, the vehicle bank, and the synthetic world."""
+"""LiDAR simulation: sensors, the rolling scan, realism, the vehicle bank (ray casting: sot_apps.raycast; the synthetic world: sot_apps.synth)."""

@@ -30,14 +30,15 @@ from typing import Iterable
 
 import numpy as np
 
-from tracker.geometry import Box, points_in_box, transform_points
+from tracker import Box, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.atomic import write_json
 from ..io.ply import read_ply_mesh, read_ply_points, write_ply_mesh, write_ply_points
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
-from .meshing import SurfelParams, surfel_mesh
+from ..objects.meshes import SurfelParams, surfel_mesh
+from ..objects.trajectory import ObjectTrajectory
 
 __all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
            "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points",
@@ -151,17 +152,6 @@ def entry_from_track_dir(bank_root: Path, track_dir: str | Path, mirror: bool = 
                              size=(track.size.length, track.size.width, track.size.height))
 
 
-def _states_at(track_times_ns: np.ndarray, boxes: list[Box], t_ns: np.ndarray) -> np.ndarray:
-    """(N, 4) box states linearly interpolated (heading unwrapped) at the given times."""
-    states = np.array([[b.x, b.y, b.z, b.heading] for b in boxes], dtype=np.float64)
-    if len(states) == 1:
-        return np.repeat(states, len(t_ns), axis=0)
-    states[:, 3] = np.unwrap(states[:, 3])
-    t = np.asarray(t_ns, dtype=np.float64)
-    times = np.asarray(track_times_ns, dtype=np.float64)
-    return np.stack([np.interp(t, times, states[:, i]) for i in range(4)], axis=1)
-
-
 def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: Iterable[int] = (),
                           ground_clearance: float = GROUND_CLEARANCE, progress: bool = False
                           ) -> dict[str, dict[int, np.ndarray]]:
@@ -202,13 +192,11 @@ def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: I
     out: dict[str, dict[int, np.ndarray]] = {tid: {} for tid in track_ids}
     for tid in track_ids:
         track = tracks[tid]
-        box_times = np.array([seen_ns[tid][k] for k in track.frames])
+        trajectory = ObjectTrajectory.from_samples([seen_ns[tid][k] for k in track.frames],
+                                                   [[b.x, b.y, b.z, b.heading] for b in track.boxes])
         for k, (pts, t) in near_points[tid].items():
             box = track.box_at(k)
-            st = _states_at(box_times, track.boxes, t)
-            d = pts - st[:, :3]
-            c, s = np.cos(st[:, 3]), np.sin(st[:, 3])
-            local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+            local = trajectory.object_from_world_points(pts, t, hold=True)
             half = box.size / 2.0 * 1.02
             inside = (np.abs(local) <= half).all(axis=1) & (local[:, 2] > -box.height / 2 + ground_clearance)
             if inside.any():

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.geometry import Box, wrap_angle
+from tracker import Box, wrap_angle
 
 from ..io.atomic import write_bytes, write_json, write_npz, write_text
 from ..io.ply import write_ply_points

@@ -11,7 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracker.geometry import Box
+from tracker import Box
 
 from ..io.atomic import write_bytes
 

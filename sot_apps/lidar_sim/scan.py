@@ -19,10 +19,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker.geometry import invert_transform
+from tracker import invert_transform
 
 from .noise import Realism, apply_range_noise, drop_mask, incidence_cosine, lambertian_intensity
-from .raycast import RaycastScene, RayHits
+from ..raycast import RaycastScene, RayHits
 from .sensors import Sensor
 
 __all__ = ["Trajectory", "SimObject", "Scan", "simulate_scan", "range_image", "build_static_scene", "state_to_matrix"]

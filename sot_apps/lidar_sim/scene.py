@@ -23,13 +23,13 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tracker.geometry import Box
+from tracker import Box
 
 from ..errors import InputError
 from ..schemas import validate
 from .bank import Bank
 from .noise import Realism
-from .raycast import RaycastScene
+from ..raycast import RaycastScene
 from .scan import Scan, SimObject, Trajectory, simulate_scan
 from .sensors import Sensor, load_sensor
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.geometry import invert_transform, transform_points
+from tracker import invert_transform, transform_points
 
 from ..io.atomic import write_json
 from .bank import Bank

@@ -1,1 +1,1 @@
-"""Motion ground truth export: kinematics (CTRV RTS smoother), MCAP for Foxglove, forecasting tables."""
+"""Motion ground truth export: MCAP for Foxglove, forecasting tables (the CTRV smoother: sot_apps.objects.smoother)."""

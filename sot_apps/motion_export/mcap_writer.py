@@ -35,7 +35,7 @@ from scipy.spatial.transform import Rotation
 from ..io.atomic import atomic_path
 from ..io.sequence import Sequence
 from ..schemas import load_schema, validate
-from .kinematics import Kinematics
+from ..objects.smoother import Kinematics
 
 __all__ = ["write_motion_mcap", "McapSummary", "object_color", "METADATA_NAME", "WORLD_FRAME", "EGO_FRAME",
            "object_frame", "KINEMATICS_SCHEMA_NAME"]
@@ -174,7 +174,7 @@ class _Writer:
         self._log(self.tf, "/tf", m.FrameTransforms(transforms=transforms), t_ns)
         deletion = m.SceneEntityDeletion(timestamp=ts, type=m.SceneEntityDeletionType.All, id="")
         self._log(self.markers, "/markers/objects", m.SceneUpdate(deletions=[deletion], entities=entities), t_ns)
-        if with_points:
+        if with_points and self.sequence.frames[frame].has_sweep:  # a frame without a sweep logs no cloud
             if self.points is None:
                 from foxglove import channels
 

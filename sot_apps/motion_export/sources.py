@@ -1,6 +1,6 @@
 """Inputs of the motion export: tracker outputs (track directories) or ground-truth annotations.
 
-Both become :class:`~sot_apps.motion_export.kinematics.ObjectTrack` (per-frame WORLD states with a
+Both become :class:`~sot_apps.objects.smoother.ObjectTrack` (per-frame WORLD states with a
 validity mask). A tracker frame whose ``flags`` contain one of ``invalid_flags`` (default
 "no_points", "prior_only", "lost": the state was predicted, not measured) is invalid: it is not used
 as a measurement and is exported with ``valid = False``. Advisory flags ("init", "low_points",
@@ -15,17 +15,18 @@ from typing import Iterable, Sequence as Seq
 
 import numpy as np
 
-from tracker.geometry import Box, invert_transform, points_in_box, transform_points
+from tracker import Box, invert_transform, points_in_box, transform_points, voxel_downsample_centres
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from .kinematics import ObjectTrack
+from ..objects.smoother import ObjectTrack
 
 __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
-           "aggregate_shape", "voxel_downsample"]
+           "aggregate_shape"]
 
-# Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points and prior_only).
-DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost"})
+# Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points, prior_only and, for a
+# frame without a sweep, no_sweep).
+DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost", "no_sweep"})
 
 
 def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> bool:
@@ -115,19 +116,12 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
     return out
 
 
-def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
-    """One point per occupied voxel (the voxel centre)."""
-    if len(points) == 0:
-        return points.reshape(0, 3)
-    keys = np.unique(np.floor(points / voxel).astype(np.int64), axis=0)
-    return (keys + 0.5) * voxel
-
-
 def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20, voxel: float = 0.05,
                     scale: float = 1.0) -> np.ndarray:
     """Object-frame points of ``track``: points inside its valid boxes (up to ``max_frames`` frames,
-    evenly spaced) moved into the object frame and voxel-downsampled."""
-    idx = np.flatnonzero(track.valid)
+    evenly spaced) moved into the object frame and voxel-downsampled. Frames without a sweep are skipped."""
+    has_sweep = np.array([sequence.frames[int(k)].has_sweep for k in track.frames], dtype=bool)
+    idx = np.flatnonzero(np.asarray(track.valid, dtype=bool) & has_sweep)
     if len(idx) == 0:
         return np.zeros((0, 3))
     pick = idx[np.unique(np.linspace(0, len(idx) - 1, min(max_frames, len(idx))).round().astype(int))]
@@ -142,4 +136,4 @@ def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20
         pts = sequence.sweep(int(track.frames[i])).xyz
         inside = pts[points_in_box(pts, box_ego, scale)]
         chunks.append(transform_points(box_ego.object_from_world(), inside))
-    return voxel_downsample(np.concatenate(chunks) if chunks else np.zeros((0, 3)), voxel)
+    return voxel_downsample_centres(np.concatenate(chunks) if chunks else np.zeros((0, 3)), voxel)

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.atomic import atomic_path, write_npz, write_text
-from .kinematics import Kinematics
+from ..objects.smoother import Kinematics
 
 __all__ = ["Scenario", "make_scenario", "av2_object_type", "PARQUET_COLUMNS", "NPZ_ARRAYS", "CSV_COLUMNS",
            "write_parquet", "write_npz_table", "write_csv", "TRACK_CATEGORY"]

@@ -1,1 +1,7 @@
-"""Shared object knowledge (motion profiles, ...), used by apps that never import each other."""
+"""What is known about one object over time, shared by every app (the floor under flow, motion_export, lidar_sim).
+
+Modules: ``selection`` (which annotated objects are vehicles / moving: one rule, documented thresholds),
+``trajectory`` (timed states, interpolation, ``world_from_object``), ``meshes`` (box, hull, surfels, the one
+voxel downsampler), ``smoother`` (the CTRV RTS smoother and kinematics), ``motion_profiles`` (vehicle motions with bounded acceleration
+and jerk, shared by the synthetic world and the generated benchmark).
+"""

@@ -135,6 +135,17 @@ class ExecutorSession:
             return self._run_dask(tasks, desc, progress)
         raise ValueError(f"unknown executor kind {spec.kind!r}")
 
+    def on_every_worker(self, fn: Callable[..., Any], *args: Any) -> list[Any]:
+        """Run ``fn(*args)`` once in every worker, e.g. to fill its worker-local caches before a batch; returns
+        one result per worker reached. Dask: every worker of the client (``Client.run``); inline: this process;
+        local process pools cannot address their workers (none: each fills its cache at its first task)."""
+        spec = self.spec
+        if spec.kind == "inline" or (spec.kind == "local" and spec.workers <= 1):
+            return [fn(*args)]
+        if spec.kind == "dask":
+            return list(self._dask_client().run(fn, *args).values())
+        return []
+
     # ------------------------------------------------------------------ local processes
     def _process_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:

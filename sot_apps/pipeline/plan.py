@@ -3,7 +3,7 @@
 Object rules (docs/pipeline.md):
 
 - ``annotations``: the listed ``track_ids`` (unique prefixes), or every annotated VEHICLE whose box moves
-  (``sot_apps.summary.motion_of``; ``moving_only: false`` takes parked ones too), in id order. Each is
+  (``sot_apps.objects.selection``; ``moving_only: false`` takes parked ones too), in id order. Each is
   tracked from its first to its last annotated frame inside the sequence's ``frames`` range, starting
   from its annotated box.
 - ``detections``: every box of the seed frame (``frame``, default the file's first frame) with
@@ -20,28 +20,51 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from tracker.geometry import Box
+from tracker import Box
 
 from ..errors import InputError
 from ..io import open_sequence
 from ..io.sequence import Sequence
 from .config import ObjectSource, PipelineConfig, SequenceConfig
 
-__all__ = ["ObjectPlan", "SequencePlan", "Plan", "make_plan", "open_cached", "safe_name"]
+__all__ = ["ObjectPlan", "SequencePlan", "Plan", "make_plan", "open_cached", "open_sequences", "worker_cache_info",
+           "safe_name"]
 
 
 def safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(text)).strip("_")[:100] or "unnamed"
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=8)
 def open_cached(path: str, format: str | None = None) -> Sequence:
-    """A sequence opened once per process (tasks running in one worker share it)."""
+    """The worker-local sequence cache: a sequence is opened once per process and kept between tasks (every
+    stage function opens its sequence through this). The runner fills it in every Dask worker before the
+    first batch (:func:`open_sequences`), so no task pays for opening a sequence."""
     return open_sequence(path, format=format)
+
+
+def open_sequences(sources: list[tuple[str, str | None]]) -> int:
+    """Open ``(path, format)`` sequences into this worker's cache (run on every worker); returns how many opened.
+    A sequence that does not open is left to the tasks, which report the error with their key."""
+    opened = 0
+    for path, format in sources:
+        try:
+            open_cached(path, format)
+            opened += 1
+        except Exception:  # noqa: BLE001 - reported by the tasks that need it
+            pass
+    return opened
+
+
+def worker_cache_info() -> dict[str, int]:
+    """This worker's process id, how many sequences it has opened and how often a task reused one."""
+    info = open_cached.cache_info()
+    return {"pid": os.getpid(), "opened": info.misses, "reused": info.hits}
 
 
 @dataclass(frozen=True)
@@ -89,7 +112,7 @@ class Plan:
 
 
 def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int) -> list[tuple]:
-    from ..summary import is_vehicle, motion_of
+    from ..objects.selection import DEFAULT_SELECTION
 
     tracks = seq.tracks()
     if not tracks:
@@ -97,14 +120,7 @@ def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int)
     if src.track_ids is not None:
         ids = [seq.resolve_track_id(t) for t in src.track_ids]
     else:
-        ids = []
-        for tid in sorted(tracks):
-            t = tracks[tid]
-            if not is_vehicle(t.label):
-                continue
-            if src.moving_only and not motion_of(t, seq.timestamps_ns)[0]:
-                continue
-            ids.append(tid)
+        ids = DEFAULT_SELECTION.moving_vehicles(seq) if src.moving_only else DEFAULT_SELECTION.vehicles(seq)
     out = []
     for tid in ids:
         t = tracks[tid]

@@ -23,7 +23,7 @@ from ..io.atomic import write_json
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
-from .plan import Plan, make_plan, safe_name
+from .plan import Plan, make_plan, open_sequences, safe_name
 from . import stages as st
 
 __all__ = ["UnitRecord", "PipelineResult", "run_pipeline"]
@@ -148,13 +148,18 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
     records: list[UnitRecord] = []
     stage_seconds: dict[str, float] = {}
 
+    # ---- 0. every Dask worker opens the planned sequences into its cache once (tasks then reuse them)
+    start = time.perf_counter()
+    session.on_every_worker(open_sequences, [(s.path, s.format) for s in plan.sequences])
+    stage_seconds["open"] = time.perf_counter() - start
+
     # ---- 1. tracking (per object)
     finished: dict[str, list[str]] = {s.name: [] for s in plan.sequences}
     if stages.track.enabled:
         track_stage = dataclasses.asdict(stages.track)
         units = [_make_unit(out, "track", f"track/{o.key}", o.sequence, o.object_id,
                             {"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage},
-                            st.track_object, {"out": str(out), "plan": o, "stage": track_stage})
+                            st.track_object, {"out": str(out), "plan": o, "stage": stages.track})
                  for o in plan.objects]
         start = time.perf_counter()
         track_records = _run_units(units, out, session, "track", progress)
@@ -183,13 +188,13 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
             stage_doc = dataclasses.asdict(stages.bank)
             units.append(_make_unit(out, "bank", f"bank/{s.name}", s.name, None, {"tracks": checks, "stage": stage_doc},
                                     st.bank_sequence, {"out": str(out), "sequence": s.name, "object_ids": objs,
-                                                       "stage": stage_doc}))
+                                                       "stage": stages.bank}))
         if stages.motion.enabled:
             stage_doc = dataclasses.asdict(stages.motion)
             units.append(_make_unit(out, "motion", f"motion/{s.name}", s.name, None,
                                     {"tracks": checks, "stage": stage_doc, "seq": s.path},
                                     st.motion_sequence, {"out": str(out), "sequence": s.name, "path": s.path,
-                                                         "format": s.format, "object_ids": objs, "stage": stage_doc}))
+                                                         "format": s.format, "object_ids": objs, "stage": stages.motion}))
         if stages.flow.enabled:
             stage_doc = dataclasses.asdict(stages.flow)
             wanted = s.cameras if stages.flow.cameras is None else [c for c in stages.flow.cameras if c in s.cameras]
@@ -201,7 +206,7 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
                                         {"tracks": checks, "stage": stage_doc, "seq": s.path, "camera": camera},
                                         st.flow_camera, {"out": str(out), "sequence": s.name, "path": s.path,
                                                          "format": s.format, "camera": camera, "object_ids": objs,
-                                                         "stage": stage_doc}))
+                                                         "stage": stages.flow}))
     start = time.perf_counter()
     batch = _run_units(units, out, session, "bank/motion/flow", progress)
     elapsed = time.perf_counter() - start

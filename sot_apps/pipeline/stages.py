@@ -15,15 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..tracking import TrackingFailed, first_box_with_points, write_track_result
+from .config import BankStage, FlowStage, MotionStage, TrackStage
 from .manifest import DoneMarker
 from .plan import ObjectPlan, open_cached
 
 __all__ = ["TrackingFailed", "track_object", "bank_sequence", "motion_sequence", "flow_camera", "simulate_scene",
            "track_dir", "scene_name"]
-
-
-class TrackingFailed(RuntimeError):
-    """The object could not be tracked (e.g. no LiDAR points in its initial box)."""
 
 
 def track_dir(out: str | Path, sequence: str, object_id: str) -> Path:
@@ -36,20 +34,23 @@ def _files_under(directory: Path) -> list[Path]:
 
 # ---------------------------------------------------------------------------------------------- track
 
-def track_object(out: str, plan: ObjectPlan, stage: dict, digest: str) -> dict:
-    """Track one object and write ``OUT/<seq>/tracks/<object>/{track.json, shape.ply}``."""
-    from tracker.config import get_preset
-    from tracker.sotracker import track
-
-    from ..io.tracks import FrameRecord, Size, TrackFile, write_track
+def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> dict:
+    """Track one object and write ``OUT/<seq>/tracks/<object>/{track.json, shape.ply}`` (sot_apps.tracking)."""
+    from tracker import get_preset
+    from tracker import track
 
     seq = open_cached(plan.sequence_path, plan.format)
-    config = get_preset(stage.get("preset", "full"), **dict(stage.get("overrides") or {}))
-    min_points = int(stage.get("min_init_points", 5))
+    config = get_preset(stage.preset, **dict(stage.overrides or {}))
+    min_points = stage.min_init_points
     start_frame, init_box = plan.start, plan.init_box
-    if plan.annotated and stage.get("start", "first_with_points") == "first_with_points":
-        start_frame, init_box = _first_box_with_points(seq, plan, config, min_points)
-    end_frame = plan.end if stage.get("max_frames") is None else min(plan.end, start_frame + int(stage["max_frames"]))
+    if plan.annotated and stage.start == "first_with_points":
+        try:
+            start_frame, init_box = first_box_with_points(seq, plan.annotated, config, min_points)
+        except TrackingFailed as exc:
+            raise TrackingFailed(f"{plan.key}: {exc}") from None
+    if not seq.frames[start_frame].has_sweep:
+        raise TrackingFailed(f"{plan.key}: the start frame {start_frame} has no sweep; nothing to track")
+    end_frame = plan.end if stage.max_frames is None else min(plan.end, start_frame + stage.max_frames)
     start = time.perf_counter()
     result = track(seq, init_box, start_frame, end_frame, config)
     seconds = time.perf_counter() - start
@@ -60,44 +61,21 @@ def track_object(out: str, plan: ObjectPlan, stage: dict, digest: str) -> dict:
     later = result.estimates[1:]
     if later and all("no_points" in e.flags for e in later):
         raise TrackingFailed(f"{plan.key}: lost after the start frame (no points in any later frame)")
-    records = [FrameRecord(frame=e.frame, timestamp_ns=int(seq.frames[e.frame].timestamp_ns), state=e.state,
-                           num_points=int(e.num_points), quality=float(np.clip(e.quality, 0.0, 1.0)),
-                           flags=list(e.flags)) for e in result.estimates]
-    size = result.size
-    doc = TrackFile(sequence=seq.id, object_id=plan.object_id, size=Size(*(float(v) for v in size)),
-                    start_frame=start_frame, end_frame=end_frame, init_box=init_box, config=config.to_dict(),
-                    frames=records, label=plan.label)
     directory = track_dir(out, plan.sequence, plan.object_id)
     # Per-frame time_ms is left out (it differs run to run): pipeline outputs are reproducible byte for byte;
     # the unit's total time is in the manifest.
-    write_track(directory, doc, result.shape)
+    write_track_result(directory, seq, result, plan.object_id, init_box, plan.label, with_time_ms=False)
+    qualities = [float(np.clip(e.quality, 0.0, 1.0)) for e in result.estimates]
     DoneMarker(Path(out), f"track/{plan.key}").mark(digest, [directory / "track.json", directory / "shape.ply"],
-                                                    extra={"frames": len(records)})
-    return {"sequence": plan.sequence, "object": plan.object_id, "frames": len(records),
-            "tracked_frames": len(records) - 1, "seconds": round(seconds, 3),
-            "mean_quality": round(float(np.mean([r.quality for r in records])), 4),
-            "shape_points": int(len(result.shape))}
-
-
-def _first_box_with_points(seq, plan: ObjectPlan, config, min_points: int):
-    """The first annotated (frame, box) whose box holds ``min_points`` non-ground points, as the tracker
-    counts them at its start; the last annotated frame cannot start a track."""
-    from tracker.sotracker import Tracker
-
-    best = (0, plan.start, plan.init_box)
-    for k, box in plan.annotated[:-1]:
-        n = Tracker(config).start(seq.lidar_frame(k), box).num_points
-        if n >= min_points:
-            return k, box
-        best = max(best, (n, k, box), key=lambda b: b[0])
-    raise TrackingFailed(f"{plan.key}: fewer than {min_points} LiDAR points in every annotated box "
-                         f"(frames {plan.annotated[0][0]}..{plan.annotated[-2][0]}; at most {best[0]} at frame {best[1]}); "
-                         "nothing to track")
+                                                    extra={"frames": len(qualities)})
+    return {"sequence": plan.sequence, "object": plan.object_id, "frames": len(qualities),
+            "tracked_frames": len(qualities) - 1, "seconds": round(seconds, 3),
+            "mean_quality": round(float(np.mean(qualities)), 4), "shape_points": int(len(result.shape))}
 
 
 # ----------------------------------------------------------------------------------------------- bank
 
-def bank_sequence(out: str, sequence: str, object_ids: list[str], stage: dict, digest: str) -> dict:
+def bank_sequence(out: str, sequence: str, object_ids: list[str], stage: BankStage, digest: str) -> dict:
     """Bank entries (surfel meshes) from one sequence's tracked shapes; the index is written by the runner."""
     from ..io.tracks import read_track
     from ..lidar_sim.bank import entry_from_points
@@ -108,14 +86,14 @@ def bank_sequence(out: str, sequence: str, object_ids: list[str], stage: dict, d
         directory = track_dir(out, sequence, object_id)
         track, shape = read_track(directory)
         quality = float(np.mean([r.quality for r in track.frames])) if track.frames else 0.0
-        if len(shape) < int(stage.get("min_points", 30)) or quality < float(stage.get("min_quality", 0.0)):
+        if len(shape) < stage.min_points or quality < stage.min_quality:
             skipped.append({"object": object_id, "shape_points": int(len(shape)), "quality": round(quality, 4)})
             continue
         size = (track.size.length, track.size.width, track.size.height)
         source = {"kind": "track", "sequence": track.sequence, "object_id": object_id,
                   "track": str(Path(sequence) / "tracks" / object_id)}
         entry = entry_from_points(bank_root, f"{sequence}__{object_id}", shape, source, quality, label=track.label,
-                                  mirror=bool(stage.get("mirror", False)), size=size)
+                                  mirror=stage.mirror, size=size)
         entry.build_seconds = None   # keep index.json reproducible
         entries.append(entry.to_json())
         outputs += [bank_root / entry.mesh, bank_root / entry.points]
@@ -125,7 +103,7 @@ def bank_sequence(out: str, sequence: str, object_ids: list[str], stage: dict, d
 
 # --------------------------------------------------------------------------------------------- motion
 
-def motion_sequence(out: str, sequence: str, path: str, format: str | None, object_ids: list[str], stage: dict,
+def motion_sequence(out: str, sequence: str, path: str, format: str | None, object_ids: list[str], stage: MotionStage,
                     digest: str) -> dict:
     """``OUT/<seq>/motion.mcap`` (+ ``motion.parquet``, ``motion.npz``) from the sequence's tracks."""
     from ..motion_export.export import export_motion
@@ -138,12 +116,12 @@ def motion_sequence(out: str, sequence: str, path: str, format: str | None, obje
     for t in tracks:   # relative sources keep the MCAP independent of where OUT lives
         t.source = str(Path(t.source).relative_to(Path(out)))
     outputs = {"mcap": root / "motion.mcap"}
-    if stage.get("parquet", True):
+    if stage.parquet:
         outputs["parquet"] = root / "motion.parquet"
-    if stage.get("npz", True):
+    if stage.npz:
         outputs["npz"] = root / "motion.npz"
     result = export_motion(seq, tracks, outputs["mcap"], parquet=outputs.get("parquet"), npz=outputs.get("npz"),
-                           with_points=bool(stage.get("with_points", False)), progress=False)
+                           with_points=stage.with_points, progress=False)
     DoneMarker(Path(out), f"motion/{sequence}").mark(digest, list(outputs.values()))
     return {"sequence": sequence, "objects": len(tracks), "messages": result.mcap.messages if result.mcap else 0,
             "outputs": {k: str(v.relative_to(Path(out))) for k, v in outputs.items()}}
@@ -152,15 +130,18 @@ def motion_sequence(out: str, sequence: str, path: str, format: str | None, obje
 # ----------------------------------------------------------------------------------------------- flow
 
 def flow_camera(out: str, sequence: str, path: str, format: str | None, camera: str, object_ids: list[str],
-                stage: dict, digest: str) -> dict:
+                stage: FlowStage, digest: str) -> dict:
     """Optical flow of one camera's image pairs: ``OUT/<seq>/flow/<camera>/...`` (see docs/flow.md)."""
     from ..flow.annotate import FlowOptions, annotate_camera
-    from ..flow.objects import objects_from_tracks
+    from ..flow.objects import objects_for_pairs
 
     seq = open_cached(path, format)
     flow_root = Path(out) / sequence / "flow"
     cam_root = flow_root / camera
-    objects = objects_from_tracks([track_dir(out, sequence, o) for o in object_ids])
+    last = len(seq.cameras[camera].frames) - 1
+    max_pairs = stage.max_pairs
+    pairs = (0, last if max_pairs is None else min(last, int(max_pairs)))
+    objects = objects_for_pairs(seq, [track_dir(out, sequence, o) for o in object_ids], pairs)
     objects = [dataclasses.replace(o, source=f"track:{sequence}/tracks/{o.object_id}") for o in objects]
     stats_path = cam_root / "stats.json"
     if stats_path.is_file():   # a previous run with another set of objects: its pairs are stale
@@ -170,10 +151,7 @@ def flow_camera(out: str, sequence: str, path: str, format: str | None, camera: 
             previous = None
         if previous != [o.object_id for o in objects]:
             shutil.rmtree(cam_root)
-    last = len(seq.cameras[camera].frames) - 1
-    max_pairs = stage.get("max_pairs")
-    pairs = (0, last if max_pairs is None else min(last, int(max_pairs)))
-    options = FlowOptions(mode=stage.get("mode", "dense"), use_lidar=bool(stage.get("use_lidar", True)))
+    options = FlowOptions(mode=stage.mode, use_lidar=stage.use_lidar)
     doc = annotate_camera(seq, camera, objects, flow_root, pairs=pairs, options=options, progress=False,
                           source="pipeline tracks")
     outputs = _files_under(cam_root)
@@ -210,7 +188,8 @@ def simulate_scene(out: str, entry_id: str, range_m: float, headings_deg: list[f
     directory = Path(out) / "scans" / scene_name(entry_id, range_m)
     outputs = run_simulation(spec, bank, directory, preview_extent=max(25.0, range_m * 1.25))
     counts = [int((outputs.result.scan.instance == i).sum()) for i in range(len(objects))]
-    DoneMarker(Path(out), f"scans/{scene_name(entry_id, range_m)}").mark(digest, outputs.files,
-                                                                         extra={"counts": counts})
+    DoneMarker(Path(out), f"scans/{scene_name(entry_id, range_m)}").mark(
+        digest, outputs.files, extra={"scene": scene_name(entry_id, range_m), "entry": entry_id, "range_m": range_m,
+                                      "counts": counts})
     return {"scene": scene_name(entry_id, range_m), "entry": entry_id, "range_m": range_m,
             "headings_deg": list(headings_deg), "points": counts}

@@ -100,19 +100,17 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
                 "Centre error of the exported (smoothed) motion against the annotations, k frames after each "
                 "track's start."], [(f"figures/{name}", "Centre error vs k")], [table]))
 
-    scene_dirs = sorted({Path(out / "scans" / u.key.split("/", 1)[1]) for u in result.by_stage("scans")
-                         if u.status in ("done", "cached")})
-    if scene_dirs:
-        by_entry: dict[str, list[Path]] = {}
-        for d in scene_dirs:
-            by_entry.setdefault(d.name.split("__r")[0], []).append(d)
-        entry, dirs = sorted(by_entry.items())[0]
-        dirs = sorted(dirs, key=lambda d: float(d.name.split("__r")[1].rstrip("m")))
+    scenes = [u.result for u in result.by_stage("scans") if u.status in ("done", "cached") and u.result]
+    if scenes:
+        entry = min(s["entry"] for s in scenes)
+        mine = sorted((s for s in scenes if s["entry"] == entry), key=lambda s: s["range_m"])
+        dirs = [out / "scans" / s["scene"] for s in mine]
+        ranges = ", ".join(f"{s['range_m']:g} m" for s in mine)
         name = "scans.png"
         if scans_figure(out / "scans", dirs, figures / name) is not None:
             sections.append(Section("Simulated scans", [
                 f"Bank vehicle <code>{html.escape(entry)}</code> (meshed from its tracked shape) ray cast at "
-                f"{', '.join(d.name.split('__r')[1] for d in dirs)}, several headings. Scan files in "
+                f"{ranges}, several headings. Scan files in "
                 "<code>scans/</code>."], [(f"figures/{name}", "Simulated scans")]))
 
     intro = list(intro or [])

@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracker.geometry import Box, transform_points
+from tracker import Box, transform_points
 
 from ..io.sequence import Sequence
 from ..io.tracks import TrackFile, read_track
@@ -32,7 +32,7 @@ class TrackScore:
 
 
 def score_tracks(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]]) -> list[TrackScore]:
-    from tracker.metrics import centre_errors_batch, iou_3d_batch
+    from tracker import centre_errors_batch, iou_3d_batch
 
     gt_tracks = seq.tracks() if seq.annotations is not None else {}
     out = []
@@ -124,8 +124,8 @@ def _shape_panel(points: np.ndarray, size: np.ndarray, label: str, px_per_m: flo
 def shape_growth_figure(seq: Sequence, track: TrackFile, path: Path, shots: int = 4) -> Path:
     """The shape filling in: the tracker is rerun on this object and its aggregated shape (object frame)
     is drawn at a few frames, top view above side view."""
-    from tracker.config import TrackerConfig
-    from tracker.sotracker import Tracker
+    from tracker import TrackerConfig
+    from tracker import Tracker
 
     config = TrackerConfig.from_dict({k: v for k, v in track.config.items() if k in TrackerConfig.__dataclass_fields__})
     tracker = Tracker(config)
@@ -227,8 +227,8 @@ def scans_figure(scans_root: Path, scene_dirs: list[Path], path: Path) -> Path |
 
 
 def motion_figure(seq: Sequence, track_dirs: list[Path], path: Path, horizon: int = 30) -> tuple[Path | None, dict | None]:
-    """Mean centre error of the motion export vs. k frames after the start (helper: sot_apps.bench.motion)."""
-    from ..bench.motion import evaluate_motion, plot_accuracy
+    """Mean centre error of the motion export vs. k frames after the start (helper: sot_apps.evaluation.motion)."""
+    from ..evaluation.motion import evaluate_motion, plot_accuracy
     from ..motion_export.sources import tracks_from_dirs
 
     if not seq.tracks():

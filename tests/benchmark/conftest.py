@@ -12,7 +12,7 @@ SMALL = dict(tracklets=8, frames=(0, 6), per_copy=8, range_m=(6.0, 30.0))
 
 @pytest.fixture(scope="session")
 def background(tmp_path_factory) -> Path:
-    from sot_apps.lidar_sim.synth import write_world
+    from sot_apps.synth import write_world
 
     return write_world(tmp_path_factory.mktemp("bg") / "world", frames=6, vehicles=2, seed=3)
 
@@ -23,7 +23,7 @@ def bank(tmp_path_factory) -> Path:
 
     from sot_apps.io.ply import write_ply_mesh
     from sot_apps.lidar_sim.bank import Bank, entry_from_mesh_file, write_bank_index
-    from sot_apps.lidar_sim.vehicles import make_vehicle
+    from sot_apps.synth.vehicles import make_vehicle
 
     root = tmp_path_factory.mktemp("bank")
     bank = Bank(root, [])

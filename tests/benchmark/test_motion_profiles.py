@@ -58,7 +58,7 @@ def test_place_path_is_a_rigid_motion():
 
 
 def test_synth_world_uses_the_shared_profiles():
-    from sot_apps.lidar_sim.synth import make_world
+    from sot_apps.synth import make_world
 
     plain = make_world(frames=30, vehicles=7, seed=0)
     profiled = make_world(frames=30, vehicles=7, seed=0, profiles=True)

@@ -9,9 +9,9 @@ import pytest
 from tracker.geometry import invert_transform, make_transform, rotation_z
 from sot_apps.flow.camera import CameraModel
 from sot_apps.flow.dense import RayCache, dense_flow
-from sot_apps.flow.meshing import Mesh
+from sot_apps.objects.meshes import Mesh
 from sot_apps.flow.scene import FlowObject, PairSetup
-from sot_apps.flow.states import world_from_object
+from sot_apps.objects.trajectory import world_from_object
 from scipy.spatial.transform import Rotation
 
 # Camera looking along world +x from 1.5 m height (OpenCV axes: x right, y down, z forward).

@@ -10,11 +10,11 @@ from tracker.geometry import invert_transform, make_transform
 from sot_apps.flow.annotate import FlowOptions, build_pair, compute_pair
 from sot_apps.flow.camera import CameraModel, project
 from sot_apps.flow.dense import RayCache, dense_flow
-from sot_apps.flow.meshing import Mesh
+from sot_apps.objects.meshes import Mesh
 from sot_apps.flow.objects import TrackedObject
 from sot_apps.flow.occlusion import project_lidar
 from sot_apps.flow.scene import FlowObject, OcclusionParams, PairSetup
-from sot_apps.flow.states import ObjectTrajectory, world_from_object
+from sot_apps.objects.trajectory import ObjectTrajectory, world_from_object
 from sot_apps.io.sequence import Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
 CAM_ROT = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])

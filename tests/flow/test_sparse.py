@@ -5,10 +5,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from sot_apps.flow.meshing import box_mesh
+from sot_apps.objects.meshes import box_mesh
 from sot_apps.flow.scene import FlowObject, PairSetup
 from sot_apps.flow.sparse import sparse_flow
-from sot_apps.flow.states import world_from_object
+from sot_apps.objects.trajectory import world_from_object
 
 from test_dense_analytic import K, plane_in_camera_k, scenario
 

@@ -8,7 +8,8 @@ import trimesh
 
 from sot_apps.errors import InputError
 from sot_apps.lidar_sim.noise import Realism
-from sot_apps.lidar_sim.raycast import RaycastScene, _horizontal_rectangle, cast_rays, compiled_backend_available
+from sot_apps.raycast import RaycastScene, cast_rays, compiled_backend_available
+from sot_apps.raycast.scene import _horizontal_rectangle
 from sot_apps.lidar_sim.scan import SimObject, Trajectory, range_image, simulate_scan
 from sot_apps.lidar_sim.sensors import PRESETS, load_sensor
 
@@ -60,7 +61,7 @@ BACKENDS = ["compiled", "embreex"]
 
 
 def test_compiled_tracer_is_built():
-    # pip install builds sot_apps/lidar_sim/_embree_trace.c; the speed figures in README depend on it
+    # pip install builds sot_apps/raycast/_embree_trace.c; the speed figures in README depend on it
     assert compiled_backend_available()
     assert RaycastScene().backend == "compiled"
 
@@ -128,7 +129,7 @@ def test_backends_agree_on_ground_and_meshes():
     for scene in scenes.values():
         for v, f in meshes:
             scene.add_mesh(v, f)
-    assert [r.geom_id for r in scenes["compiled"]._rects] == [0, 1]
+    assert scenes["compiled"].rectangle_ids == scenes["embreex"].rectangle_ids == [0, 1]
     dirs = rng.normal(size=(20_000, 3))
     dirs[:, 2] = -np.abs(dirs[:, 2]) * rng.uniform(0.02, 1.0, len(dirs))
     dirs[::7, 2] *= -1                                                    # some rays go up
@@ -153,7 +154,7 @@ def test_backends_agree_on_ground_and_meshes():
     v = v.copy()
     v[0, 2] -= 1e-5
     plain.add_mesh(v, f)
-    assert not plain._rects
+    assert not plain.rectangle_ids
     c = plain.cast(origins, dirs)
     only_ground = RaycastScene("compiled")
     only_ground.add_mesh(*meshes[0])

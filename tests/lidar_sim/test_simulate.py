@@ -18,7 +18,7 @@ from sot_apps.lidar_sim.export import kitti_label_lines
 from sot_apps.lidar_sim.noise import Realism
 from sot_apps.lidar_sim.scene import SceneObject, SceneSpec, insert_into_background
 from sot_apps.lidar_sim.sensors import PRESETS
-from sot_apps.lidar_sim.synth import make_world, write_world
+from sot_apps.synth import make_world, write_world
 from tracker.geometry import Box
 
 BOX_SIZE = (4.0, 2.0, 1.6)
@@ -171,7 +171,7 @@ def test_bank_build_from_tracker_output_dir(tmp_path, capsys):
     from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
     from tracker.geometry import State
 
-    from sot_apps.lidar_sim.vehicles import make_vehicle
+    from sot_apps.synth.vehicles import make_vehicle
 
     vehicle = make_vehicle("suv", 4.6, 1.9, 1.7)
     shape, _ = trimesh.sample.sample_surface(trimesh.Trimesh(vehicle.vertices, vehicle.faces, process=False), 5000, seed=0)

@@ -11,7 +11,7 @@ import numpy as np
 from sot_apps.io import open_sequence
 from sot_apps.lidar_sim.noise import Realism
 from sot_apps.lidar_sim.scan import Trajectory, state_to_matrix
-from sot_apps.lidar_sim.synth import make_world, write_world
+from sot_apps.synth import make_world, write_world
 from tracker.geometry import invert_transform, transform_points
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
-from sot_apps.motion_export.kinematics import ObjectTrack
+from sot_apps.objects.smoother import ObjectTrack
 from tracker.geometry import make_transform, rotation_z, wrap_angle
 
 T0_NS = 1_557_539_956_500_000_000

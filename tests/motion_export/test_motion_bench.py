@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from sot_apps.bench.motion import evaluate_motion, format_table, plot_accuracy
+from sot_apps.evaluation.motion import evaluate_motion, format_table, plot_accuracy
 from sot_apps.io.sequence import BoxAnnotation
 from tracker.geometry import Box
 

@@ -12,7 +12,7 @@ SEEDS = (4, 5)
 
 
 def write_tiny_world(out: Path, seed: int) -> Path:
-    from sot_apps.lidar_sim.synth import write_world
+    from sot_apps.synth import write_world
 
     return write_world(out, frames=6, vehicles=3, sensor="vlp16", seed=seed, cameras=True, camera_size=(320, 240))
 

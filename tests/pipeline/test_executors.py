@@ -32,3 +32,27 @@ def test_dask_local_cluster_matches_local():
     local = run_tasks(_tasks(), ExecutorSpec("local", workers=2), progress=False)
     dask = run_tasks(_tasks(), ExecutorSpec("dask", workers=2), progress=False)
     assert _summary(dask) == _summary(local)
+
+
+@pytest.mark.slow
+def test_dask_workers_open_each_sequence_once(tiny_worlds, tmp_path):
+    """The worker-local cache: every Dask worker opens the sequence once, before the first batch, and the tracking
+    tasks reuse it (nothing is re-opened between tasks or stages)."""
+    from sot_apps.pipeline.config import PipelineConfig
+    from sot_apps.pipeline.executors import ExecutorSession
+    from sot_apps.pipeline.plan import worker_cache_info
+    from sot_apps.pipeline.runner import run_pipeline
+
+    doc = {"version": 1, "out": str(tmp_path / "out"),
+           "sequences": [{"path": str(tiny_worlds[0]), "objects": {"from": "annotations",
+                                                                   "track_ids": ["veh_000", "veh_001", "veh_002"]}}],
+           "stages": {name: {"enabled": False} for name in ("bank", "motion", "flow", "scans")}}
+    spec = ExecutorSpec("dask", workers=2)
+    with ExecutorSession(spec) as session:
+        result = run_pipeline(PipelineConfig.from_json(doc), spec, progress=False, session=session)
+        assert len(result.by_stage("track")) == 3 and not result.failed
+        infos = session.on_every_worker(worker_cache_info)
+    assert len(infos) == 2 and len({i["pid"] for i in infos}) == 2
+    for info in infos:
+        assert info["opened"] == 1                      # opened once, when the runner filled the cache
+    assert sum(info["reused"] for info in infos) >= 3   # every tracking task reused it

@@ -43,17 +43,18 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import Box, invert_transform, transform_points
+from tracker import Box, invert_transform, transform_points
 
 from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
 from ..io.ply import write_ply_mesh
 from ..io.sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
+from ..objects.meshes import box_mesh
 from ..objects.motion_profiles import PROFILES, integrate_motion, place_path, sample_motion
-from .noise import Realism
-from .raycast import RaycastScene
-from .scan import Scan, SimObject, Trajectory, simulate_scan, state_to_matrix
-from .sensors import Sensor, load_sensor
+from ..lidar_sim.noise import Realism
+from ..raycast import RaycastScene
+from ..lidar_sim.scan import Scan, SimObject, Trajectory, simulate_scan, state_to_matrix
+from ..lidar_sim.sensors import Sensor, load_sensor
 from .vehicles import random_vehicle
 
 __all__ = ["WorldObject", "World", "SynthCamera", "make_world", "write_world", "SENSOR_HEIGHT", "BASE_TIME_NS"]
@@ -130,7 +131,7 @@ class World:
                              static_scene=static_scene)
 
     def static_scene(self) -> RaycastScene:
-        from .scan import build_static_scene
+        from ..lidar_sim.scan import build_static_scene
 
         return build_static_scene(self.sim_objects())
 
@@ -217,13 +218,9 @@ def _profile_trajectory(rng: np.random.Generator, t0_ns: int, t1_ns: int, start:
 
 # ------------------------------------------------------------------------------------------ scene
 
-def _box_mesh(extents, centre, heading: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
-
-    m = trimesh.creation.box(extents=extents)
-    c, s = math.cos(heading), math.sin(heading)
-    v = np.asarray(m.vertices) @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + np.asarray(centre)
-    return v, np.asarray(m.faces)
+def _box_mesh(extents, centre) -> tuple[np.ndarray, np.ndarray]:
+    mesh = box_mesh(*(float(v) for v in extents))
+    return mesh.vertices + np.asarray(centre, dtype=np.float64), mesh.faces
 
 
 def _cylinder_mesh(radius: float, height: float, centre) -> tuple[np.ndarray, np.ndarray]:
@@ -347,7 +344,7 @@ def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
                                 timestamp_ns=int(t)) for t in times]
                 for cam, times in zip(world.cameras, camera_times)}
         objects.append(entry)
-    return {"version": 1, "generator": "sot_apps.lidar_sim.synth", "seed": world.seed,
+    return {"version": 1, "generator": "sot_apps.synth", "seed": world.seed,
             "sensor": world.sensor.to_dict(), "sensor_height": SENSOR_HEIGHT, "ground_z": 0.0,
             "frame_timestamps_ns": [int(t) for t in world.frame_times_ns],
             "trajectories": "gt/trajectories.npz", "labels": "gt/labels/{frame:06d}.npz",
@@ -409,9 +406,9 @@ def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: st
 
 def _write_preview(path: Path, world: World, scan: Scan, info: FrameInfo) -> None:
     """Bird's-eye view of the last frame (ego frame) with its ground-truth boxes."""
-    from tracker.geometry import invert_transform
+    from tracker import invert_transform
 
-    from .preview import write_bev_png
+    from ..lidar_sim.preview import write_bev_png
 
     ego_from_world = invert_transform(info.world_from_ego)
     boxes = [o.box_at(info.timestamp_ns).transformed(ego_from_world) for o in world.objects]

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker.geometry import wrap_angle
+from tracker import wrap_angle
 
 __all__ = ["SmootherConfig", "ObjectTrack", "Kinematics", "smooth_track", "ctrv_transition",
            "central_difference_kinematics"]

@@ -25,29 +25,14 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from tracker.config import TrackerConfig, get_preset, preset_names
-from tracker.frames import LidarFrame
-from tracker.geometry import Box
-from tracker.ground import GroundParams
-from tracker.metrics import (
-    DIFFICULTIES,
-    DIFFICULTY_THRESHOLDS,
-    PRECISION_THRESHOLDS,
-    ROB_THRESHOLDS,
-    SUCCESS_THRESHOLDS,
-    PooledMetrics,
-    TrackletScores,
-    chamfer_distance,
-    difficulty,
-    pool_metrics,
-    score_tracklet,
-    tracklet_metrics,
-)
-from tracker.pseudo_gt import mean_points_in_boxes, pseudo_gt_shape
-from tracker.sotracker import TrackResult, track
+from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
+                     Box, LidarFrame, PooledMetrics, TrackResult, TrackerConfig, TrackletScores, chamfer_distance,
+                     difficulty, get_preset, mean_points_in_boxes, pool_metrics, preset_names, pseudo_gt_shape,
+                     score_tracklet, track, tracklet_metrics)
 
-from .errors import InputError
-from .io.sequence import Sequence as LidarSequence
+from ..errors import InputError
+from ..objects.selection import DEFAULT_SELECTION, Selection, annotated_span
+from ..io.sequence import Sequence as LidarSequence
 
 __all__ = [
     "EvalConfig",
@@ -56,7 +41,6 @@ __all__ = [
     "RunRecord",
     "ResultRow",
     "EvalReport",
-    "annotated_span",
     "select_moving_vehicle_tracks",
     "prepare_tracks",
     "evaluate",
@@ -64,31 +48,17 @@ __all__ = [
     "resolve_presets",
 ]
 
-# PandaSet's (and the canonical format's) four-wheeled vehicle classes, compared case-insensitively.
-DEFAULT_VEHICLE_LABELS: tuple[str, ...] = (
-    "car", "vehicle", "van", "truck", "bus", "pickup truck", "medium-sized truck", "semi-truck",
-    "emergency vehicle", "other vehicle - uncommon", "other vehicle - construction vehicle",
-)
-
-
 @dataclass(frozen=True)
 class EvalConfig:
     """Everything that defines the evaluation (stored in the JSON report).
 
-    Track selection for ``--all-moving`` (LiDAR-SOT's criteria adapted to short sequences): label in
-    ``vehicle_labels`` (case-insensitive); the ground-truth centre moves more than
-    ``min_displacement_m`` from its first position at some frame of the span (LiDAR-SOT drops vehicles
-    that never move); the span has at least ``min_frames`` frames; the mean number of sweep points in
-    the ground-truth box over the first ``difficulty_frames`` frames is at least ``min_mean_points``
-    (LiDAR-SOT asks for more than 20 points in each of the first 10 frames; tracks this sparse have no
-    meaningful initial shape). On pandaset_002 this selects exactly the 9 dev tracks.
+    Track selection for ``--all-moving``: ``selection`` (:mod:`sot_apps.objects.selection`, the rule every
+    command uses): moving vehicles that are evaluable (LiDAR-SOT's start criteria adapted to short
+    sequences: span of at least ``min_frames`` frames, at least ``min_mean_points`` mean sweep points in
+    the box over the first ``difficulty_frames`` frames). On pandaset_002 this selects exactly the 9 dev tracks.
     """
 
-    vehicle_labels: tuple[str, ...] = DEFAULT_VEHICLE_LABELS
-    min_displacement_m: float = 2.0
-    min_frames: int = 10
-    min_mean_points: float = 15.0
-    difficulty_frames: int = 10
+    selection: Selection = DEFAULT_SELECTION
     difficulty_thresholds: tuple[float, float] = DIFFICULTY_THRESHOLDS
     shape_voxel_m: float = 0.05
     pgt_ground_margin_m: float = 3.0
@@ -147,44 +117,21 @@ class TrackSpec:
                 "pgt_points": int(len(self.pgt_shape))}
 
 
-def annotated_span(frames: Sequence[int]) -> tuple[int, int]:
-    """First contiguous run of annotated frame indices: (start, end) inclusive."""
-    frames = sorted(int(f) for f in frames)
-    end = frames[0]
-    for f in frames[1:]:
-        if f != end + 1:
-            break
-        end = f
-    return frames[0], end
-
-
 def select_moving_vehicle_tracks(sequence: LidarSequence, config: EvalConfig = EvalConfig(),
                                  source: CachedSource | None = None) -> list[str]:
-    """Ids of moving vehicle tracks (criteria in :class:`EvalConfig`), sorted by id."""
-    labels = {label.lower() for label in config.vehicle_labels}
+    """Ids of the moving vehicle tracks that are evaluable (``config.selection``), sorted by id."""
+    rule = config.selection
     source = source or CachedSource(sequence)
+    tracks = sequence.tracks()
     selected = []
-    for tid, trk in sorted(sequence.tracks().items()):
-        if trk.label.lower() not in labels:
-            continue
+    for tid in rule.moving_vehicles(sequence):
+        trk = tracks[tid]
         start, end = annotated_span(trk.frames)
-        if end - start + 1 < config.min_frames:
-            continue
-        boxes = [trk.box_at(k) for k in range(start, end + 1)]
-        centres = np.array([b.center for b in boxes])
-        if np.max(np.linalg.norm(centres - centres[0], axis=1)) <= config.min_displacement_m:
-            continue
-        n = min(config.difficulty_frames, len(boxes))
-        if mean_points_in_boxes(source, range(start, start + n), boxes[:n]) < config.min_mean_points:
-            continue
-        selected.append(tid)
+        n = min(rule.difficulty_frames, end - start + 1)
+        boxes = [trk.box_at(k) for k in range(start, start + n)]
+        if rule.evaluable(end - start + 1, mean_points_in_boxes(source, range(start, start + n), boxes)):
+            selected.append(tid)
     return selected
-
-
-def _ground_params(config: TrackerConfig) -> GroundParams:
-    return GroundParams(lpr_count=config.gpf_lpr_count, seed_threshold=config.gpf_seed_threshold,
-                        distance_threshold=config.gpf_distance_threshold, iterations=config.gpf_iterations,
-                        segment_length=config.gpf_segment_length, outlier_depth=config.gpf_outlier_depth)
 
 
 def prepare_tracks(sequence: LidarSequence, track_ids: Iterable[str], source: CachedSource,
@@ -193,7 +140,7 @@ def prepare_tracks(sequence: LidarSequence, track_ids: Iterable[str], source: Ca
     """TrackSpecs for ``track_ids`` (unique prefixes allowed); spans are cut at ``end_frame``. Without
     ``with_shape`` no pseudo-ground-truth shape is built (Shape is then NaN)."""
     tracks = sequence.tracks()
-    ground = _ground_params(TrackerConfig())
+    ground = TrackerConfig().ground_params()
     specs = []
     for prefix in track_ids:
         tid = sequence.resolve_track_id(prefix)
@@ -206,7 +153,7 @@ def prepare_tracks(sequence: LidarSequence, track_ids: Iterable[str], source: Ca
                                             + (f" up to --end-frame {end_frame}" if end_frame is not None else ""))
         frames = tuple(range(start, end + 1))
         boxes = tuple(trk.box_at(k) for k in frames)
-        n = min(config.difficulty_frames, len(frames))
+        n = min(config.selection.difficulty_frames, len(frames))
         mean_pts = mean_points_in_boxes(source, frames[:n], boxes[:n])
         pgt = (pseudo_gt_shape(source, frames, boxes, ground, config.shape_voxel_m, config.pgt_ground_margin_m)
                if with_shape else np.zeros((0, 3)))
@@ -380,7 +327,7 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
         raise InputError(sequence.root, "no track to evaluate (no moving vehicle track matches the selection)")
     specs = prepare_tracks(sequence, ids, source, config, end_frame, with_shape)
     if offline and refine is None:
-        from tracker.offline import refine_offline as refine
+        from tracker import refine_offline as refine
     jobs = [(p, s, spec) for p in presets for s in seeds for spec in specs]
     online: dict[str, list[RunRecord]] = {p: [] for p in presets}
     refined: dict[str, list[RunRecord]] = {p: [] for p in presets}

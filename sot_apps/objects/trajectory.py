@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from tracker.geometry import make_transform, rotation_z
+from tracker import make_transform, rotation_z
 
 __all__ = ["ObjectTrajectory", "interpolate_pose", "world_from_object"]
 
@@ -62,19 +62,24 @@ class ObjectTrajectory:
         alpha = (time_ns - int(t[i])) / float(int(t[i + 1]) - int(t[i]))
         return self.states[i] + alpha * (self.states[i + 1] - self.states[i])
 
-    def states_at(self, times_ns: np.ndarray) -> np.ndarray:
-        """(N, 4) states at many times (linear, extrapolating the end segments; no coverage check)."""
+    def states_at(self, times_ns: np.ndarray, hold: bool = False) -> np.ndarray:
+        """(N, 4) states at many times (linear, extrapolating the end segments; no coverage check). ``hold``:
+        outside the samples the end states are held instead."""
         times = np.asarray(times_ns, dtype=np.int64).ravel()
         t = self.times_ns
+        if hold:
+            times = np.clip(times, t[0], t[-1])
         if len(t) == 1:
             return np.repeat(self.states, len(times), axis=0)
         i = np.clip(np.searchsorted(t, times) - 1, 0, len(t) - 2)
         alpha = (times - t[i]).astype(np.float64) / (t[i + 1] - t[i]).astype(np.float64)
         return self.states[i] + alpha[:, None] * (self.states[i + 1] - self.states[i])
 
-    def object_from_world_points(self, points_world: np.ndarray, times_ns: np.ndarray) -> np.ndarray:
-        """Object-frame coordinates of world points captured at their own times (rolling-shutter LiDAR)."""
-        states = self.states_at(times_ns)
+    def object_from_world_points(self, points_world: np.ndarray, times_ns: np.ndarray, hold: bool = False
+                                 ) -> np.ndarray:
+        """Object-frame coordinates of world points captured at their own times (rolling-shutter LiDAR);
+        ``hold`` as in :meth:`states_at`."""
+        states = self.states_at(times_ns, hold)
         d = np.asarray(points_world, dtype=np.float64).reshape(-1, 3) - states[:, :3]
         c, s = np.cos(states[:, 3]), np.sin(states[:, 3])
         return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)

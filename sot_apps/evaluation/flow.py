@@ -22,11 +22,11 @@ import numpy as np
 
 from ..io import open_sequence
 from ..io.sequence import Sequence
-from .annotate import FlowOptions, build_pair, compute_pair
-from .dense import RayCache
-from .meshing import Mesh
-from .objects import TrackedObject, mesh_for, objects_from_annotations
-from .states import ObjectTrajectory
+from ..flow.annotate import FlowOptions, build_pair, compute_pair
+from ..flow.dense import RayCache
+from ..objects.meshes import Mesh
+from ..flow.objects import TrackedObject, mesh_for, objects_from_annotations
+from ..objects.trajectory import ObjectTrajectory
 from tqdm import tqdm
 
 __all__ = ["flow_errors", "classical_flow", "synthetic_quality", "photometric_quality", "tracker_objects", "FlowScore"]
@@ -99,8 +99,8 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
     passed it, as PandaSet's boxes do). The first estimate is the ground-truth start box: it keeps
     the boxes' own time convention ``box_time`` ("frame" for ``sot-apps synth``, "points" for PandaSet).
     """
-    from tracker.geometry import points_in_box, transform_points
-    from tracker.sotracker import track
+    from tracker import points_in_box, transform_points
+    from tracker import track
 
     out = []
     tracks = seq.tracks()
@@ -130,7 +130,7 @@ def synthetic_quality(world_dir: str | Path, frames: int = 8, vehicles: int = 4,
                       camera_size: tuple[int, int] = (960, 540), sensor: str = "pandar64", with_tracker: bool = True,
                       progress: bool = True) -> dict:
     """Build (or reuse) a synthetic world with camera images and score every method (see module doc)."""
-    from ..lidar_sim.synth import make_world, write_world
+    from ..synth import make_world, write_world
 
     world_dir = Path(world_dir)
     world = make_world(frames=frames, vehicles=vehicles, sensor=sensor, seed=seed, cameras=True, camera_size=camera_size)

@@ -32,7 +32,7 @@ def render_camera_images(world, cam, times_ns: np.ndarray, out_dir: Path) -> lis
     import cv2
     import trimesh
 
-    from .scan import state_to_matrix
+    from ..lidar_sim.scan import state_to_matrix
 
     pyrender = _pyrender()
     scene = pyrender.Scene(bg_color=[0.62, 0.75, 0.9, 1.0], ambient_light=[0.35, 0.35, 0.35])

@@ -1,0 +1,115 @@
+"""Small conversions shared by the dataset readers (quaternions, boxes from poses, pose lookup, files)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from tracker.geometry import Box, make_transform, wrap_angle
+
+from ..errors import InputError
+
+__all__ = ["quaternion_wxyz_to_matrix", "quaternions_wxyz_to_matrices", "transform_from_quaternion", "box_from_transform", "pose_at",
+           "split_selector", "read_text_lines", "read_float32_records"]
+
+
+def quaternion_wxyz_to_matrix(w: float, x: float, y: float, z: float, path: Path, where: str) -> np.ndarray:
+    """3x3 rotation of a (w, x, y, z) quaternion; InputError unless finite with a norm near 1."""
+    q = np.array([x, y, z, w], dtype=np.float64)
+    norm = float(np.linalg.norm(q))
+    if not np.isfinite(q).all() or not 0.5 < norm < 2.0:
+        raise InputError(path, f"{where}: quaternion {q.tolist()} is not a rotation (norm {norm:.3g})")
+    return Rotation.from_quat(q / norm).as_matrix()
+
+
+def quaternions_wxyz_to_matrices(wxyz: np.ndarray, path: Path, what: str) -> np.ndarray:
+    """(N, 4) (w, x, y, z) quaternions -> (N, 3, 3) rotations; InputError naming the first bad row."""
+    q = np.asarray(wxyz, dtype=np.float64).reshape(-1, 4)[:, [1, 2, 3, 0]]
+    norm = np.linalg.norm(q, axis=1)
+    bad = ~(np.isfinite(q).all(axis=1) & (norm > 0.5) & (norm < 2.0))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise InputError(path, f"{what} {i}: quaternion {q[i].tolist()} is not a rotation")
+    if len(q) == 0:
+        return np.zeros((0, 3, 3))
+    return Rotation.from_quat(q / norm[:, None]).as_matrix()
+
+
+def transform_from_quaternion(wxyz, translation, path: Path, where: str) -> np.ndarray:
+    """4x4 ``target_from_source`` from a (w, x, y, z) quaternion and a translation."""
+    t = np.asarray(translation, dtype=np.float64).reshape(3)
+    if not np.isfinite(t).all():
+        raise InputError(path, f"{where}: translation is not finite")
+    return make_transform(quaternion_wxyz_to_matrix(*[float(v) for v in wxyz], path=path, where=where), t)
+
+
+def box_from_transform(target_from_object: np.ndarray, length: float, width: float, height: float,
+                       path: Path, where: str) -> Box:
+    """A box whose object frame (x along the length, z up, origin at the centre) is ``target_from_object``.
+
+    The heading is the yaw of the object's x axis in ``target`` (roll and pitch are dropped).
+    """
+    size = [float(length), float(width), float(height)]
+    if not all(math.isfinite(v) and v > 0 for v in size):
+        raise InputError(path, f"{where}: box size {size} must be finite and positive")
+    x_axis = target_from_object[:3, 0]
+    heading = float(wrap_angle(math.atan2(x_axis[1], x_axis[0])))
+    c = target_from_object[:3, 3]
+    return Box(float(c[0]), float(c[1]), float(c[2]), heading, *size)
+
+
+def pose_at(times_ns: np.ndarray, poses: np.ndarray, time_ns: int, path: Path, max_gap_ns: int = 200_000_000) -> np.ndarray:
+    """The pose at ``time_ns``: the exact row when there is one, else SLERP/linear between the two
+    neighbouring rows (at most ``max_gap_ns`` apart); outside the pose times -> InputError."""
+    i = int(np.searchsorted(times_ns, time_ns))
+    if i < len(times_ns) and int(times_ns[i]) == time_ns:
+        return poses[i].copy()
+    if i == 0 or i == len(times_ns):
+        raise InputError(path, f"no ego pose around time {time_ns} ns (poses cover {int(times_ns[0])}..{int(times_ns[-1])})")
+    t0, t1 = int(times_ns[i - 1]), int(times_ns[i])
+    if t1 - t0 > max_gap_ns:
+        raise InputError(path, f"no ego pose within {max_gap_ns * 1e-6:.0f} ms of time {time_ns} ns")
+    alpha = (time_ns - t0) / (t1 - t0)
+    rotation = Slerp([0.0, 1.0], Rotation.from_matrix(poses[i - 1:i + 1, :3, :3]))([alpha]).as_matrix()[0]
+    return make_transform(rotation, (1 - alpha) * poses[i - 1, :3, 3] + alpha * poses[i, :3, 3])
+
+
+def split_selector(path: str | Path) -> tuple[Path, str | None]:
+    """``DIR#NAME`` (a sequence NAME inside a multi-sequence DIR) -> (DIR, NAME); a plain path -> (path, None).
+
+    A path that exists as written is never split.
+    """
+    text = str(path)
+    if "#" in text and not Path(text).exists():
+        base, _, name = text.rpartition("#")
+        return Path(base), name
+    return Path(text), None
+
+
+def read_text_lines(path: Path) -> list[str]:
+    """The file's lines (InputError if it is missing or not text)."""
+    if not path.is_file():
+        raise InputError(path, "file is missing")
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError as exc:
+        raise InputError(path, f"not a text file ({exc})") from exc
+
+
+def read_float32_records(path: Path, columns: int) -> np.ndarray:
+    """(N, columns) float32 of a headerless little-endian float32 point file (KITTI ``.bin``, nuScenes
+    ``.pcd.bin``); InputError if it is missing, truncated or has non-finite x, y, z."""
+    if not path.is_file():
+        raise InputError(path, "point file is missing")
+    size = path.stat().st_size
+    if size % (4 * columns):
+        raise InputError(path, f"size {size} bytes is not a multiple of {4 * columns} ({columns} float32 per point): "
+                               "file is truncated")
+    data = np.fromfile(path, dtype="<f4").reshape(-1, columns)
+    bad = ~np.isfinite(data[:, :3]).all(axis=1)
+    if bad.any():
+        raise InputError(path, f"{int(bad.sum())} points have non-finite coordinates")
+    return data

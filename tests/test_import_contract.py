@@ -1,0 +1,116 @@
+"""The floors stay honest (docs/conventions.md, ../shared/docs/architecture.md): every import in the code,
+module-level or inside functions, is checked against the contract."""
+
+from __future__ import annotations
+
+import ast
+import functools
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+@functools.lru_cache(maxsize=1)
+def imports_by_module() -> dict[str, frozenset[str]]:
+    """{module: every absolute module name it imports} for tracker/ and sot_apps/."""
+    out: dict[str, set[str]] = {}
+    for root in ("tracker", "sot_apps"):
+        for path in sorted((REPO / root).rglob("*.py")):
+            name = _module_name(path)
+            package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+            found: set[str] = set()
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.Import):
+                    found.update(alias.name for alias in node.names)
+                elif isinstance(node, ast.ImportFrom):
+                    if node.level:
+                        base = package.split(".")
+                        base = base[:len(base) - (node.level - 1)]
+                        target = ".".join(base + ([node.module] if node.module else []))
+                    else:
+                        target = node.module or ""
+                    found.add(target)
+                    found.update(f"{target}.{alias.name}" for alias in node.names)
+            out[name] = frozenset(found)
+    return out
+
+
+def _in(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+def violations(rule: str, importer: str, imported: str) -> list[str]:
+    graph = imports_by_module()
+    return sorted(f"{m} imports {i} ({rule})" for m, found in graph.items() if _in(m, importer)
+                  for i in found if _in(i, imported))
+
+
+def test_tracker_imports_nothing_from_sot_apps():
+    assert violations("tracker is the core", "tracker", "sot_apps") == []
+
+
+def test_apps_never_import_each_other():
+    apps = ("sot_apps.flow", "sot_apps.lidar_sim", "sot_apps.motion_export")
+    bad = [v for a in apps for b in apps if a != b for v in violations("apps are siblings", a, b)]
+    assert bad == []
+
+
+def test_the_floor_imports_no_app():
+    floor = ("sot_apps.objects", "sot_apps.raycast", "sot_apps.io")
+    apps = ("sot_apps.flow", "sot_apps.lidar_sim", "sot_apps.motion_export", "sot_apps.synth", "sot_apps.pipeline",
+            "sot_apps.evaluation", "sot_apps.bench", "sot_apps.report", "sot_apps.cli")
+    assert [v for f in floor for a in apps for v in violations("the floor is below the apps", f, a)] == []
+
+
+def test_report_never_imports_bench():
+    assert violations("report renders what it is given", "sot_apps.report", "sot_apps.bench") == []
+
+
+def test_evaluation_never_imports_bench_or_report():
+    assert violations("evaluation is pure", "sot_apps.evaluation", "sot_apps.bench") == []
+    assert violations("evaluation is pure", "sot_apps.evaluation", "sot_apps.report") == []
+
+
+def test_only_the_cli_imports_the_cli():
+    graph = imports_by_module()
+    bad = sorted(f"{m} imports {i}" for m, found in graph.items() if not _in(m, "sot_apps.cli")
+                 for i in found if _in(i, "sot_apps.cli"))
+    assert bad == []
+
+
+def test_no_private_names_across_packages():
+    """``from other_package import _private`` is a hidden coupling (e.g. bench reaching into flow)."""
+    bad = []
+    for path in sorted((REPO / "sot_apps").rglob("*.py")):
+        name = _module_name(path)
+        top = ".".join(name.split(".")[:2])
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level >= 2 and node.module:
+                target_top = "sot_apps." + node.module.split(".")[0]
+                if target_top != top:
+                    bad += [f"{name}: {node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
+    assert bad == []
+
+
+def test_the_contract_checker_sees_imports():
+    """The checker itself: it must see function-level relative imports (a contract that sees nothing passes)."""
+    graph = imports_by_module()
+    assert "sot_apps.objects.selection" in graph["sot_apps.summary"]
+    assert "sot_apps.evaluation.tracker" in graph["sot_apps.cli.eval"]        # inside run()
+    assert "sot_apps.raycast" in graph["sot_apps.lidar_sim.scan"]
+
+
+def test_apps_import_the_tracker_through_its_package():
+    """``tracker/__init__`` exports what the apps use; the apps import from it, not from its modules.
+    (sot_apps.io is left to the reader branches merged on top.)"""
+    graph = imports_by_module()
+    bad = sorted(f"{m} imports {i}" for m, found in graph.items() if _in(m, "sot_apps") and not _in(m, "sot_apps.io")
+                 for i in found if i.startswith("tracker.") and i.split(".")[1] not in __import__("tracker").__all__)
+    assert bad == []
