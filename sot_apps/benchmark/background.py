@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import ndimage
 
-from tracker.geometry import Box, invert_transform, points_in_box, transform_points
+from tracker import Box, invert_transform, points_in_box, transform_points
 
 from ..io.sequence import Sequence
 from .deps import Sensor, Trajectory

@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 from ..evaluation.tracker import CachedSource, EvalConfig, TrackSpec, resolve_presets
-from ..evaluation.tracker import _score
 from ..lidar_sim.bank import Bank, BankEntry, read_bank
 from ..lidar_sim.noise import Realism
 from ..raycast import RaycastScene
@@ -17,13 +16,10 @@ from ..lidar_sim.sensors import Sensor, load_sensor
 
 def eval_ground_params():
     """The ground removal ``sot-apps eval`` uses for pseudo-ground-truth shapes (default tracker settings)."""
-    from tracker.config import TrackerConfig
+    from tracker import TrackerConfig
 
     return TrackerConfig().ground_params()
 
-
-eval_score = _score  # one tracklet's scores exactly as ``sot-apps eval`` computes them
-
-__all__ = ["eval_ground_params", "eval_score", "CachedSource", "EvalConfig", "TrackSpec", "resolve_presets", "Bank", "BankEntry", "read_bank", "Realism",
+__all__ = ["eval_ground_params", "CachedSource", "EvalConfig", "TrackSpec", "resolve_presets", "Bank", "BankEntry", "read_bank", "Realism",
            "RaycastScene", "Scan", "SimObject", "Trajectory", "invert_transform_batch", "simulate_scan",
            "state_to_matrix", "OCCLUDER_MARGIN_M", "Sensor", "load_sensor"]

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tracker.geometry import Box, invert_transform, points_in_box, transform_points
+from tracker import Box, invert_transform, points_in_box, transform_points
 
 from ..io.sequence import Sequence
 from .background import ego_from_sensor, sensor_path, to_states

@@ -21,8 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from tracker.geometry import points_in_box
-from tracker.metrics import DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty
+from tracker import DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty, points_in_box
 
 from ..errors import InputError
 from ..io.sequence import Sequence

@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from tracker.geometry import points_in_box, transform_points
-from tracker.metrics import DIFFICULTY_THRESHOLDS, difficulty
+from tracker import DIFFICULTY_THRESHOLDS, difficulty, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io import open_sequence

@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tracker.metrics import bev_corners_batch, bev_intersection_area_batch
+from tracker import iou_3d_batch
 
 from ..objects.motion_profiles import MotionSpec, integrate_motion, place_path, place_states, sample_motion
 from .background import GroundMap
@@ -114,8 +114,10 @@ def _overlaps(boxes: np.ndarray, others: np.ndarray) -> bool:
     close = np.flatnonzero(np.hypot(boxes[:, 0] - others[:, 0], boxes[:, 1] - others[:, 1]) < reach)
     if close.size == 0:
         return False
-    area = bev_intersection_area_batch(bev_corners_batch(boxes[close]), bev_corners_batch(others[close]))
-    return bool((area > 1e-6).any())
+    flat_a, flat_b = boxes[close].copy(), others[close].copy()  # same z and height: 3D IoU = bird's-eye IoU
+    flat_a[:, 2] = flat_b[:, 2] = 0.0
+    flat_a[:, 6] = flat_b[:, 6] = 1.0
+    return bool((iou_3d_batch(flat_a, flat_b) > 1e-9).any())
 
 
 def _clear(ctx: PlacementContext, xyh: np.ndarray, size: tuple[float, float, float]) -> np.ndarray | None:

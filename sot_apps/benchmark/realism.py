@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.geometry import points_in_box, transform_points
+from tracker import points_in_box
 
 from ..errors import InputError
 from ..io import open_sequence
