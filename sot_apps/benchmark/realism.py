@@ -121,8 +121,8 @@ def write_plot(curves: RangeCurves, path: Path, width: int = 900, height: int = 
             cv2.circle(img, p, 4, colour, -1, cv2.LINE_AA)
     for i, (name, data, colour) in enumerate(styles):
         y = top + 20 + 22 * i
-        cv2.line(img, (width - 330, y - 5), (width - 300, y - 5), colour, 2)
-        cv2.putText(img, f"{name}: median per bin ({len(data)} boxes)", (width - 292, y), font, 0.45, (0, 0, 0), 1,
+        cv2.line(img, (width - 410, y - 5), (width - 380, y - 5), colour, 2)
+        cv2.putText(img, f"{name}: median per bin ({len(data)} boxes)", (width - 372, y), font, 0.45, (0, 0, 0), 1,
                     cv2.LINE_AA)
     ok, data = cv2.imencode(".png", img)
     if not ok:
