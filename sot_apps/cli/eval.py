@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..io import FORMATS
 from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, declare_outputs, load_detections,
                      load_sequence, check_profile, simulated_detections)
 
@@ -20,9 +21,23 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "sot-apps eval ../shared/data/pandaset_002 --all-moving --preset all --offline --json eval.json",
                   "sot-apps eval ../shared/data/pandaset_002 --tracks 20d13d1d,91aa5b5c --preset full icp_mp --seeds 3",
                   "sot-apps eval ../shared/data/pandaset_002 --all-moving --preset det full det_sot "
-                  "--simulate-detections learned --seeds 3"])
-    add_sequence_argument(parser)
-    which = parser.add_mutually_exclusive_group(required=True)
+                  "--simulate-detections learned --seeds 3",
+                  "sot-apps eval --benchmark out/bench/benchmark.json --preset full faithful --seeds 3",
+                  "sot-apps eval --benchmark lidar-sot --lists ../shared/data/readers/lidar_sot_benchmark/vehicle "
+                  "WAYMO_DIR"])
+    parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", default=None,
+                        help="sequence directory (canonical or PandaSet); with --benchmark lidar-sot: the Waymo data "
+                             "directory")
+    parser.add_argument("--format", choices=FORMATS, default=None, help="force the reader (default: auto-detect)")
+    parser.add_argument("--benchmark", metavar="LIST",
+                        help="evaluate a tracklet list instead: a list file (benchmark.json of `benchmark make`, "
+                             "bench_list.json of `benchmark build`) or folder, or 'lidar-sot' with --lists and "
+                             "SEQUENCE = the Waymo data directory; tables per difficulty and per motion profile")
+    parser.add_argument("--first", type=int, metavar="N", help="with --benchmark: only the list's first N tracklets "
+                                                                 "(a generated list is ordered copy by copy)")
+    parser.add_argument("--lists", metavar="DIR", help="with --benchmark lidar-sot: LiDAR-SOT's list folder "
+                                                       "(bench_list.json, easy/medium/hard.json)")
+    which = parser.add_mutually_exclusive_group()
     which.add_argument("--tracks", metavar="ID,...", help="comma-separated track ids (unique prefixes allowed)")
     which.add_argument("--all-moving", action="store_true", help="all moving vehicle tracks (see description)")
     parser.add_argument("--preset", nargs="+", action="extend", metavar="NAME",
@@ -57,6 +72,10 @@ def run(args: argparse.Namespace) -> int:
     if args.detections and args.simulate_detections:
         raise InputError(None, "give --detections or --simulate-detections, not both")
     presets = resolve_presets(args.preset, with_detections=bool(args.detections or args.simulate_detections))
+    if args.benchmark:
+        return _run_benchmark(args, presets)
+    if args.sequence is None or not (args.tracks or args.all_moving):
+        raise InputError(None, "eval: give SEQUENCE with --tracks or --all-moving (or --benchmark LIST)")
     sequence = load_sequence(args)
     detections = load_detections(args, sequence)
     if args.simulate_detections:
@@ -73,4 +92,41 @@ def run(args: argparse.Namespace) -> int:
     print(format_report(report, per_track=not args.no_per_track))
     if args.json:
         write_json(args.json, report.to_dict())
+    return 0
+
+
+def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
+    from pathlib import Path
+
+    from tqdm import tqdm
+
+    from ..benchmark.evaluate import evaluate_tracklets, format_benchmark
+    from ..benchmark.lists import default_resolver, read_lists
+    from ..errors import InputError
+    from ..io.atomic import write_json
+
+    if args.tracks or args.all_moving:
+        raise InputError(None, "--benchmark takes its tracklets from the list: drop --tracks/--all-moving")
+    if args.benchmark == "lidar-sot":
+        if not args.lists or args.sequence is None:
+            raise InputError(None, "--benchmark lidar-sot needs --lists DIR and the Waymo DATA_DIR as SEQUENCE")
+        source = Path(args.lists)
+    else:
+        source = Path(args.benchmark)
+    tracklets = read_lists(source)
+    if args.first is not None:
+        if args.first < 1:
+            raise InputError(None, f"--first must be >= 1, not {args.first}")
+        tracklets = tracklets[: args.first]
+    list_dir = source if source.is_dir() else source.parent
+    resolve = default_resolver(list_dir, Path(args.sequence) if args.sequence else None)
+
+    def progress(total: int):
+        bar = tqdm(total=total, desc="eval", unit="run", file=sys.stderr, leave=False)
+        return lambda: bar.update(1)
+
+    run = evaluate_tracklets(tracklets, resolve, presets, range(args.seeds), progress=progress)
+    print(format_benchmark(run, f"benchmark: {source} ({len(tracklets)} tracklets)"))
+    if args.json:
+        write_json(args.json, run.to_dict())
     return 0

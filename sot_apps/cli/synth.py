@@ -21,7 +21,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "1 pixel in 3 of 20 images). LiDAR sweeps, labels, ground truth and the sequence file are "
                     "byte-identical; never hash camera images to compare runs.",
         examples=["sot-apps synth --out out/world --frames 20 --vehicles 3 --sensor pandar64 --seed 0",
-                  "sot-apps synth --out /tmp/world_cam --frames 10 --vehicles 4 --cameras --camera-size 640x360"])
+                  "sot-apps synth --out /tmp/world_cam --frames 10 --vehicles 4 --cameras --camera-size 640x360",
+                  "sot-apps synth --out out/world_profiles --frames 40 --vehicles 7 --profiles"])
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--frames", type=int, default=20, help="number of frames (default 20)")
     parser.add_argument("--vehicles", type=int, default=3, help="number of moving vehicles (default 3)")
@@ -29,6 +30,10 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--cameras", action="store_true", help="also render a front pinhole camera (pyrender, EGL)")
     parser.add_argument("--camera-size", default="640x360", metavar="WxH", help="camera image size (default 640x360)")
+    parser.add_argument("--profiles", action="store_true",
+                        help="moving vehicles follow the benchmark's motion profiles (kinematic bicycle, bounded "
+                             "acceleration and jerk: constant speed, hard braking, strong acceleration, stop-and-go, "
+                             "lane change, turn, U-turn) instead of random piecewise motion")
     parser.set_defaults(func=run)
     declare_outputs(parser, dirs=("out",))
     return parser
@@ -50,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.vehicles < 0:
         raise InputError(None, "--frames must be >= 1 and --vehicles >= 0")
     out = write_world(Path(args.out), frames=args.frames, vehicles=args.vehicles, sensor=args.sensor,
-                      seed=args.seed, cameras=args.cameras, camera_size=_size(args.camera_size), progress=True)
+                      seed=args.seed, cameras=args.cameras, camera_size=_size(args.camera_size), progress=True,
+                      profiles=args.profiles)
     print(f"wrote {out / 'sequence.json'} ({args.frames} frames, {args.vehicles} moving vehicles; ground truth in {out / 'gt'})")
     return 0

@@ -145,7 +145,16 @@ def write_json(path: str | Path, data: Any, indent: int | None = 1) -> None:
 
 
 def write_npz(path: str | Path, compressed: bool = True, **arrays: np.ndarray) -> None:
-    """Write an .npz atomically."""
+    """Write an .npz atomically; the same arrays give the same bytes (the zip entries carry a fixed date,
+    where ``numpy.savez`` stamps the current time; deflate at zlib's default level, as ``savez_compressed``)."""
+    import zipfile
+
     buffer = io.BytesIO()
-    (np.savez_compressed if compressed else np.savez)(buffer, **arrays)
+    method = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
+    with zipfile.ZipFile(buffer, "w", compression=method, allowZip64=True) as archive:
+        for name, value in arrays.items():
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = method
+            with archive.open(info, "w", force_zip64=True) as handle:
+                np.lib.format.write_array(handle, np.asanyarray(value), allow_pickle=False)
     write_bytes(path, buffer.getvalue())

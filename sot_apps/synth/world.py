@@ -5,7 +5,8 @@ The world (everything in metres, world frame z up, ground plane z = 0):
 - a straight road along +x; walls (with gaps) at |y| ~ 14 m, poles at |y| ~ 12 m, parked cars at |y| ~ 10 m;
 - ``vehicles`` procedural vehicles (sedan/SUV/van/truck, varied size) in lanes y = 3.5, -3.5, 7 (oncoming),
   0 (ego lane, ahead or behind); each follows a random piecewise profile of cruising, turning, abrupt
-  stops (-6..-9 m/s^2) and abrupt accelerations (+3..+5 m/s^2), integrated at 1 ms;
+  stops (-6..-9 m/s^2) and abrupt accelerations (+3..+5 m/s^2), integrated at 1 ms; or, with
+  ``profiles``, the benchmark's motion profiles (:mod:`sot_apps.objects.motion_profiles`);
 - the ego (= the LiDAR, 1.8 m above the ground; ``ego_from_lidar`` is the identity) drives along the
   road with gentle speed and heading changes.
 
@@ -51,6 +52,7 @@ from ..io.canonical import write_sequence
 from ..io.ply import write_ply_mesh
 from ..io.sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 from ..objects.meshes import box_mesh
+from ..objects.motion_profiles import PROFILES, integrate_motion, place_path, sample_motion
 from ..lidar_sim.noise import Realism
 from ..raycast import RaycastScene
 from ..lidar_sim.scan import Scan, SimObject, simulate_scan
@@ -208,6 +210,16 @@ def _integrate(rng: np.random.Generator, t0_ns: int, t1_ns: int, start: tuple[fl
     return Trajectory(times, states)
 
 
+def _profile_trajectory(rng: np.random.Generator, t0_ns: int, t1_ns: int, start: tuple[float, float, float, float],
+                        profile: str) -> Trajectory:
+    """A drawn motion profile (shared with the benchmark) integrated at 1 ms from ``start``."""
+    duration = (t1_ns - t0_ns) * 1e-9
+    path = integrate_motion(sample_motion(profile, rng, duration), duration, dt=STEP_NS * 1e-9)
+    xyh = place_path(path, start[0], start[1], start[3])
+    times = t0_ns + np.arange(len(xyh), dtype=np.int64) * STEP_NS
+    return Trajectory(times, np.column_stack([xyh[:, :2], np.full(len(xyh), start[2]), xyh[:, 2]]))
+
+
 # ------------------------------------------------------------------------------------------ scene
 
 def _box_mesh(extents, centre) -> tuple[np.ndarray, np.ndarray]:
@@ -259,8 +271,12 @@ def default_front_camera(width: int = 640, height: int = 360, period_ns: int = 1
 
 def make_world(frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pandar64", seed: int = 0,
                cameras: bool = False, camera_size: tuple[int, int] = (640, 360), parked: int | None = None,
-               realism: Realism | None = None) -> World:
-    """Build (but do not simulate) a synthetic world; cheap (well under a second)."""
+               realism: Realism | None = None, profiles: bool = False) -> World:
+    """Build (but do not simulate) a synthetic world; cheap (well under a second).
+
+    ``profiles``: moving vehicle i follows motion profile ``PROFILES[i % 7]`` of
+    :mod:`sot_apps.objects.motion_profiles` (the benchmark's: kinematic bicycle, bounded acceleration and
+    jerk; ``occluded`` is left out) instead of the random piecewise profile."""
     if frames < 1 or vehicles < 0:
         raise ValueError("frames must be >= 1 and vehicles >= 0")
     sensor = load_sensor(sensor)
@@ -289,8 +305,9 @@ def make_world(frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pand
         used.setdefault(lane, []).append(x)
         mesh = random_vehicle(rng)
         speed = float(rng.uniform(4.0, 12.0))
-        traj = _integrate(rng, t0, t1, (x, y + float(rng.uniform(-0.3, 0.3)), mesh.size[2] / 2.0, heading), speed,
-                          gentle=False)
+        start = (x, y + float(rng.uniform(-0.3, 0.3)), mesh.size[2] / 2.0, heading)
+        traj = (_profile_trajectory(rng, t0, t1, start, PROFILES[i % (len(PROFILES) - 1)]) if profiles else
+                _integrate(rng, t0, t1, start, speed, gentle=False))
         objects.append(WorldObject(f"veh_{i:03d}", mesh.label, mesh.kind, mesh.size, mesh.vertices, mesh.faces, traj,
                                    moving=True, color=_color(rng), reflectivity=float(rng.uniform(0.3, 0.8))))
     n_parked = int(rng.integers(4, 9)) if parked is None else parked
@@ -347,14 +364,14 @@ def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
 
 def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pandar64",
                 seed: int = 0, cameras: bool = False, camera_size: tuple[int, int] = (640, 360),
-                world: World | None = None, progress: bool = False) -> Path:
+                world: World | None = None, progress: bool = False, profiles: bool = False) -> Path:
     """Synthesise a world and write it as a canonical sequence with ground truth; returns ``out``.
 
     Pass ``world`` (from :func:`make_world`) to write a world you built or modified yourself.
     """
     out = Path(out)
     if world is None:
-        world = make_world(frames, vehicles, sensor, seed, cameras, camera_size)
+        world = make_world(frames, vehicles, sensor, seed, cameras, camera_size, profiles=profiles)
     out.mkdir(parents=True, exist_ok=True)
     static = world.static_scene()
     sweeps: list[Sweep] = []

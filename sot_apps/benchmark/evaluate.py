@@ -1,0 +1,152 @@
+"""Tracker presets on a tracklet list (``sot-apps eval --benchmark LIST``): paper-style tables per difficulty
+and per motion profile.
+
+Each tracklet is tracked from its first frame's ground-truth box to its last frame (LiDAR-SOT's protocol) with
+every preset and seed; scores are those of ``sot-apps eval`` (:mod:`tracker.metrics`: Acc, Rob, Success,
+Precision over frames 1..n-1; Shape = Chamfer to the pseudo-ground-truth shape). A group's figures pool its
+tracklets' frames; with several seeds each figure is the mean over seeds (± the spread of Acc).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import defaultdict
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable
+
+import numpy as np
+
+from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, chamfer_distance, difficulty, get_preset, mean_points_in_boxes,
+                     pool_metrics, pseudo_gt_shape, score_tracklet, track)
+
+from ..errors import InputError
+from ..io import open_sequence
+from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params
+from .lists import SequenceResolver, Tracklet
+
+__all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
+
+
+@dataclass(frozen=True)
+class BenchmarkRun:
+    """Per (preset, seed, tracklet key): scores and per-frame times; plus each tracklet's groups."""
+
+    presets: tuple[str, ...]
+    seeds: tuple[int, ...]
+    records: dict[tuple[str, int, str], tuple[Any, np.ndarray]]
+    difficulty: dict[str, str]
+    profile: dict[str, str | None]
+
+    def groups(self) -> list[tuple[str, list[str]]]:
+        keys = list(self.difficulty)
+        out = [("all", keys)]
+        out += [(d, [k for k in keys if self.difficulty[k] == d]) for d in DIFFICULTIES]
+        profiles = sorted({p for p in self.profile.values() if p})
+        out += [(f"profile {p}", [k for k in keys if self.profile[k] == p]) for p in profiles]
+        return [(name, ks) for name, ks in out if ks]
+
+    def summary(self, preset: str, keys: list[str]) -> dict[str, float]:
+        per_seed = []
+        for seed in self.seeds:
+            scores = [self.records[(preset, seed, k)][0] for k in keys]
+            pooled = pool_metrics(scores)
+            ms = np.concatenate([self.records[(preset, seed, k)][1] for k in keys])
+            per_seed.append({"acc": pooled.acc, "rob": pooled.rob, "shape": pooled.shape, "success": pooled.success,
+                             "precision": pooled.precision, "ms": float(np.mean(ms)) if ms.size else float("nan")})
+        mean = {k: float(np.nanmean([s[k] for s in per_seed])) for k in per_seed[0]}
+        mean["acc_std"] = float(np.std([s["acc"] for s in per_seed]))
+        mean["n"] = len(keys)
+        return mean
+
+    def to_dict(self) -> dict:
+        return {"presets": list(self.presets), "seeds": list(self.seeds),
+                "tables": {p: {name: self.summary(p, keys) for name, keys in self.groups()} for p in self.presets},
+                "tracklets": {k: {"difficulty": self.difficulty[k], "profile": self.profile[k]} for k in self.difficulty}}
+
+
+def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSpec:
+    tracks = seq.tracks()
+    if t.id not in tracks:
+        raise InputError(seq.root, f"tracklet {t.id}: no annotated object with this id")
+    a, b = t.frame_range
+    if b >= len(seq):
+        raise InputError(seq.root, f"tracklet {t.id}: frame_range {a}..{b} beyond the sequence's {len(seq)} frames")
+    frames = tuple(range(a, b + 1))
+    boxes = tuple(tracks[t.id].box_at(k) for k in frames)
+    if any(box is None for box in boxes):
+        missing = [k for k, box in zip(frames, boxes) if box is None]
+        raise InputError(seq.root, f"tracklet {t.id}: no box at frame {missing[0]} of {a}..{b}")
+    n = min(config.selection.difficulty_frames, len(frames))
+    mean10 = mean_points_in_boxes(source, frames[:n], boxes[:n])
+    level = t.difficulty or difficulty(mean10, DIFFICULTY_THRESHOLDS)
+    pgt = pseudo_gt_shape(source, frames, boxes, eval_ground_params(), config.shape_voxel_m, config.pgt_ground_margin_m)
+    return TrackSpec(t.id, tracks[t.id].label, frames, boxes, mean10, level, pgt)
+
+
+def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, presets: Iterable[str],
+                       seeds: Iterable[int] = (0,), config: EvalConfig = EvalConfig(),
+                       progress: Callable[[int], Callable[[], None]] | None = None) -> BenchmarkRun:
+    """Track every tracklet with every preset and seed (sequence by sequence: one sweep cache at a time).
+
+    ``progress(total)`` returns a callable ticked once per (tracklet, preset, seed) run."""
+    presets, seeds = tuple(presets), tuple(int(s) for s in seeds)
+    if not tracklets:
+        raise InputError(None, "the list has no tracklet")
+    by_sequence: dict[str, list[Tracklet]] = defaultdict(list)
+    for t in tracklets:
+        by_sequence[str(resolve(t))].append(t)
+    tick = progress(len(tracklets) * len(presets) * len(seeds)) if progress else (lambda: None)
+    records: dict[tuple[str, int, str], tuple[Any, np.ndarray]] = {}
+    levels: dict[str, str] = {}
+    profiles: dict[str, str | None] = {}
+    for path, group in by_sequence.items():
+        seq = open_sequence(path)
+        source = CachedSource(seq)
+        for t in group:
+            spec = _spec(seq, source, t, config)
+            levels[t.key], profiles[t.key] = spec.difficulty, t.profile
+            for preset in presets:
+                for seed in seeds:
+                    result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], get_preset(preset, seed=seed))
+                    ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
+                    records[(preset, seed, t.key)] = (dataclasses.replace(_score(spec, result, config),
+                                                                          track_id=t.key), ms)
+                    tick()
+    return BenchmarkRun(presets, seeds, records, levels, profiles)
+
+
+def _score(spec: TrackSpec, result, config: EvalConfig):
+    """One tracklet's scores as ``sot-apps eval`` computes them (boxes of frames 1..n-1, Chamfer of the shape)."""
+    predicted = np.array([b.to_array() for b in result.boxes])
+    truth = np.array([b.to_array() for b in spec.boxes])
+    scores = score_tracklet(spec.track_id, predicted, truth, mean_points_first10=spec.mean_points_first10)
+    cd = (chamfer_distance(result.shape, spec.pgt_shape, voxel=config.shape_voxel_m) if len(spec.pgt_shape)
+          else float("nan"))
+    return dataclasses.replace(scores, shape_cd=cd)
+
+
+def _fmt(v: float, spec: str) -> str:
+    return "—" if v is None or not np.isfinite(v) else format(v, spec)
+
+
+def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
+    """One table per preset: rows = all / easy / medium / hard / each motion profile."""
+    out = [title] if title else []
+    n_seeds = len(run.seeds)
+    for preset in run.presets:
+        out.append(f"preset {preset} ({n_seeds} seed{'s' if n_seeds > 1 else ''}"
+                   + (": mean, Acc ± std over seeds)" if n_seeds > 1 else ")"))
+        header = ["group", "n", "Acc", "Rob", "Shape(m)", "Success", "Prec", "ms/frame"]
+        rows = []
+        for name, keys in run.groups():
+            m = run.summary(preset, keys)
+            acc = _fmt(100 * m["acc"], ".1f") + (f" ± {100 * m['acc_std']:.1f}" if n_seeds > 1 else "")
+            rows.append([name, str(m["n"]), acc, _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f"),
+                         _fmt(m["success"], ".1f"), _fmt(m["precision"], ".1f"), _fmt(m["ms"], ".1f")])
+        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+        line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
+                                       for i, (c, w) in enumerate(zip(cells, widths)))
+        out += [line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows] + [""]
+    out.append("Acc, Rob in %; Success, Precision: 100 x AUC; Shape: mean Chamfer to the pseudo-ground-truth shape; "
+               "difficulty by mean GT-box points over the first 10 frames (hard < 38.2 <= medium < 808.3 <= easy).")
+    return "\n".join(out)

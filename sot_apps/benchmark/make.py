@@ -1,0 +1,319 @@
+"""``sot-apps benchmark make``: hundreds of tracklets with exact ground truth in real background sweeps.
+
+Layout of ``OUT``::
+
+    OUT/benchmark.json                 every listed tracklet (LiDAR-SOT list format + difficulty, profile, ...)
+    OUT/easy.json, medium.json, hard.json   the same entries split by difficulty (as LiDAR-SOT ships them)
+    OUT/make.json                      the configuration, counts and timing
+    OUT/<background>_cNN/              one canonical sequence per copy of the background (frames A:B renumbered
+                                       from 0) with the real annotations and every inserted vehicle's boxes,
+                                       plus inserted.json (vehicles, motions, trajectories) and
+                                       labels/NNNNNN.npz (per point: -1 real, else the vehicle's index)
+
+Many tracklets share one copy (``--per-copy``, default 14): one simulation per frame serves all of them.
+The whole plan (every vehicle of every copy) is drawn first from ``--seed``; copies are then simulated
+independently (``--workers``) and each is marked done with its plan's digest, so an interrupted run resumes
+where it stopped and the same seed gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from tracker import DIFFICULTY_THRESHOLDS, difficulty, points_in_box, transform_points
+
+from ..errors import InputError
+from ..io import open_sequence
+from ..io.atomic import write_json, write_npz
+from ..io.canonical import write_sequence
+from ..io.sequence import BoxAnnotation, FrameInfo, Sequence, Sweep
+from ..objects.motion_profiles import PROFILES, MotionSpec
+from ..objects.selection import annotated_span
+from ..schemas import validate
+from .background import boxes_array, build_ground_map, ego_from_sensor, fitted_sensor
+from .deps import Bank, Realism, load_sensor, read_bank
+from .insert import simulate_frame, vehicle_scenes
+from .placement import InsertedVehicle, PlacementContext, place_occluder, place_vehicle
+
+__all__ = ["MakeConfig", "plan_copies", "make_benchmark", "CopyPlan"]
+
+TYPE_VEHICLE = 1  # Waymo Label.Type as LiDAR-SOT's lists carry it
+
+
+@dataclass(frozen=True)
+class MakeConfig:
+    background: str
+    bank: str
+    tracklets: int
+    frames: tuple[int, int]        # [A, B): python slice of the background's frames
+    seed: int
+    out: str
+    per_copy: int = 14
+    sensor: str = "pandar64"
+    range_m: tuple[float, float] = (5.0, 80.0)
+    drop_random: float = 0.0
+    workers: int = 1
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)   # the optical centre in the LiDAR frame
+    replicas: tuple[str, ...] = ()   # instead of profiles: copies of these real tracks (bank entries of theirs)
+
+
+@dataclass(frozen=True)
+class CopyPlan:
+    index: int
+    name: str
+    vehicles: list[InsertedVehicle]
+
+    def digest(self, config: MakeConfig) -> str:
+        h = hashlib.sha256(json.dumps({k: v for k, v in asdict(config).items() if k not in ("workers", "out")},
+                                      sort_keys=True).encode())
+        for v in self.vehicles:
+            h.update(f"{v.id}|{v.bank_id}|{v.listed}".encode())
+            h.update(np.ascontiguousarray(v.states).tobytes())
+        return h.hexdigest()[:16]
+
+
+def _frames(seq: Sequence, frames: tuple[int, int]) -> list[int]:
+    a, b = frames
+    if not (0 <= a < b <= len(seq)):
+        raise InputError(seq.root, f"--frames {a}:{b} is outside the sequence's 0:{len(seq)}")
+    if b - a < 2:
+        raise InputError(seq.root, "--frames needs at least 2 frames")
+    return list(range(a, b))
+
+
+def _context(seq: Sequence, frames: list[int], config: MakeConfig) -> PlacementContext:
+    ground = build_ground_map(seq, frames)
+    times = np.array([seq.frames[k].timestamp_ns for k in frames], dtype=np.int64)
+    sensor_xyh = []
+    for k in frames:
+        m = seq.frames[k].world_from_ego @ seq.ego_from_lidar
+        sensor_xyh.append((m[0, 3], m[1, 3], np.arctan2(m[1, 0], m[0, 0])))
+    real = [boxes_array([a.box for a in (seq.annotations[k] if seq.annotations else [])]) for k in frames]
+    return PlacementContext(ground, times, np.array(sensor_xyh), real, config.range_m)
+
+
+def box_size(bank: Bank, entry, sigma: float) -> tuple[float, float, float]:
+    """The ground-truth box size of a bank entry: its (annotated) size, grown where needed to cover the mesh
+    plus three range-noise sigmas on each side (a mesh file's size is its exact bounds, which noisy returns
+    leave half the time)."""
+    vertices, _ = bank.mesh(entry.id)
+    extent = 2.0 * np.abs(vertices).max(axis=0) + 6.0 * sigma
+    return tuple(round(float(max(a, b)), 3) for a, b in zip(entry.box_size(), extent))  # type: ignore[return-value]
+
+
+def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, entry, profile: str, entries,
+                    sizes: dict) -> list[InsertedVehicle] | None:
+    """The tracklet's vehicle (and, for ``occluded``, its occluder: up to 6 target places are tried)."""
+    for _ in range(6 if profile == "occluded" else 1):
+        vehicle = place_vehicle(ctx, rng, vid, entry.id, entry.label or "Car", sizes[entry.id], profile)
+        if vehicle is None or profile != "occluded":
+            return None if vehicle is None else [vehicle]
+        occ = entries[int(rng.integers(len(entries)))]
+        occluder = place_occluder(ctx, rng, vehicle, vid.replace("ins_", "occ_"), occ.id, occ.label or "Car",
+                                  sizes[occ.id])
+        if occluder is not None:
+            return [vehicle, occluder]
+        ctx.placed.pop()
+    return None
+
+
+def _plan_replicas(seq: Sequence, bank: Bank, config: MakeConfig, frames: list[int]) -> list[CopyPlan]:
+    """One copy in which each real track of ``config.replicas`` is replaced by its bank vehicle on the real path
+    (the real car's points are cut, the copy is simulated): same ranges, headings and occluders (realism check)."""
+    sigma = load_sensor(config.sensor).range_noise_sigma
+    tracks = seq.tracks()
+    vehicles = []
+    for prefix in config.replicas:
+        tid = seq.resolve_track_id(prefix)
+        entry = next((e for e in bank.entries if e.source.get("track") == tid), None)
+        if entry is None:
+            raise InputError(Path(config.bank) / "index.json", f"no bank entry built from track {tid}")
+        trk = tracks[tid]
+        ks = [k for k in frames if trk.box_at(k) is not None]
+        first, last = annotated_span(ks) if ks else (0, -1)
+        run = list(range(first, last + 1))
+        if len(run) < 2:
+            raise InputError(seq.root, f"track {tid} has fewer than 2 frames in --frames")
+        boxes = [trk.box_at(k) for k in run]
+        states = np.array([[b.x, b.y, b.z, b.heading] for b in boxes])
+        states[:, 3] = np.unwrap(states[:, 3])
+        times = np.array([seq.frames[k].timestamp_ns for k in run], dtype=np.int64)
+        vehicles.append(InsertedVehicle(f"rep_{tid[:8]}", entry.id, entry.label or "Car", box_size(bank, entry, sigma),
+                                        MotionSpec("replica", 0.0), times, states, True, None,
+                                        (run[0] - frames[0], run[-1] - frames[0]), tid))
+    return [CopyPlan(0, f"{seq.id}_replicas", vehicles)]
+
+
+def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = False) -> list[CopyPlan]:
+    """Every copy's inserted vehicles (deterministic in ``config.seed``)."""
+    frames = _frames(seq, config.frames)
+    if config.replicas:
+        return _plan_replicas(seq, bank, config, frames)
+    rng = np.random.default_rng(config.seed)
+    profiles = [PROFILES[i % len(PROFILES)] for i in range(config.tracklets)]
+    profiles = [profiles[i] for i in rng.permutation(len(profiles))]
+    plans: list[CopyPlan] = []
+    queue = list(profiles)
+    entries = sorted(bank.entries, key=lambda e: e.id)
+    sigma = load_sensor(config.sensor).range_noise_sigma
+    sizes = {e.id: box_size(bank, e, sigma) for e in entries}
+    bar = tqdm(total=len(queue), desc="placing", unit="tracklet", disable=not progress, leave=False)
+    base = _context(seq, frames, config)
+    while queue:
+        c = len(plans)
+        ctx = PlacementContext(base.ground, base.frame_times_ns, base.sensor_xyh, base.real_boxes, config.range_m)
+        crng = np.random.default_rng([config.seed, c])
+        vehicles: list[InsertedVehicle] = []
+        left = []
+        for profile in queue:
+            if sum(v.listed for v in vehicles) >= config.per_copy:
+                left.append(profile)
+                continue
+            entry = entries[int(crng.integers(len(entries)))]
+            vid = f"ins_c{c:02d}_{len(vehicles):02d}"
+            placed = _place_tracklet(ctx, crng, vid, entry, profile, entries, sizes)
+            if placed is None:
+                left.append(profile)
+                continue
+            vehicles += placed
+            bar.update(1)
+        if not vehicles:
+            raise InputError(seq.root, f"could not place a {left[0]} tracklet on free ground of the background "
+                                       "even in an empty copy (try a shorter --range or other --frames)")
+        queue = left
+        plans.append(CopyPlan(c, f"{seq.id}_c{c:02d}", vehicles))
+    bar.close()
+    return plans
+
+
+_BACKGROUNDS: dict[str, Sequence] = {}
+
+
+def _background(path: str) -> Sequence:
+    """The background, opened once per process with every sweep kept once read (copies reread them all)."""
+    if path not in _BACKGROUNDS:
+        seq = open_sequence(path)
+        seq.cache_size = len(seq)
+        _BACKGROUNDS[path] = seq
+    return _BACKGROUNDS[path]
+
+
+def _copy_done(directory: Path, digest: str) -> bool:
+    path = directory / "done.json"
+    if not path.is_file():
+        return False
+    try:
+        return json.loads(path.read_text()).get("digest") == digest
+    except (json.JSONDecodeError, OSError):
+        return False
+
+
+def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -> dict:
+    """Simulate and write one copy; returns its tracklet summaries (also stored in done.json)."""
+    out = Path(config.out) / plan.name
+    digest = plan.digest(config)
+    if _copy_done(out, digest):
+        return json.loads((out / "done.json").read_text())
+    seq = _background(config.background)
+    bank = read_bank(config.bank)
+    frames = _frames(seq, config.frames)
+    sensor = fitted_sensor(seq, frames, load_sensor(config.sensor))
+    meshes = {v.bank_id: bank.mesh(v.bank_id) for v in plan.vehicles}
+    scenes = vehicle_scenes(plan.vehicles, meshes)
+    sweeps: list[Sweep] = []
+    infos: list[FrameInfo] = []
+    annotations: list[list[BoxAnnotation]] = []
+    counts = np.zeros((len(frames), len(plan.vehicles)), dtype=np.int64)
+    removed = [0, 0]
+    for i, k in enumerate(tqdm(frames, desc=plan.name, unit="frame", disable=not progress, leave=False)):
+        realism = Realism(drop_random=config.drop_random, seed=config.seed * 1_000_003 + plan.index * 1_009 + k)
+        replaced = {v.replaces for v in plan.vehicles if v.replaces}
+        real = [a for a in (seq.annotations[k] if seq.annotations else []) if a.track_id not in replaced]
+        cut = [a.box for a in (seq.annotations[k] if seq.annotations else []) if a.track_id in replaced]
+        frame = simulate_frame(seq, k, sensor, plan.vehicles, meshes, realism, scenes, config.origin, cut)
+        sweeps.append(Sweep(frame.xyz, frame.intensity, frame.time_offset_ns))
+        write_npz(out / "labels" / f"{i:06d}.npz", instance=frame.instance)
+        info = seq.frames[k]
+        infos.append(FrameInfo(i, info.timestamp_ns, info.world_from_ego, Path(f"points/{i:06d}.npz")))
+        annotations.append(real + [BoxAnnotation(v.id, v.label, b, stationary=False)
+                                   for v, b in zip(plan.vehicles, frame.boxes)])
+        world = transform_points(info.world_from_ego, frame.xyz)
+        counts[i] = [int(points_in_box(world, b).sum()) for b in frame.boxes]
+        removed[0] += frame.removed_real
+        removed[1] += frame.removed_inserted
+    copy = Sequence(id=plan.name, root=Path(config.background), format="benchmark", frames=infos,
+                    load_sweep=lambda j: sweeps[j], ego_from_lidar=seq.ego_from_lidar, annotations=annotations,
+                    cache_size=0)
+    write_json(out / "inserted.json", {
+        "version": 1, "background": str(config.background), "frames": list(config.frames),
+        "sensor": sensor.to_dict(), "vehicles": [
+            {"id": v.id, "bank_id": v.bank_id, "label": v.label, "listed": v.listed, "occluder_of": v.occluder_of,
+             "size": {"length": v.size[0], "width": v.size[1], "height": v.size[2]}, "motion": v.motion.to_dict(),
+             "times_ns": v.times_ns, "states": np.round(v.states, 5)} for v in plan.vehicles]})
+    write_sequence(copy, out, progress=False)
+    n = min(10, len(frames))
+    tracklets = []
+    for j, v in enumerate(plan.vehicles):
+        if not v.listed:
+            continue
+        a, b = v.span if v.span is not None else (0, len(frames) - 1)
+        mean10 = float(counts[a:a + n, j].mean())
+        sensor_xy = (seq.frames[frames[a]].world_from_ego @ ego_from_sensor(seq, config.origin))[:2, 3]
+        r0 = float(np.hypot(*(annotations[a][len(annotations[a]) - len(plan.vehicles) + j].box.center[:2] - sensor_xy)))
+        tracklets.append({"id": v.id, "type": TYPE_VEHICLE, "segment_name": plan.name,
+                          "frame_range": [a, b], "difficulty": difficulty(mean10, DIFFICULTY_THRESHOLDS),
+                          "profile": v.motion.profile, "mean_points_first10": round(mean10, 2),
+                          "initial_range_m": round(r0, 2), "bank_id": v.bank_id, "motion": v.motion.to_dict(),
+                          "min_points": int(counts[a:b + 1, j].min()),
+                          "mean_points": round(float(counts[a:b + 1, j].mean()), 2)})
+    summary = {"digest": digest, "tracklets": tracklets, "removed_real_points": removed[0],
+               "removed_inserted_points": removed[1]}
+    write_json(out / "done.json", summary)
+    return summary
+
+
+def make_benchmark(config: MakeConfig, progress: bool = True) -> dict:
+    """Plan, simulate (resuming finished copies) and write the lists; returns make.json's content."""
+    start = time.perf_counter()
+    seq = _background(config.background)
+    bank = read_bank(config.bank)
+    if not bank.entries:
+        raise InputError(Path(config.bank) / "index.json", "the bank has no entries")
+    if (config.tracklets < 1 and not config.replicas) or config.per_copy < 1:
+        raise InputError(None, "--tracklets and --per-copy must be >= 1")
+    plans = plan_copies(seq, bank, config, progress)
+    planned = time.perf_counter() - start
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    summaries: list[dict] = []
+    if config.workers > 1:
+        with ProcessPoolExecutor(config.workers) as pool:
+            futures = [pool.submit(_simulate_copy, config, p) for p in plans]
+            for f in tqdm(futures, desc="copies", unit="copy", disable=not progress):
+                summaries.append(f.result())
+    else:
+        bar = tqdm(plans, desc="copies", unit="copy", disable=not progress)
+        for p in bar:
+            summaries.append(_simulate_copy(config, p, progress))
+    entries = [t for s in summaries for t in s["tracklets"]]
+    validate("benchmark", entries, out / "benchmark.json")
+    write_json(out / "benchmark.json", entries)
+    for level in ("easy", "medium", "hard"):
+        write_json(out / f"{level}.json", [e for e in entries if e["difficulty"] == level])
+    counts = {"difficulty": {d: sum(e["difficulty"] == d for e in entries) for d in ("easy", "medium", "hard")},
+              "profile": {p: sum(e["profile"] == p for e in entries)
+                          for p in list(PROFILES) + sorted({e["profile"] for e in entries} - set(PROFILES))}}
+    report = {"config": asdict(config), "copies": len(plans), "tracklets": len(entries), "counts": counts,
+              "removed_real_points": sum(s["removed_real_points"] for s in summaries),
+              "removed_inserted_points": sum(s["removed_inserted_points"] for s in summaries),
+              "seconds": {"planning": round(planned, 1), "total": round(time.perf_counter() - start, 1)}}
+    write_json(out / "make.json", {k: v for k, v in report.items() if k != "seconds"} | {"seconds": report["seconds"]})
+    return report

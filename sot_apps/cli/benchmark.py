@@ -1,0 +1,153 @@
+"""``sot-apps benchmark make|build|realism``: generate a LiDAR-SOT benchmark, build lists, measure realism."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..errors import InputError
+from .common import add_subcommand
+
+
+def _frames(text: str) -> tuple[int, int]:
+    try:
+        a, b = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise InputError(None, f"--frames must look like A:B (frames A..B-1), got {text!r}") from None
+    return a, b
+
+
+def _range(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise InputError(None, f"--range must look like MIN:MAX in metres, got {text!r}") from None
+    if not 0 < lo < hi:
+        raise InputError(None, f"--range needs 0 < MIN < MAX, got {text!r}")
+    return lo, hi
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    parser = add_subcommand(
+        subparsers, "benchmark", help="generate a LiDAR-SOT benchmark into real sweeps; build LiDAR-SOT lists",
+        description="make: insert bank vehicles with motion profiles into copies of a real sequence (rolling scan, "
+                    "occlusion both ways) and write canonical sequences + benchmark.json (LiDAR-SOT list format). "
+                    "build: LiDAR-SOT-style lists from annotated sequences with the paper's criteria. realism: points "
+                    "in box versus range of inserted and real vehicles (table + PNG). See docs/benchmark.md.",
+        examples=["sot-apps benchmark make --background ../shared/data/pandaset_002 --bank bank --tracklets 200 "
+                  "--frames 0:40 --seed 0 --origin 0 0 1.6 --out out/bench",
+                  "sot-apps eval --benchmark out/bench/benchmark.json --preset full faithful --seeds 3",
+                  "sot-apps benchmark build ../shared/data/pandaset_002 --min-frames 20 --out out/lists",
+                  "sot-apps benchmark realism out/bench --plot docs/images/benchmark_points_vs_range.png"])
+    sub = parser.add_subparsers(dest="action", metavar="ACTION", parser_class=type(parser))
+    make = sub.add_parser("make", help="generate a benchmark (see docs/benchmark.md)")
+    make.add_argument("--background", required=True, metavar="SEQUENCE", help="real annotated sequence")
+    make.add_argument("--bank", required=True, metavar="BANK", help="vehicle bank (sot-apps bank build)")
+    make.add_argument("--tracklets", type=int, default=200, metavar="N", help="listed tracklets (default 200)")
+    make.add_argument("--frames", type=_frames, default=(0, 40), metavar="A:B",
+                      help="background frames A..B-1 = every tracklet's span (default 0:40)")
+    make.add_argument("--seed", type=int, default=0, help="seed (default 0): same seed, same bytes")
+    make.add_argument("--out", required=True, metavar="DIR", help="output directory (rerun to resume)")
+    make.add_argument("--per-copy", type=int, default=14, metavar="K",
+                      help="listed tracklets per copy of the background (default 14)")
+    make.add_argument("--sensor", default="pandar64", help="sensor preset or JSON (default pandar64; the scan "
+                                                          "phase is fitted to the background's point times)")
+    make.add_argument("--range", type=_range, default=(5.0, 80.0), metavar="MIN:MAX",
+                      help="initial range of the tracklets in metres (default 5:80, log-uniform)")
+    make.add_argument("--drop", type=float, default=0.0, help="random ray drop probability (default 0)")
+    make.add_argument("--workers", type=int, default=1, help="processes simulating copies (default 1)")
+    make.add_argument("--origin", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
+                      help="the optical centre in the LiDAR frame (m; default 0 0 0). PandaSet's pose origin is not "
+                           "its optical centre: use 0 0 1.6 as `bench realism --origin-z 1.6` (docs/lidar_sim.md)")
+    make.add_argument("--replicas", nargs="+", default=(), metavar="TRACK_ID",
+                      help="realism check instead of profiles: one copy in which each of these real tracks is "
+                           "replaced by its bank vehicle on its own path (real points cut, vehicle simulated; same "
+                           "ranges, headings, occluders), listed over the track's annotated frames; compare "
+                           "`eval --benchmark` with `eval SEQUENCE --tracks`")
+    make.set_defaults(action_run=_run_make)
+
+    build = sub.add_parser("build", help="LiDAR-SOT-style lists from annotated sequences")
+    build.add_argument("sequences", nargs="+", metavar="SEQUENCE")
+    build.add_argument("--out", required=True, metavar="DIR", help="writes bench_list.json, easy/medium/hard.json")
+    build.add_argument("--min-frames", type=int, default=100, help="minimum tracklet length (default 100, the paper's)")
+    build.add_argument("--max-frames", type=int, default=None, help="cut tracklets to this length (default: whole run)")
+    build.add_argument("--min-points", type=int, default=20,
+                       help="more than this many points in each of the first 10 frames (default 20)")
+    build.add_argument("--min-displacement", type=float, default=2.0,
+                       help="not static: the centre moves more than this (m, default 2)")
+    build.add_argument("--types", default="vehicle", help="comma-separated: vehicle,pedestrian,cyclist (default vehicle)")
+    build.set_defaults(action_run=_run_build)
+
+    realism = sub.add_parser("realism", help="points in box versus range: inserted versus real vehicles")
+    realism.add_argument("benchmark", metavar="DIR", help="a `benchmark make` output directory")
+    realism.add_argument("--plot", metavar="PNG", help="write the points-versus-range plot")
+    realism.add_argument("--json", metavar="FILE", help="write the binned figures as JSON")
+    realism.set_defaults(action_run=_run_realism)
+    parser.set_defaults(func=lambda args: _run(args, parser))
+    return parser
+
+
+def _run(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    run = getattr(args, "action_run", None)
+    if run is None:
+        parser.print_help()
+        return 2
+    return int(run(args) or 0)
+
+
+def _run_make(args: argparse.Namespace) -> int:
+    from ..benchmark.make import MakeConfig, make_benchmark
+
+    if args.workers < 1:
+        raise InputError(None, "--workers must be >= 1")
+    config = MakeConfig(str(args.background), str(args.bank), args.tracklets, tuple(args.frames), args.seed,
+                        str(args.out), args.per_copy, args.sensor, tuple(args.range), args.drop, args.workers,
+                        tuple(args.origin), tuple(args.replicas))
+    report = make_benchmark(config, progress=sys.stderr.isatty())
+    counts = report["counts"]
+    print(f"{report['tracklets']} tracklets in {report['copies']} copies -> {Path(args.out) / 'benchmark.json'}")
+    print("difficulty: " + ", ".join(f"{k} {v}" for k, v in counts["difficulty"].items()))
+    print("profile:    " + ", ".join(f"{k} {v}" for k, v in counts["profile"].items()))
+    print(f"time: {report['seconds']['total']:.0f} s (planning {report['seconds']['planning']:.0f} s)")
+    return 0
+
+
+def _run_build(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..benchmark.lists import ListCriteria, build_lists, relative, write_lists
+    from ..io import open_sequence
+
+    names = {"vehicle": 1, "pedestrian": 2, "cyclist": 4}
+    types = tuple(t.strip() for t in args.types.split(",") if t.strip())
+    bad = [t for t in types if t not in names]
+    if bad or not types:
+        raise InputError(None, f"--types: unknown {bad}; choose from {', '.join(names)}")
+    if args.min_frames < 1:
+        raise InputError(None, "--min-frames must be >= 1")
+    criteria = ListCriteria(args.min_frames, args.max_frames, args.min_points, 10, args.min_displacement,
+                            tuple(names[t] for t in types))
+    out = Path(args.out)
+    sequences = [(open_sequence(p), relative(Path(p), out)) for p in args.sequences]
+    progress = lambda it: tqdm(it, desc="counting", unit="frame", disable=not sys.stderr.isatty(), leave=False)  # noqa: E731
+    entries = build_lists(sequences, criteria, progress)
+    paths = write_lists(entries, out)
+    levels = {d: sum(e["difficulty"] == d for e in entries) for d in ("easy", "medium", "hard")}
+    print(f"{len(entries)} tracklets ({', '.join(f'{k} {v}' for k, v in levels.items())}) -> "
+          + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _run_realism(args: argparse.Namespace) -> int:
+    from ..benchmark.realism import format_realism, points_versus_range, write_plot
+    from ..io.atomic import write_json
+
+    curves = points_versus_range(Path(args.benchmark))
+    print(format_realism(curves))
+    if args.plot:
+        write_plot(curves, Path(args.plot))
+        print(f"plot -> {args.plot}")
+    if args.json:
+        write_json(args.json, curves.to_dict())
+    return 0

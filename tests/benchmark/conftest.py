@@ -1,0 +1,62 @@
+"""A small background (the synthetic world: road, walls, poles, parked and moving cars, rolling scan with
+per-point times) and a bank of procedural vehicles, generated once per session; and one small benchmark."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+SMALL = dict(tracklets=8, frames=(0, 6), per_copy=8, range_m=(6.0, 30.0))
+
+
+@pytest.fixture(scope="session")
+def background(tmp_path_factory) -> Path:
+    from sot_apps.synth import write_world
+
+    return write_world(tmp_path_factory.mktemp("bg") / "world", frames=6, vehicles=2, seed=3)
+
+
+@pytest.fixture(scope="session")
+def bank(tmp_path_factory) -> Path:
+    import numpy as np
+
+    from sot_apps.io.ply import write_ply_mesh
+    from sot_apps.lidar_sim.bank import Bank, entry_from_mesh_file, write_bank_index
+    from sot_apps.synth.vehicles import make_vehicle
+
+    root = tmp_path_factory.mktemp("bank")
+    bank = Bank(root, [])
+    for kind, size in (("sedan", (4.5, 1.8, 1.45)), ("suv", (4.7, 1.9, 1.75))):
+        mesh = make_vehicle(kind, *size)
+        path = root / f"{kind}.ply"
+        write_ply_mesh(path, mesh.vertices, np.asarray(mesh.faces))
+        bank.upsert(entry_from_mesh_file(root, path, kind, "Car"))
+    write_bank_index(bank)
+    return root
+
+
+def _make_small(background: Path, bank: Path, out: Path, seed: int = 0) -> dict:
+    from sot_apps.benchmark.make import MakeConfig, make_benchmark
+
+    config = MakeConfig(str(background), str(bank), SMALL["tracklets"], SMALL["frames"], seed, str(out),
+                        per_copy=SMALL["per_copy"], range_m=SMALL["range_m"])
+    return make_benchmark(config, progress=False)
+
+
+@pytest.fixture(scope="session")
+def make_small():
+    """``make_small(background, bank, out, seed=0)``: the small benchmark's ``make`` (8 tracklets, 6 frames)."""
+    return _make_small
+
+
+@pytest.fixture(scope="session")
+def small_config() -> dict:
+    return dict(SMALL)
+
+
+@pytest.fixture(scope="session")
+def small_benchmark(background, bank, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("bench") / "b"
+    _make_small(background, bank, out)
+    return out
