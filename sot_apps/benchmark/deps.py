@@ -10,7 +10,8 @@ from ..evaluation.tracker import CachedSource, EvalConfig, TrackSpec, resolve_pr
 from ..lidar_sim.bank import Bank, BankEntry, read_bank
 from ..lidar_sim.noise import Realism
 from ..raycast import RaycastScene
-from ..lidar_sim.scan import Scan, SimObject, Trajectory, invert_transform_batch, simulate_scan, state_to_matrix
+from ..lidar_sim.scan import Scan, SimObject, invert_transform_batch, simulate_scan
+from ..objects.trajectory import Trajectory, world_from_object
 from ..lidar_sim.scene import OCCLUDER_MARGIN_M
 from ..lidar_sim.sensors import Sensor, load_sensor
 
@@ -22,4 +23,4 @@ def eval_ground_params():
 
 __all__ = ["eval_ground_params", "CachedSource", "EvalConfig", "TrackSpec", "resolve_presets", "Bank", "BankEntry", "read_bank", "Realism",
            "RaycastScene", "Scan", "SimObject", "Trajectory", "invert_transform_batch", "simulate_scan",
-           "state_to_matrix", "OCCLUDER_MARGIN_M", "Sensor", "load_sensor"]
+           "world_from_object", "OCCLUDER_MARGIN_M", "Sensor", "load_sensor"]

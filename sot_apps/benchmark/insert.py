@@ -37,7 +37,7 @@ from .deps import (
     Trajectory,
     invert_transform_batch,
     simulate_scan,
-    state_to_matrix,
+    world_from_object,
 )
 from .placement import InsertedVehicle
 
@@ -76,8 +76,8 @@ def _in_sensor_frame(vehicle: InsertedVehicle, mesh: tuple[np.ndarray, np.ndarra
     times, states = vehicle.times_ns[lo:hi], vehicle.states[lo:hi]
     if len(times) < 2:  # one sample (the sweep is beyond the path's ends): still a moving object, held still
         times, states = np.array([times[0], times[0] + 1], dtype=np.int64), np.repeat(states, 2, axis=0)
-    world_from_object = state_to_matrix(states)
-    rel = sensor_from_world @ world_from_object
+    world_from_obj = world_from_object(states)
+    rel = sensor_from_world @ world_from_obj
     rel_states = to_states(rel)
     rel_states[:, 3] = np.unwrap(rel_states[:, 3])
     mid = len(times) // 2
@@ -102,7 +102,7 @@ def _background_occlusion(objects: list[tuple[SimObject, np.ndarray]], scenes: d
         speed = float(np.max(np.hypot(*np.diff(states[:, :2], axis=0).T) /
                              np.maximum(np.diff(o.trajectory.times_ns) * 1e-9, 1e-9))) if len(states) > 1 else 0.0
         radius = o.radius() + speed * 0.12 + 0.2
-        centre = o.trajectory.at(frame_time_ns)[:3]
+        centre = o.trajectory.states_at(frame_time_ns)[:3]
         reach = float(np.hypot(centre[0], centre[1]))
         half = math.pi if reach <= radius + 1.0 else math.asin(min(1.0, radius / (reach - 1.0))) + 0.02
         cand = np.flatnonzero(np.abs((azimuth - math.atan2(centre[1], centre[0]) + math.pi) % (2 * math.pi) - math.pi)
@@ -113,7 +113,7 @@ def _background_occlusion(objects: list[tuple[SimObject, np.ndarray]], scenes: d
         cand = cand[(perp2 <= radius * radius) & (t >= -radius) & (t <= dist[cand] + radius)]
         if cand.size == 0:
             continue
-        object_from_sensor = invert_transform_batch(state_to_matrix(o.trajectory.at(t_ns[cand])))
+        object_from_sensor = invert_transform_batch(world_from_object(o.trajectory.states_at(t_ns[cand])))
         to_mesh = tilt.T @ object_from_sensor[:, :3, :3]  # into the untilted mesh frame
         o_obj = np.einsum("nij,nj->ni", to_mesh, origins[cand]) + \
             np.einsum("ij,nj->ni", tilt.T, object_from_sensor[:, :3, 3])
@@ -173,7 +173,7 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
     scenes = scenes if scenes is not None else vehicle_scenes(vehicles, meshes)
     objects = [_in_sensor_frame(v, meshes[v.bank_id], sensor_from_world, t_k, i) for i, v in enumerate(vehicles)]
     reach = sensor.max_range + 10.0
-    objects = [(o, tilt) for o, tilt in objects if np.linalg.norm(o.trajectory.at(t_k)[:3]) < reach]
+    objects = [(o, tilt) for o, tilt in objects if np.linalg.norm(o.trajectory.states_at(t_k)[:3]) < reach]
     scan = simulate_scan(sensor, [o for o, _ in objects], path, t_k, realism, static_scene=RaycastScene())
 
     sweep = seq.sweep(k)
@@ -186,11 +186,11 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
     real_offsets = (sweep.time_offset_ns[keep] if sweep.time_offset_ns is not None
                     else np.zeros(len(real), dtype=np.int64))
     real_t = t_k + real_offsets
-    real_origins = path.at(real_t)[:, :3]
+    real_origins = path.states_at(real_t)[:, :3]
     occluded = _background_occlusion(objects, scenes, real_origins, real, real_t, t_k)
 
     sim = scan.xyz.astype(np.float64)
-    sim_origins = path.at(t_k + scan.time_offset_ns)[:, :3]
+    sim_origins = path.states_at(t_k + scan.time_offset_ns)[:, :3]
     kept_real = ~occluded
     rd = real[kept_real] - real_origins[kept_real]
     rr = np.linalg.norm(rd, axis=1)

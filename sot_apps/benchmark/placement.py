@@ -56,7 +56,7 @@ class InsertedVehicle:
 
     def states_at(self, t_ns: np.ndarray | int) -> np.ndarray:
         """(..., 4) x, y, z, heading at the given times (linear between samples, held outside)."""
-        return Trajectory(self.times_ns, self.states).at(t_ns)
+        return Trajectory(self.times_ns, self.states).states_at(t_ns)
 
 
 @dataclass
