@@ -140,3 +140,13 @@ def test_corrupt_camera_image_is_warned_about(tmp_path, capsys):
                  "--box-time", "frame", "--quiet", "--out", str(tmp_path / "F")])
     err = capsys.readouterr().err
     assert code == 0 and "warning" in err and image.name in err and "cannot decode" in err
+
+
+
+def test_sensor_fit_warns_when_the_beam_count_is_implausible(tmp_path, pandaset_root, capsys):
+    """Defect 9: without --align the PandaSet pose origin is not the optical centre and the fit finds far more
+    beams than the Pandar64 has (162-166); the command must say so instead of reporting the count silently."""
+    out = tmp_path / "fit.json"
+    assert main(["sensor", "fit", str(pandaset_root), "--frames", "0", "--compare", "pandar64", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: fitted" in err and "pandar64 has 64" in err and "--align" in err, err
