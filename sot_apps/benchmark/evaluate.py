@@ -16,12 +16,12 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, chamfer_distance, difficulty, get_preset, mean_points_in_boxes,
-                     pool_metrics, pseudo_gt_shape, score_tracklet, track)
+from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty, get_preset, mean_points_in_boxes, pool_metrics,
+                     pseudo_gt_shape, track)
 
 from ..errors import InputError
 from ..io import open_sequence
-from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params
+from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params, score_result
 from .lists import SequenceResolver, Tracklet
 
 __all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
@@ -109,20 +109,11 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
                 for seed in seeds:
                     result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], get_preset(preset, seed=seed))
                     ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
-                    records[(preset, seed, t.key)] = (dataclasses.replace(_score(spec, result, config),
+                    records[(preset, seed, t.key)] = (dataclasses.replace(score_result(spec, result, config),
                                                                           track_id=t.key), ms)
                     tick()
     return BenchmarkRun(presets, seeds, records, levels, profiles)
 
-
-def _score(spec: TrackSpec, result, config: EvalConfig):
-    """One tracklet's scores as ``sot-apps eval`` computes them (boxes of frames 1..n-1, Chamfer of the shape)."""
-    predicted = np.array([b.to_array() for b in result.boxes])
-    truth = np.array([b.to_array() for b in spec.boxes])
-    scores = score_tracklet(spec.track_id, predicted, truth, mean_points_first10=spec.mean_points_first10)
-    cd = (chamfer_distance(result.shape, spec.pgt_shape, voxel=config.shape_voxel_m) if len(spec.pgt_shape)
-          else float("nan"))
-    return dataclasses.replace(scores, shape_cd=cd)
 
 
 def _fmt(v: float, spec: str) -> str:

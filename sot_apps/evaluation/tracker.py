@@ -36,6 +36,7 @@ from ..io.sequence import Sequence as LidarSequence
 
 __all__ = [
     "EvalConfig",
+    "score_result",
     "CachedSource",
     "TrackSpec",
     "RunRecord",
@@ -291,7 +292,8 @@ def _flag_counts(result: TrackResult) -> dict[str, int]:
     return counts
 
 
-def _score(spec: TrackSpec, result: TrackResult, config: EvalConfig) -> TrackletScores:
+def score_result(spec: TrackSpec, result: TrackResult, config: EvalConfig) -> TrackletScores:
+    """One tracklet's scores: boxes of frames 1..n-1 against the truth, Chamfer of the shape to the pseudo-GT."""
     predicted = np.array([b.to_array() for b in result.boxes])
     truth = np.array([b.to_array() for b in spec.boxes])
     scores = score_tracklet(spec.track_id, predicted, truth, mean_points_first10=spec.mean_points_first10)
@@ -354,19 +356,19 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
         result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], tconfig,
                        detections=detections_for(int(seed)))
         ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
-        online[preset].append(RunRecord(preset, int(seed), spec.track_id, _score(spec, result, config), ms,
+        online[preset].append(RunRecord(preset, int(seed), spec.track_id, score_result(spec, result, config), ms,
                                         _flag_counts(result)))
         for n in lags:
             smoothed = refine_fixed_lag(source, result, int(n), tconfig)
             lag_ms = np.array([e.time_ms for e in smoothed.estimates[1:]], dtype=np.float64)
             lagged[(preset, n)].append(RunRecord(f"{preset}+lag{n}", int(seed), spec.track_id,
-                                                 _score(spec, smoothed, config), lag_ms, _flag_counts(smoothed)))
+                                                 score_result(spec, smoothed, config), lag_ms, _flag_counts(smoothed)))
         if offline:
             t0 = time.perf_counter()
             better = refine(source, result, tconfig)
             extra = (time.perf_counter() - t0) * 1e3 / max(len(ms), 1)
             refined[preset].append(RunRecord(f"{preset}+offline", int(seed), spec.track_id,
-                                             _score(spec, better, config), ms + extra, _flag_counts(better)))
+                                             score_result(spec, better, config), ms + extra, _flag_counts(better)))
     rows = []
     for preset in presets:
         rows.append(_summarise_row(preset, preset, False, seeds, online[preset], specs))
