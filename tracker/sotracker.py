@@ -517,16 +517,17 @@ class Tracker:
             return finder_icp(self._start_points, local, prev, self.rng, scale=c.first_search_scale,
                               iterations=c.first_icp_iterations, max_points=c.max_points, min_points=c.min_points,
                               solver_iterations=c.solver_iterations)
-        if det_target is not None:
-            prior = det_target
-        if c.first_hypotheses <= 0 or det_target is not None:  # one ICP-only search from the prediction
+        if c.first_hypotheses <= 0:  # one ICP-only search from the prediction
             x, _ = self._estimate(target, prior, c.first_search_scale, c.first_icp_iterations, True, None, flags)
             return x
         dt = self._last_dt
         best, best_score = np.zeros(4), -1
         source = self.prev_points
-        for x0 in motion_hypotheses(prev.heading, c.first_hypotheses, c.first_max_speed * dt,
-                                    c.first_max_speed * dt / 3.0):
+        starts = list(motion_hypotheses(prev.heading, c.first_hypotheses, c.first_max_speed * dt,
+                                        c.first_max_speed * dt / 3.0))
+        if det_target is not None:  # the associated detection's motion is one more hypothesis (first: wins ties)
+            starts.insert(0, det_target)
+        for x0 in starts:
             x, _ = self._estimate(target, x0, c.search_scale, c.first_icp_iterations, True, None, flags)
             if c.first_max_yaw > 0:
                 x[3] = np.clip(x[3], -c.first_max_yaw, c.first_max_yaw)
