@@ -7,13 +7,17 @@ Modules are discovered automatically; one that fails to import is reported, neve
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 
 
 def _interrupted_while_starting(signum, frame) -> None:
+    # Nothing has been written yet, so leave at once: an exception raised here could land inside importlib's
+    # module-lock callbacks, where Python prints it as "Exception ignored ..." instead of exiting.
     sys.stderr.write("interrupted\n")
-    raise SystemExit(130)
+    sys.stderr.flush()
+    os._exit(130)
 
 
 # As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles

@@ -13,7 +13,7 @@ import errno
 import io
 import json
 import os
-import signal
+import secrets
 import tempfile
 from pathlib import Path
 from typing import Any, Iterator
@@ -74,43 +74,33 @@ def _umask() -> int:
 
 
 @contextlib.contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """Hold SIGINT (delivered when the block ends) where an interrupt would orphan a temporary file."""
-    try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    except (AttributeError, ValueError, OSError):  # no pthread_sigmask on this platform
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-@contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success it is renamed to ``path``.
 
     On any exception the temporary file is removed and ``path`` is left untouched.
     """
     path = Path(path)
+    tmp: Path | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with _sigint_deferred():  # a Ctrl-C between creating the file and owning its name would leave it behind
-            fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-            os.close(fd)
-            tmp = Path(tmp_name)
-    except OSError as exc:
-        if is_environment_error(exc):
-            raise output_error(path, exc) from exc
-        raise
-    try:
+        # The name is ours before the file exists, so a Ctrl-C at any point (the signal may be taken by any
+        # thread, so masking it here would not be enough) leaves nothing behind: the except below removes it.
+        for _ in range(100):
+            tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp"
+            try:
+                os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+                break
+            except FileExistsError:
+                continue
+        else:
+            raise FileExistsError(errno.EEXIST, "no free temporary name", str(path.parent))
         yield tmp
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600 files; give the usual permissions
         os.replace(tmp, path)
     except BaseException as exc:
-        with _sigint_deferred(), contextlib.suppress(OSError):
-            tmp.unlink()
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
         if is_environment_error(exc):
             raise output_error(path, exc) from exc   # type: ignore[arg-type]
         raise
