@@ -22,12 +22,12 @@ def _interrupted_while_starting(signum, frame) -> None:
 
 # As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles
 # it, exits quietly instead of printing a traceback
-if __name__ == "__main__" or sys.argv[0].endswith("sot-apps"):
+_AS_PROGRAM = __name__ == "__main__" or sys.argv[0].endswith("sot-apps")
+if _AS_PROGRAM:
     signal.signal(signal.SIGINT, _interrupted_while_starting)
 
 import argparse  # noqa: E402
 import importlib  # noqa: E402
-import os  # noqa: E402
 import pkgutil  # noqa: E402
 import re  # noqa: E402
 import traceback  # noqa: E402
@@ -139,9 +139,26 @@ def main(argv: Seq[str] | None = None) -> int:
         return 2
     except Exception as exc:  # noqa: BLE001 - last line of defence: one line unless --debug
         return _unexpected(exc, debug)
+    finally:
+        if _AS_PROGRAM:   # the command is over: a Ctrl-C during interpreter shutdown (atexit, pools) changes nothing
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _caused_by_interrupt(exc: BaseException | None) -> bool:
+    """Some library code wraps a Ctrl-C in another exception (e.g. a RuntimeError from ``__set_name__``)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def _unexpected(exc: BaseException, debug: bool) -> int:
+    if _caused_by_interrupt(exc):
+        sys.stderr.write("interrupted: finished outputs are kept; rerun to resume\n")
+        return 130
     if debug:
         traceback.print_exc()
     message = " ".join(str(exc).split()) or type(exc).__name__

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_path
-from ..interrupts import import_pyrender, import_trimesh
+from ..interrupts import deferred_interrupt, import_pyrender, import_trimesh
 
 __all__ = ["render_camera_images", "CV_FROM_GL"]
 
@@ -56,7 +56,9 @@ def render_camera_images(world, cam, times_ns: np.ndarray, out_dir: Path) -> lis
     fx, fy, cx, cy = cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2]
     camera = pyrender.IntrinsicsCamera(fx, fy, cx, cy, znear=0.1, zfar=500.0)
     cam_node = scene.add(camera, pose=np.eye(4))
-    renderer = pyrender.OffscreenRenderer(cam.width, cam.height)
+    # PyOpenGL turns a KeyboardInterrupt raised inside its calls into a TypeError: Ctrl-C waits for each GL call
+    with deferred_interrupt():
+        renderer = pyrender.OffscreenRenderer(cam.width, cam.height)
     paths = []
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -66,7 +68,8 @@ def render_camera_images(world, cam, times_ns: np.ndarray, out_dir: Path) -> lis
                 scene.set_pose(node, world_from_object(o.trajectory.states_at(t)))
             world_from_camera = world.world_from_ego(t) @ cam.ego_from_camera
             scene.set_pose(cam_node, world_from_camera @ CV_FROM_GL)
-            color, _ = renderer.render(scene)
+            with deferred_interrupt():
+                color, _ = renderer.render(scene)
             path = out_dir / f"{k:06d}.png"
             ok, data = cv2.imencode(".png", cv2.cvtColor(color, cv2.COLOR_RGB2BGR))
             if not ok:
@@ -75,5 +78,6 @@ def render_camera_images(world, cam, times_ns: np.ndarray, out_dir: Path) -> lis
                 tmp.write_bytes(data.tobytes())
             paths.append(path)
     finally:
-        renderer.delete()
+        with deferred_interrupt():
+            renderer.delete()
     return paths
