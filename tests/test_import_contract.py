@@ -56,16 +56,26 @@ def test_tracker_imports_nothing_from_sot_apps():
     assert violations("tracker is the core", "tracker", "sot_apps") == []
 
 
+APPS = ("sot_apps.flow", "sot_apps.motion_export", "sot_apps.lidar_sim", "sot_apps.synth", "sot_apps.benchmark",
+        "sot_apps.detection")
+FLOOR = ("sot_apps.objects", "sot_apps.raycast", "sot_apps.sensor", "sot_apps.io")
+
+
 def test_apps_never_import_each_other():
-    apps = ("sot_apps.flow", "sot_apps.lidar_sim", "sot_apps.motion_export")
-    bad = [v for a in apps for b in apps if a != b for v in violations("apps are siblings", a, b)]
+    """(e.g. the benchmark simulates sweeps with the floor's sensor model, never through lidar_sim)"""
+    bad = [v for a in APPS for b in APPS if a != b for v in violations("apps are siblings", a, b)]
     assert bad == []
 
 
+def test_realism_evaluation_simulates_with_the_floor():
+    """``bench realism`` simulates with sot_apps.sensor, not through the simulate-lidar app."""
+    assert [v for a in ("sot_apps.lidar_sim", "sot_apps.benchmark")
+            for v in violations("evaluation uses the floor", "sot_apps.evaluation", a)] == []
+
+
 def test_the_floor_imports_no_app():
-    floor = ("sot_apps.objects", "sot_apps.raycast", "sot_apps.io")
-    apps = ("sot_apps.flow", "sot_apps.lidar_sim", "sot_apps.motion_export", "sot_apps.synth", "sot_apps.pipeline",
-            "sot_apps.evaluation", "sot_apps.bench", "sot_apps.report", "sot_apps.cli")
+    floor = FLOOR
+    apps = APPS + ("sot_apps.pipeline", "sot_apps.evaluation", "sot_apps.bench", "sot_apps.report", "sot_apps.cli")
     assert [v for f in floor for a in apps for v in violations("the floor is below the apps", f, a)] == []
 
 
@@ -104,7 +114,7 @@ def test_the_contract_checker_sees_imports():
     graph = imports_by_module()
     assert "sot_apps.objects.selection" in graph["sot_apps.summary"]
     assert "sot_apps.evaluation.tracker" in graph["sot_apps.cli.eval"]        # inside run()
-    assert "sot_apps.raycast" in graph["sot_apps.lidar_sim.scan"]
+    assert "sot_apps.raycast" in graph["sot_apps.sensor.scan"]
 
 
 def test_apps_import_the_tracker_through_its_package():

@@ -40,7 +40,7 @@ def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.nda
     meshes, seconds, npoints = [], [], []
     if bank_dir:
         from ..io.ply import read_ply_points
-        from ..lidar_sim.bank import read_bank
+        from ..objects.bank import read_bank
 
         bank = read_bank(bank_dir)
         for entry in bank.entries:
@@ -70,11 +70,11 @@ def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.nda
 
 
 def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int = 20, sensor_name: str = "waymo_top") -> dict:
-    from ..lidar_sim.noise import Realism
+    from ..sensor.noise import Realism
     from ..raycast import RaycastScene
-    from ..lidar_sim.scan import SimObject, simulate_scan
+    from ..sensor.scan import SimObject, simulate_scan
     from ..objects.trajectory import Trajectory
-    from ..lidar_sim.sensors import load_sensor
+    from ..sensor.model import load_sensor
 
     pinned = _pin_one_core()
     sensor = load_sensor(sensor_name)
@@ -93,7 +93,7 @@ def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int 
         placed.append((x, y))
         objects.append(SimObject(v, f, Trajectory.static(x, y, -1.8 + height / 2 - float(v[:, 2].min() + height / 2),
                                                          float(rng.uniform(-np.pi, np.pi))), i, 0.5))
-    from ..lidar_sim.scan import build_static_scene
+    from ..sensor.scan import build_static_scene
 
     start = time.perf_counter()
     scene: RaycastScene = build_static_scene(objects)

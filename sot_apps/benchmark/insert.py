@@ -22,19 +22,19 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from tracker import Box, invert_transform, points_in_box, transform_points
 
 from ..io.sequence import Sequence
 from .background import ego_from_sensor, sensor_path, to_states
 from .deps import (
-    OCCLUDER_MARGIN_M,
     RaycastScene,
     Realism,
     Sensor,
     SimObject,
     Trajectory,
+    angular_tolerance,
+    blocked_by_real,
     invert_transform_batch,
     simulate_scan,
     world_from_object,
@@ -123,16 +123,6 @@ def _background_occlusion(objects: list[tuple[SimObject, np.ndarray]], scenes: d
     return occluded
 
 
-def _blocked_by_real(real_dirs: np.ndarray, real_dist: np.ndarray, sim_dirs: np.ndarray, sim_dist: np.ndarray,
-                     sensor: Sensor) -> np.ndarray:
-    if len(sim_dirs) == 0 or len(real_dirs) == 0:
-        return np.zeros(len(sim_dirs), dtype=bool)
-    tol = max(math.radians(sensor.azimuth_resolution_deg) / 2.0, math.radians(0.1))
-    dist, idx = cKDTree(real_dirs).query(sim_dirs, k=8, distance_upper_bound=tol)
-    near = np.where(np.isfinite(dist), real_dist[np.minimum(idx, len(real_dist) - 1)], np.inf)
-    return (near < sim_dist[:, None] - OCCLUDER_MARGIN_M).any(axis=1)
-
-
 def _centre_times(vehicles: list[InsertedVehicle], sensor: Sensor, sensor_from_world: np.ndarray,
                   frame_time_ns: int) -> np.ndarray:
     """When the beams pass each vehicle's centre (two fixed-point steps: pose -> azimuth -> column time)."""
@@ -196,7 +186,8 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
     rr = np.linalg.norm(rd, axis=1)
     sd = sim - sim_origins
     sr = np.linalg.norm(sd, axis=1)
-    blocked = _blocked_by_real(rd / np.maximum(rr, 1e-9)[:, None], rr, sd / np.maximum(sr, 1e-9)[:, None], sr, sensor)
+    blocked = blocked_by_real(rd / np.maximum(rr, 1e-9)[:, None], rr, sd / np.maximum(sr, 1e-9)[:, None], sr,
+                              angular_tolerance(sensor))
     keep_sim = ~blocked
 
     intensity_real = (sweep.intensity[keep] if sweep.intensity is not None else np.zeros(len(real), np.float32))

@@ -50,7 +50,7 @@ def register(subparsers) -> argparse.ArgumentParser:
 def run_build(args: argparse.Namespace) -> int:
     from ..io import open_sequence
     from ..objects.selection import DEFAULT_SELECTION
-    from ..lidar_sim.bank import (entries_from_annotations, entry_from_mesh_file, entry_from_track_dir,
+    from ..objects.bank import (entries_from_annotations, entry_from_mesh_file, entry_from_track_dir,
                                   is_track_dir, read_bank, write_bank_index)
 
     if not args.inputs and not args.from_annotations:
@@ -95,7 +95,7 @@ def run_build(args: argparse.Namespace) -> int:
 
 
 def run_list(args: argparse.Namespace) -> int:
-    from ..lidar_sim.bank import bank_summary_rows, read_bank
+    from ..objects.bank import bank_summary_rows, read_bank
 
     bank = read_bank(args.bank)
     headers = ["id", "label", "size LxWxH (m)", "points", "quality", "source", "sequence/path", "track"]

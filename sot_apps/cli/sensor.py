@@ -57,8 +57,8 @@ def run_fit(args: argparse.Namespace) -> int:
     from tracker import invert_transform, transform_points
 
     from ..io.atomic import write_json
-    from ..lidar_sim.fit import compare_to_preset, fit_sensor, points_at_capture_pose
-    from ..lidar_sim.sensors import preset
+    from ..sensor.fit import compare_to_preset, fit_sensor, points_at_capture_pose
+    from ..sensor.model import preset
 
     seq = load_sequence(args)
     try:
@@ -83,7 +83,7 @@ def run_fit(args: argparse.Namespace) -> int:
         times.append(sweep.time_offset_ns)
     alignment = None
     if args.align:
-        from ..lidar_sim.fit import align_sensor_frame
+        from ..sensor.fit import align_sensor_frame
 
         sensor_from_frame, alignment = align_sensor_frame(sweeps)
         sweeps = [transform_points(sensor_from_frame, s) for s in sweeps]

@@ -43,10 +43,10 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from ..io import open_sequence
-    from ..lidar_sim.bank import read_bank
+    from ..objects.bank import read_bank
     from ..lidar_sim.export import FORMATS
     from ..lidar_sim.scene import load_scene, overlapping_objects, random_scene
-    from ..lidar_sim.sensors import load_sensor
+    from ..sensor.model import load_sensor
     from ..lidar_sim.simulate import counts_table, run_simulation
 
     if (args.scene is None) == (args.random is None):

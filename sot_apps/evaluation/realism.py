@@ -54,11 +54,13 @@ def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_
 
     from tracker import Box, invert_transform, points_in_box, transform_points
 
-    from ..lidar_sim.bank import GROUND_CLEARANCE, Bank, BankEntry, track_points_by_frame
+    from ..objects.bank import GROUND_CLEARANCE, track_points_by_frame
     from ..objects.meshes import SurfelParams, box_mesh, surfel_mesh
-    from ..lidar_sim.noise import Realism
-    from ..lidar_sim.scene import SceneObject, SceneSpec, insert_into_background
-    from ..lidar_sim.sensors import load_sensor
+    from ..objects.trajectory import Trajectory
+    from ..sensor.model import load_sensor
+    from ..sensor.noise import Realism
+    from ..sensor.occlusion import angular_tolerance, blocked_by_real
+    from ..sensor.scan import SimObject, simulate_scan
 
     sensor = load_sensor(sensor_name)
     ids = [seq.resolve_track_id(p) for p in track_prefixes]
@@ -73,18 +75,6 @@ def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_
         jobs += [(tid, k) for k in picks]
     rows: list[Row] = []
 
-    class _MemBank(Bank):
-        def __init__(self, meshes):
-            super().__init__(root=seq.root, entries=[])
-            self._meshes = meshes
-            for key, (v, _f, size) in meshes.items():
-                self.entries.append(BankEntry(key, "", None, {"kind": "mesh"},
-                                              {"length": size[0], "width": size[1], "height": size[2]}, len(v), 1.0))
-
-        def mesh(self, entry_id):
-            v, f, _ = self._meshes[entry_id]
-            return v, f
-
     # the simulated optical centre in the LiDAR frame (``origin`` wins over ``origin_z``)
     centre = np.asarray(origin if origin is not None else (0.0, 0.0, origin_z), dtype=np.float64)
     lidar_from_ego = invert_transform(seq.ego_from_lidar)
@@ -94,26 +84,27 @@ def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_
         others = np.vstack([p for j, p in per_frame[tid].items() if j != k])
         size = box_world.size
         cuboid = box_mesh(*(float(v) for v in size))
-        meshes = {"box": (cuboid.vertices, cuboid.faces, tuple(size))}
+        meshes = {"box": (cuboid.vertices, cuboid.faces)}
         for variant, mirror in (("surfel", False), ("surfel+mirror", True)):
             v, f, _ = surfel_mesh(others, SurfelParams(), mirror=mirror)
-            meshes[variant] = (v, f, tuple(size))
+            meshes[variant] = (v, f)
         sensor_from_world = lidar_from_ego @ invert_transform(seq.frames[k].world_from_ego)
         box_sensor: Box = box_world.transformed(sensor_from_world)
         sweep = seq.sweep(k)
         bg = transform_points(lidar_from_ego, sweep.xyz)
-        bg = bg[~points_in_box(bg, box_sensor, scale=(1.1, 1.1, 1.05))]
-        bg -= centre
+        bg = bg[~points_in_box(bg, box_sensor, scale=(1.1, 1.1, 1.05))] - centre
+        bg_r = np.linalg.norm(bg, axis=1)
+        bg, bg_r = bg[bg_r > 1e-6], bg_r[bg_r > 1e-6]
         rng_m = float(np.hypot(box_sensor.x, box_sensor.y))
+        pose = Trajectory.static(box_sensor.x - centre[0], box_sensor.y - centre[1], box_sensor.z - centre[2],
+                                 box_sensor.heading)
+        realism = Realism(range_noise=True, drop_grazing=True, intensity=False, motion_distortion=False, seed=seed + k)
         for variant in ("box", "surfel", "surfel+mirror"):
-            spec = SceneSpec(sensor, None, [SceneObject(variant, box_sensor.x - centre[0], box_sensor.y - centre[1],
-                                                        box_sensor.z - centre[2],
-                                                        box_sensor.heading)],
-                             Realism(range_noise=True, drop_grazing=True, intensity=False, motion_distortion=False,
-                                     seed=seed + k))
-            result = insert_into_background(spec, _MemBank(meshes), bg)
-            sim = result.scan.xyz[result.scan.instance == 0].astype(np.float64)
-            sim += centre
+            scan = simulate_scan(sensor, [SimObject(*meshes[variant], pose, instance=0)], np.eye(4), realism=realism)
+            sim = scan.xyz.astype(np.float64)
+            sim_r = np.linalg.norm(sim, axis=1)
+            hidden = blocked_by_real(bg / bg_r[:, None], bg_r, sim / sim_r[:, None], sim_r, angular_tolerance(sensor))
+            sim = sim[~hidden] + centre
             local = transform_points(box_sensor.object_from_world(), sim)
             local = local[local[:, 2] > -box_sensor.height / 2 + GROUND_CLEARANCE]
             rows.append(Row(tid[:8], k, rng_m, len(real), variant, len(local), chamfer(local, real)))

@@ -25,7 +25,7 @@ from tracker import Box, wrap_angle
 
 from ..io.atomic import write_bytes, write_json, write_npz, write_text
 from ..io.ply import write_ply_points
-from .scan import Scan, range_image
+from ..sensor.scan import Scan, range_image
 from .visibility import Visibility
 
 __all__ = ["write_scan_npz", "write_bin", "write_pcd", "write_ply", "kitti_label_lines", "write_boxes",

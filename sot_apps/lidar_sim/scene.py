@@ -21,23 +21,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from tracker import Box
 
 from ..errors import InputError
 from ..schemas import validate
-from .bank import Bank
-from .noise import Realism
+from ..objects.bank import Bank
+from ..sensor.noise import Realism
 from ..raycast import RaycastScene
-from .scan import Scan, SimObject, Trajectory, simulate_scan
-from .sensors import Sensor, load_sensor
+from ..sensor.scan import Scan, SimObject, Trajectory, simulate_scan
+from ..sensor.model import Sensor, load_sensor
+from ..sensor.occlusion import OCCLUDER_MARGIN_M, angular_tolerance, blocked_by_real
 from .visibility import Visibility, vehicle_visibility
 
 __all__ = ["SceneObject", "SceneSpec", "SimResult", "load_scene", "overlapping_objects", "random_scene", "simulate_scene",
            "insert_into_background", "OCCLUDER_MARGIN_M"]
-
-OCCLUDER_MARGIN_M = 0.3
 
 
 @dataclass
@@ -218,13 +216,9 @@ def insert_into_background(spec: SceneSpec, bank: Bank, background_xyz: np.ndarr
     if len(sim) and keep_bg.any():
         kept = bg[keep_bg & valid]
         kept_r = np.linalg.norm(kept, axis=1)
-        tree = cKDTree(kept / kept_r[:, None])
         sim_r = np.linalg.norm(sim.xyz.astype(np.float64), axis=1)
-        tol = max(math.radians(spec.sensor.azimuth_resolution_deg) / 2.0, math.radians(0.1))
-        dist, idx = tree.query(sim.xyz / sim_r[:, None], k=8, distance_upper_bound=tol)
-        found = np.isfinite(dist)
-        near_r = np.where(found, kept_r[np.minimum(idx, len(kept_r) - 1)], np.inf)
-        blocked = (near_r < sim_r[:, None] - OCCLUDER_MARGIN_M).any(axis=1)
+        blocked = blocked_by_real(kept / kept_r[:, None], kept_r, sim.xyz / sim_r[:, None], sim_r,
+                                  angular_tolerance(spec.sensor))
         removed_vehicle = int(blocked.sum())
         sim = _subset(sim, ~blocked)
 

@@ -10,9 +10,9 @@ import numpy as np
 from tracker import invert_transform, transform_points
 
 from ..io.atomic import write_json
-from .bank import Bank
+from ..objects.bank import Bank
 from .export import write_bin, write_boxes, write_pcd, write_ply, write_scan_npz
-from .preview import write_bev_png, write_object_gallery
+from ..sensor.preview import write_bev_png, write_object_gallery
 from .scene import SceneSpec, SimResult, insert_into_background, simulate_scene
 
 __all__ = ["SimulationOutputs", "run_simulation"]

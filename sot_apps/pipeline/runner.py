@@ -242,7 +242,7 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
     # ---- bank index (written here, from every sequence's entries)
     bank_entries: list[dict] = []
     if stages.bank.enabled:
-        from ..lidar_sim.bank import Bank, BankEntry, write_bank_index
+        from ..objects.bank import Bank, BankEntry, write_bank_index
 
         for r in batch:
             if r.stage == "bank" and r.status in ("done", "cached") and r.result:
@@ -253,7 +253,7 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
 
     # ---- 3. simulated scans (per bank entry and range)
     if stages.scans.enabled:
-        from ..lidar_sim.bank import read_bank
+        from ..objects.bank import read_bank
 
         scan_stage = stages.scans
         bank = read_bank(out / "bank", must_exist=False)

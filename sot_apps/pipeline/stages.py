@@ -91,7 +91,7 @@ def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> 
 def bank_sequence(out: str, sequence: str, object_ids: list[str], stage: BankStage, digest: str) -> dict:
     """Bank entries (surfel meshes) from one sequence's tracked shapes; the index is written by the runner."""
     from ..io.tracks import read_track
-    from ..lidar_sim.bank import entry_from_points
+    from ..objects.bank import entry_from_points
 
     bank_root = Path(out) / "bank"
     entries, skipped, outputs = [], [], []
@@ -196,10 +196,10 @@ def simulate_scene(out: str, entry_id: str, range_m: float, headings_deg: list[f
                    digest: str) -> dict:
     """One bank vehicle placed ``len(headings)`` times at ``range_m`` (evenly spread azimuths, one heading each)
     and ray cast: ``OUT/scans/<entry>__r<range>m/`` (scan.npz, boxes.json, labels_kitti.txt, preview.png, scene.json)."""
-    from ..lidar_sim.bank import read_bank
-    from ..lidar_sim.noise import Realism
+    from ..objects.bank import read_bank
+    from ..sensor.noise import Realism
     from ..lidar_sim.scene import SceneObject, SceneSpec
-    from ..lidar_sim.sensors import load_sensor
+    from ..sensor.model import load_sensor
     from ..lidar_sim.simulate import run_simulation
 
     bank = read_bank(Path(out) / "bank")

@@ -11,7 +11,7 @@ The world (everything in metres, world frame z up, ground plane z = 0):
   road with gentle speed and heading changes.
 
 Frame ``k``'s timestamp marks the end of its sweep. Points are simulated with a rolling scan (see
-:mod:`sot_apps.lidar_sim.scan`): the ego and every vehicle are at their exact pose at each column's time.
+:mod:`sot_apps.sensor.scan`): the ego and every vehicle are at their exact pose at each column's time.
 Ground-truth boxes in ``sequence.json`` describe each object when the LiDAR saw it (the median capture
 time of its returns; see :func:`observation_times_ns`), as PandaSet's annotations do; ``gt/objects.json``
 has the states at the frame timestamps and ``gt/trajectories.npz`` every millisecond.
@@ -53,11 +53,11 @@ from ..io.ply import write_ply_mesh
 from ..io.sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 from ..objects.meshes import box_mesh
 from ..objects.motion_profiles import PROFILES, integrate_motion, place_path, sample_motion
-from ..lidar_sim.noise import Realism
+from ..sensor.noise import Realism
 from ..raycast import RaycastScene
-from ..lidar_sim.scan import Scan, SimObject, simulate_scan
+from ..sensor.scan import Scan, SimObject, simulate_scan
 from ..objects.trajectory import Trajectory, world_from_object, wrap_heading
-from ..lidar_sim.sensors import Sensor, load_sensor
+from ..sensor.model import Sensor, load_sensor
 from .vehicles import random_vehicle
 from ..interrupts import import_trimesh
 
@@ -135,7 +135,7 @@ class World:
                              static_scene=static_scene)
 
     def static_scene(self) -> RaycastScene:
-        from ..lidar_sim.scan import build_static_scene
+        from ..sensor.scan import build_static_scene
 
         return build_static_scene(self.sim_objects())
 
@@ -419,7 +419,7 @@ def _write_preview(path: Path, world: World, scan: Scan, info: FrameInfo) -> Non
     """Bird's-eye view of the last frame (ego frame) with its ground-truth boxes."""
     from tracker import invert_transform
 
-    from ..lidar_sim.preview import write_bev_png
+    from ..sensor.preview import write_bev_png
 
     ego_from_world = invert_transform(info.world_from_ego)
     boxes = [o.box_at(info.timestamp_ns).transformed(ego_from_world) for o in world.objects]

@@ -22,7 +22,7 @@ def bank(tmp_path_factory) -> Path:
     import numpy as np
 
     from sot_apps.io.ply import write_ply_mesh
-    from sot_apps.lidar_sim.bank import Bank, entry_from_mesh_file, write_bank_index
+    from sot_apps.objects.bank import Bank, entry_from_mesh_file, write_bank_index
     from sot_apps.synth.vehicles import make_vehicle
 
     root = tmp_path_factory.mktemp("bank")

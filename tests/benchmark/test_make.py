@@ -105,7 +105,7 @@ def test_inserted_points_sit_where_the_ground_truth_says(small_benchmark):
 def test_replicas_stand_in_for_real_tracks_on_their_own_path(background, tmp_path):
     """--replicas: the real car's points are cut and its bank vehicle is simulated on the real path."""
     from sot_apps.benchmark.make import MakeConfig, make_benchmark
-    from sot_apps.lidar_sim.bank import Bank, entries_from_annotations, write_bank_index
+    from sot_apps.objects.bank import Bank, entries_from_annotations, write_bank_index
 
     seq = open_sequence(background)
     tid = sorted(t for t in seq.tracks() if t.startswith("veh_"))[0]

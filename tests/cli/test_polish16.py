@@ -85,7 +85,7 @@ def test_bank_build_that_adds_nothing_is_an_error(tmp_path, pandaset_root, capsy
 
 
 def test_overlapping_objects_in_a_scene_file_are_refused(tmp_path, capsys):
-    from sot_apps.lidar_sim.bank import Bank, entry_from_mesh_file, write_bank_index
+    from sot_apps.objects.bank import Bank, entry_from_mesh_file, write_bank_index
 
     mesh = tmp_path / "car.ply"
     trimesh.creation.box(extents=(4.0, 2.0, 1.6)).export(mesh)

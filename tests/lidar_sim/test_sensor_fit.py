@@ -11,10 +11,10 @@ import trimesh
 from sot_apps.cli.main import main
 from sot_apps.io.canonical import write_sequence
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
-from sot_apps.lidar_sim.noise import Realism
-from sot_apps.lidar_sim.scan import SimObject, simulate_scan
+from sot_apps.sensor.noise import Realism
+from sot_apps.sensor.scan import SimObject, simulate_scan
 from sot_apps.objects.trajectory import Trajectory
-from sot_apps.lidar_sim.sensors import PRESETS
+from sot_apps.sensor.model import PRESETS
 
 
 def _room_sweep(name: str, seed: int = 0):
@@ -49,7 +49,7 @@ def test_points_at_capture_pose_undoes_the_sensor_motion():
     """Points seen by a moving, turning sensor come back to the sensor frame of their own capture time."""
     from scipy.spatial.transform import Rotation, Slerp
 
-    from sot_apps.lidar_sim.fit import points_at_capture_pose
+    from sot_apps.sensor.fit import points_at_capture_pose
 
     rng = np.random.default_rng(0)
     t_prev, t_now = 1_000_000_000, 1_100_000_000
@@ -79,7 +79,7 @@ def test_align_finds_an_offset_optical_centre():
     centre, and the fit then recovers the preset's beams."""
     from tracker.geometry import transform_points
 
-    from sot_apps.lidar_sim.fit import align_sensor_frame, fit_sensor
+    from sot_apps.sensor.fit import align_sensor_frame, fit_sensor
 
     room = trimesh.creation.box(extents=[60.0, 50.0, 30.0])
     room.apply_translation([3.0, -2.0, 8.0])

@@ -12,12 +12,12 @@ from scipy.spatial import cKDTree
 
 from sot_apps.cli.main import main
 from sot_apps.io import open_sequence
-from sot_apps.lidar_sim.bank import (Bank, aggregate_track_points, entries_from_annotations, entry_from_mesh_file,
+from sot_apps.objects.bank import (Bank, aggregate_track_points, entries_from_annotations, entry_from_mesh_file,
                                      read_bank, write_bank_index)
 from sot_apps.lidar_sim.export import kitti_label_lines
-from sot_apps.lidar_sim.noise import Realism
+from sot_apps.sensor.noise import Realism
 from sot_apps.lidar_sim.scene import SceneObject, SceneSpec, insert_into_background
-from sot_apps.lidar_sim.sensors import PRESETS
+from sot_apps.sensor.model import PRESETS
 from sot_apps.synth import make_world, write_world
 from tracker.geometry import Box
 

@@ -39,7 +39,7 @@ def test_motion_rule_thresholds():
 def test_info_planning_bank_and_eval_select_the_same_vehicles(pandaset, pandaset_root, tmp_path, monkeypatch):
     from sot_apps.cli.main import main
     from sot_apps.evaluation.tracker import select_moving_vehicle_tracks
-    from sot_apps.lidar_sim import bank as bank_module
+    from sot_apps.objects import bank as bank_module
     from sot_apps.pipeline.config import ObjectSource, PipelineConfig, SequenceConfig
     from sot_apps.pipeline.plan import make_plan
     from sot_apps.summary import summarize_tracks

@@ -24,7 +24,7 @@ from tracker import invert_transform
 from ..objects.trajectory import Trajectory, world_from_object
 from .noise import Realism, apply_range_noise, drop_mask, incidence_cosine, lambertian_intensity
 from ..raycast import RaycastScene, RayHits
-from .sensors import Sensor
+from .model import Sensor
 
 __all__ = ["SimObject", "Scan", "simulate_scan", "range_image", "build_static_scene"]
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from .sensors import Sensor
+from .model import Sensor
 
 __all__ = ["FitResult", "fit_sensor", "elevation_peaks", "align_sensor_frame", "points_at_capture_pose"]
 

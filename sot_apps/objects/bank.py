@@ -37,8 +37,8 @@ from ..io.atomic import write_json
 from ..io.ply import read_ply_mesh, read_ply_points, write_ply_mesh, write_ply_points
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
-from ..objects.meshes import SurfelParams, surfel_mesh
-from ..objects.shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
+from .meshes import SurfelParams, surfel_mesh
+from .shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
 from ..interrupts import import_trimesh
 
 __all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
