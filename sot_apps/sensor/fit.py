@@ -23,7 +23,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from .model import Sensor
 
-__all__ = ["FitResult", "fit_sensor", "elevation_peaks", "align_sensor_frame", "points_at_capture_pose"]
+__all__ = ["FitResult", "fit_sensor", "elevation_peaks", "align_sensor_frame", "points_at_capture_pose", "ring_sharpness"]
 
 
 @dataclass
@@ -183,6 +183,12 @@ def _sharpness(points: np.ndarray, params: np.ndarray) -> float:
     fine = np.bincount(bins[(bins >= 0) & (bins < 4500)], minlength=4500).astype(np.float64)
     coarse = fine.reshape(180, 25).sum(axis=1)                         # 0.5-degree bins
     return float((fine ** 2).sum() / max((coarse ** 2).sum(), 1.0) * 25.0)
+
+
+def ring_sharpness(points: np.ndarray) -> float:
+    """How sharply the elevations of points (sensor frame) concentrate on beams: the criterion
+    :func:`align_sensor_frame` maximises (1 = no structure finer than 0.5 degrees)."""
+    return _sharpness(np.asarray(points, dtype=np.float64), np.zeros(5))
 
 
 def align_sensor_frame(sweeps: list[np.ndarray], min_range: float = 3.0, max_points: int = 40_000,

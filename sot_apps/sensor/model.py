@@ -18,6 +18,9 @@ Beam tables (degrees, in laser-id order) — see docs/lidar_sim.md for sources:
 - ``pandar64``: Hesai Pandar64 angle-correction table as we remember the published datasheet (dense 0.167
   deg spacing from +1.86 to -6.06 deg, sparse above and below, +14.88 ... -24.90 deg); 0.2 deg at 10 Hz
   (1800 columns), 200 m. ``sot-apps sensor fit`` on PandaSet checks it (docs/lidar_sim.md).
+- ``pandaset_pandar64``: ``pandar64`` with PandaSet's range drop, ``clip(0.05 + 0.005 * r, 0, 1)``, fitted
+  on real against simulated points of non-dev vehicles (docs/lidar_sim.md). Its optical centre is not a
+  sensor property: the PandaSet reader puts the LiDAR frame there (``ego_from_lidar``).
 """
 
 from __future__ import annotations
@@ -49,6 +52,9 @@ class Sensor:
         direction: +1 counter-clockwise (seen from above), -1 clockwise.
         range_noise_sigma: Gaussian range noise (metres, 1 sigma) used when noise is switched on.
         azimuth_offsets_deg: optional per-beam azimuth offset (degrees) added to the column azimuth.
+        drop_at_zero_range, drop_per_m: the range drop model (with ``Realism.drop_range``): a return at
+            range r is lost with probability ``clip(drop_at_zero_range + drop_per_m * r, 0, 1)``; both 0 (the
+            default) turn it off.
     """
 
     name: str
@@ -61,6 +67,8 @@ class Sensor:
     direction: int = 1
     range_noise_sigma: float = 0.02
     azimuth_offsets_deg: tuple[float, ...] | None = field(default=None)
+    drop_at_zero_range: float = 0.0
+    drop_per_m: float = 0.0
 
     def __post_init__(self) -> None:
         if len(self.elevations_deg) == 0:
@@ -69,6 +77,8 @@ class Sensor:
             raise ValueError("columns must be >= 1")
         if self.azimuth_offsets_deg is not None and len(self.azimuth_offsets_deg) != len(self.elevations_deg):
             raise ValueError("azimuth_offsets_deg must have one entry per beam")
+        if not 0.0 <= self.drop_at_zero_range <= 1.0 or self.drop_per_m < 0:
+            raise ValueError("drop_at_zero_range must be in [0, 1] and drop_per_m >= 0")
 
     @property
     def beams(self) -> int:
@@ -85,6 +95,14 @@ class Sensor:
     @property
     def azimuth_resolution_deg(self) -> float:
         return 360.0 / self.columns
+
+    @property
+    def has_range_drop(self) -> bool:
+        return self.drop_at_zero_range > 0 or self.drop_per_m > 0
+
+    def range_drop_probability(self, distance: np.ndarray) -> np.ndarray:
+        """Probability that a return at ``distance`` (m) is lost (the range drop model; zeros when off)."""
+        return np.clip(self.drop_at_zero_range + self.drop_per_m * np.asarray(distance, dtype=np.float64), 0.0, 1.0)
 
     def elevations(self) -> np.ndarray:
         """(B,) beam elevations in radians."""
@@ -128,6 +146,9 @@ class Sensor:
             data.pop("azimuth_offsets_deg")
         else:
             data["azimuth_offsets_deg"] = list(self.azimuth_offsets_deg)
+        if not self.has_range_drop:  # the JSON of sensors without one is unchanged
+            data.pop("drop_at_zero_range")
+            data.pop("drop_per_m")
         return {"version": 1, **data}
 
 
@@ -167,6 +188,12 @@ PRESETS: dict[str, Sensor] = {
                      direction=-1, range_noise_sigma=0.02),
     "pandar64": Sensor("pandar64", _PANDAR64, columns=1800, min_range=0.3, max_range=200.0, rotation_hz=10.0,
                        direction=-1, range_noise_sigma=0.02),
+    # PandaSet's Pandar64 as its sweeps show it: the same beam table (every beam from -8.1 to +15 deg within
+    # 0.12 deg of a measured ring; tests/sensor), and returns on vehicles lost with a probability growing
+    # with range, fitted on 37 parked and other non-dev vehicles of pandaset_002 (docs/lidar_sim.md)
+    "pandaset_pandar64": Sensor("pandaset_pandar64", _PANDAR64, columns=1800, min_range=0.3, max_range=200.0,
+                                rotation_hz=10.0, direction=-1, range_noise_sigma=0.02, drop_at_zero_range=0.05,
+                                drop_per_m=0.005),
 }
 
 

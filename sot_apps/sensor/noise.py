@@ -8,6 +8,9 @@ Every effect is off unless switched on in :class:`Realism`, and all randomness c
 - Grazing drop: a return whose incidence angle ``theta`` (between the reversed ray and the surface
   normal) exceeds ``grazing_start_deg`` is lost with probability
   ``((theta - start) / (90 - start)) ** 2`` (certain at 90 degrees).
+- Range drop (the sensor's, e.g. ``pandaset_pandar64``): a return at range ``r`` is lost with probability
+  ``clip(drop_at_zero_range + drop_per_m * r, 0, 1)`` (:meth:`Sensor.range_drop_probability`): weak far
+  returns (dark paint, windows at a slant) fall below the detection threshold.
 - Intensity: Lambertian times reflectivity with atmospheric range falloff,
   ``I = rho * cos(theta) * exp(-2 * attenuation * r)``, in [0, 1].
 """
@@ -29,6 +32,7 @@ class Realism:
     drop_random: float = 0.0
     drop_grazing: bool = True
     grazing_start_deg: float = 75.0
+    drop_range: bool = True
     intensity: bool = True
     attenuation_per_m: float = 0.002
     motion_distortion: bool = True
@@ -36,7 +40,7 @@ class Realism:
 
     @classmethod
     def ideal(cls, seed: int = 0) -> "Realism":
-        return cls(range_noise=False, drop_random=0.0, drop_grazing=False, intensity=False,
+        return cls(range_noise=False, drop_random=0.0, drop_grazing=False, drop_range=False, intensity=False,
                    motion_distortion=False, seed=seed)
 
 
@@ -51,11 +55,13 @@ def apply_range_noise(distance: np.ndarray, sigma: float, rng: np.random.Generat
 
 
 def drop_mask(cos_incidence: np.ndarray, realism: Realism, rng: np.random.Generator, num_rays: int | None = None,
-              index: np.ndarray | None = None) -> np.ndarray:
+              index: np.ndarray | None = None, range_drop: np.ndarray | None = None) -> np.ndarray:
     """Boolean mask of returns that are dropped.
 
     ``cos_incidence`` may cover a subset of the sweep: ``index`` (into ``num_rays`` rays) says which. The
     random draws always cover all ``num_rays``, so the same seed drops the same rays whatever the subset.
+    ``range_drop``: per-return drop probability from the sensor's range model (None: no range drop; its draws
+    come last, so sensors without one give the same scans as before).
     """
     n = cos_incidence.shape[0] if num_rays is None else int(num_rays)
 
@@ -75,6 +81,8 @@ def drop_mask(cos_incidence: np.ndarray, realism: Realism, rng: np.random.Genera
         theta = np.degrees(np.arccos(cos_incidence[grazing]))
         p[grazing] = np.clip((theta - start) / max(90.0 - start, 1e-6), 0.0, 1.0) ** 2
         dropped |= draw() < p
+    if range_drop is not None:
+        dropped |= draw() < range_drop
     return dropped
 
 

@@ -164,8 +164,9 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
     measured = dist.copy()
     if realism.range_noise and sensor.range_noise_sigma > 0:
         measured = apply_range_noise(measured, sensor.range_noise_sigma, rng)
-    if realism.drop_random > 0 or realism.drop_grazing:
-        valid[cand] &= ~drop_mask(cos_cand, realism, rng, num_rays=len(dist), index=cand)
+    range_drop = (sensor.range_drop_probability(dist[cand]) if realism.drop_range and sensor.has_range_drop else None)
+    if realism.drop_random > 0 or realism.drop_grazing or range_drop is not None:
+        valid[cand] &= ~drop_mask(cos_cand, realism, rng, num_rays=len(dist), index=cand, range_drop=range_drop)
     keep_in_cand = valid[cand]
     keep = cand[keep_in_cand]
     if realism.intensity:
