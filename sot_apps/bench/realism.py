@@ -16,11 +16,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("sequence", metavar="SEQUENCE", help="annotated sequence (e.g. ../shared/data/pandaset_002)")
     parser.add_argument("--ids", nargs="+", default=list(DEV_TRACKS), metavar="ID",
                         help="track id prefixes (default: the 9 PandaSet dev tracks)")
-    parser.add_argument("--sensor", default="pandar64", help="sensor preset or JSON (default pandar64)")
+    parser.add_argument("--sensor", default="pandaset_pandar64",
+                        help="sensor preset or JSON (default pandaset_pandar64: PandaSet's Pandar64 with its range drop)")
     parser.add_argument("--frames-per-track", type=int, default=3, help="held-out frames per track (default 3)")
     parser.add_argument("--min-points", type=int, default=20, help="minimum real points in the box (default 20)")
     parser.add_argument("--origin-z", type=float, default=0.0,
-                        help="height of the simulated optical centre above the ego origin (m, default 0)")
+                        help="height of the simulated optical centre above the LiDAR frame origin (m, default 0: the "
+                             "reader's LiDAR frame, for PandaSet the measured optical centre; what-if experiments)")
     parser.add_argument("--origin", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                         help="the simulated optical centre in the LiDAR frame (m), e.g. from `sensor fit --align`; "
                              "overrides --origin-z")

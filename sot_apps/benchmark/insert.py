@@ -153,8 +153,8 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
                    scenes: dict[str, RaycastScene] | None = None,
                    origin: tuple[float, float, float] = (0.0, 0.0, 0.0), cut: list[Box] = ()) -> InsertedFrame:
     """Insert ``vehicles`` into frame ``k`` of ``seq`` (see the module doc); ``scenes`` from
-    :func:`vehicle_scenes` (built here when not given); ``origin``: the optical centre in the LiDAR frame
-    (PandaSet's pose origin is not: ``bench realism --origin-z 1.6``, docs/lidar_sim.md); ``cut``: world boxes
+    :func:`vehicle_scenes` (built here when not given); ``origin``: the simulated optical centre in the LiDAR frame
+    (0: the reader's LiDAR frame, which is the optical centre; what-if experiments only); ``cut``: world boxes
     whose real points are removed first (grown 0.75 m at each end for the rolling-scan smear, 0.3 m at the sides)."""
     t_k = int(seq.frames[k].timestamp_ns)
     world_from_sensor, path = sensor_path(seq, k, origin)

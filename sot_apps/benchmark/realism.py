@@ -21,7 +21,8 @@ from ..errors import InputError
 from ..io import open_sequence
 from ..objects.selection import DEFAULT_SELECTION
 
-__all__ = ["RangeCurves", "points_versus_range", "format_realism", "write_plot", "RANGE_BINS_M"]
+__all__ = ["RangeCurves", "points_versus_range", "format_realism", "write_plot", "RANGE_BINS_M", "ReplicaTrack",
+           "replica_counts", "format_replicas"]
 
 RANGE_BINS_M = (0.0, 5.0, 10.0, 15.0, 20.0, 30.0, 40.0, 50.0, 60.0, 80.0)
 
@@ -73,6 +74,77 @@ def points_versus_range(benchmark_dir: Path, max_copies: int = 5) -> RangeCurves
         seq = open_sequence(copy)
         inserted += _box_samples(seq, range(len(seq)), ids)
     return RangeCurves(np.array(real, dtype=np.float64).reshape(-1, 2), np.array(inserted, dtype=np.float64).reshape(-1, 2))
+
+
+@dataclass(frozen=True)
+class ReplicaTrack:
+    """A real track and its simulated copy (``benchmark make --replicas``), frame by frame."""
+
+    track: str             # the real track id
+    range_m: np.ndarray    # (F,) box centre's horizontal distance from the sensor, real box
+    real: np.ndarray       # (F,) points in the real box, real sweep
+    copy: np.ndarray       # (F,) points in the copy's box, the copy's sweep
+
+
+def replica_counts(benchmark_dir: Path) -> list[ReplicaTrack]:
+    """Real against copy point counts of a replica benchmark, over each listed tracklet's frames ([] when the
+    benchmark has no replicas)."""
+    config = json.loads((benchmark_dir / "make.json").read_text())["config"]
+    if not config.get("replicas"):
+        return []
+    first = int(config["frames"][0])
+    background = open_sequence(config["background"])
+    real_tracks = background.tracks()
+    out = []
+    for copy_dir in sorted(p.parent for p in benchmark_dir.glob("*/inserted.json")):
+        copy = open_sequence(copy_dir)
+        copy_tracks = copy.tracks()
+        for entry in json.loads((benchmark_dir / "benchmark.json").read_text()):
+            if entry["segment_name"] != copy.id or entry["id"] not in copy_tracks:
+                continue
+            tid = background.resolve_track_id(entry["id"].removeprefix("rep_"))
+            rows = []
+            for i in range(entry["frame_range"][0], entry["frame_range"][1] + 1):
+                k = first + i
+                real_box, copy_box = real_tracks[tid].box_at(k), copy_tracks[entry["id"]].box_at(i)
+                if real_box is None or copy_box is None:
+                    continue
+                sensor = (background.frames[k].world_from_ego @ background.ego_from_lidar)[:2, 3]
+                rows.append((float(np.hypot(*(real_box.center[:2] - sensor))),
+                             int(points_in_box(background.points_world(k), real_box).sum()),
+                             int(points_in_box(copy.points_world(i), copy_box).sum())))
+            a = np.array(rows, dtype=np.float64).reshape(-1, 3)
+            out.append(ReplicaTrack(tid, a[:, 0], a[:, 1], a[:, 2]))
+    return out
+
+
+def format_replicas(tracks: list[ReplicaTrack], first_frames: int = 10) -> str:
+    """Per track (first ``first_frames`` frames, as LiDAR-SOT's difficulty) and per range band (all frames)."""
+    lines = [f"replicas: real track against its simulated copy; points in the box, mean over the first {first_frames} "
+             "frames and summed over all frames", "",
+             "| track | range at start (m) | real (first 10) | copy (first 10) | copy / real | all frames copy / real |",
+             "|---|---:|---:|---:|---:|---:|"]
+    ratio = lambda c, r: f"{c / r:.2f}" if r else "—"  # noqa: E731
+    for t in sorted(tracks, key=lambda t: t.range_m[0] if len(t.range_m) else np.inf):
+        if not len(t.real):
+            continue
+        r10, c10 = float(t.real[:first_frames].mean()), float(t.copy[:first_frames].mean())
+        lines.append(f"| {t.track[:8]} | {t.range_m[0]:.1f} | {r10:.0f} | {c10:.1f} | {ratio(c10, r10)} | "
+                     f"{ratio(t.copy.sum(), t.real.sum())} |")
+    rng = np.concatenate([t.range_m for t in tracks]) if tracks else np.zeros(0)
+    real = np.concatenate([t.real for t in tracks]) if tracks else np.zeros(0)
+    copy = np.concatenate([t.copy for t in tracks]) if tracks else np.zeros(0)
+    lines += ["", "| range (m) | frames | real median | copy median | copy / real (sums) |", "|---|---:|---:|---:|---:|"]
+    for lo, hi in zip(RANGE_BINS_M[:-1], RANGE_BINS_M[1:]):
+        sel = (rng >= lo) & (rng < hi)
+        if sel.any():
+            lines.append(f"| {lo:.0f}-{hi:.0f} | {int(sel.sum())} | {np.median(real[sel]):.0f} | {np.median(copy[sel]):.0f} | "
+                         f"{ratio(copy[sel].sum(), real[sel].sum())} |")
+    sel = rng >= RANGE_BINS_M[-1]
+    if sel.any():
+        lines.append(f"| {RANGE_BINS_M[-1]:.0f}+ | {int(sel.sum())} | {np.median(real[sel]):.0f} | {np.median(copy[sel]):.0f} | "
+                     f"{ratio(copy[sel].sum(), real[sel].sum())} |")
+    return "\n".join(lines)
 
 
 def format_realism(curves: RangeCurves) -> str:

@@ -36,7 +36,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "build: LiDAR-SOT-style lists from annotated sequences with the paper's criteria. realism: points "
                     "in box versus range of inserted and real vehicles (table + PNG). See docs/benchmark.md.",
         examples=["sot-apps benchmark make --background ../shared/data/pandaset_002 --bank bank --tracklets 200 "
-                  "--frames 0:40 --seed 0 --origin 0 0 1.6 --out out/bench",
+                  "--frames 0:40 --seed 0 --out out/bench",
                   "sot-apps eval --benchmark out/bench/benchmark.json --preset full faithful --seeds 3",
                   "sot-apps benchmark build ../shared/data/pandaset_002 --min-frames 20 --out out/lists",
                   "sot-apps benchmark realism out/bench --plot docs/images/benchmark_points_vs_range.png"])
@@ -51,15 +51,17 @@ def register(subparsers) -> argparse.ArgumentParser:
     make.add_argument("--out", required=True, metavar="DIR", help="output directory (rerun to resume)")
     make.add_argument("--per-copy", type=int, default=14, metavar="K",
                       help="listed tracklets per copy of the background (default 14)")
-    make.add_argument("--sensor", default="pandar64", help="sensor preset or JSON (default pandar64; the scan "
-                                                          "phase is fitted to the background's point times)")
+    make.add_argument("--sensor", default="pandaset_pandar64",
+                      help="sensor preset or JSON (default pandaset_pandar64: PandaSet's Pandar64 with its range drop; "
+                           "the scan phase is fitted to the background's point times)")
     make.add_argument("--range", type=_range, default=(5.0, 80.0), metavar="MIN:MAX",
                       help="initial range of the tracklets in metres (default 5:80, log-uniform)")
     make.add_argument("--drop", type=float, default=0.0, help="random ray drop probability (default 0)")
     make.add_argument("--workers", type=int, default=1, help="processes simulating copies (default 1)")
     make.add_argument("--origin", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
-                      help="the optical centre in the LiDAR frame (m; default 0 0 0). PandaSet's pose origin is not "
-                           "its optical centre: use 0 0 1.6 as `bench realism --origin-z 1.6` (docs/lidar_sim.md)")
+                      help="the simulated optical centre in the background's LiDAR frame (m; default 0 0 0: the "
+                           "reader's LiDAR frame, which for PandaSet is the Pandar64's optical centre measured from "
+                           "the sweeps; docs/lidar_sim.md). Only for what-if experiments")
     make.add_argument("--replicas", nargs="+", default=(), metavar="TRACK_ID",
                       help="realism check instead of profiles: one copy in which each of these real tracks is "
                            "replaced by its bank vehicle on its own path (real points cut, vehicle simulated; same "
@@ -79,7 +81,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     build.add_argument("--types", default="vehicle", help="comma-separated: vehicle,pedestrian,cyclist (default vehicle)")
     build.set_defaults(action_run=_run_build)
 
-    realism = sub.add_parser("realism", help="points in box versus range: inserted versus real vehicles")
+    realism = sub.add_parser("realism", help="points in box versus range: inserted versus real vehicles (and, for "
+                                             "--replicas benchmarks, each copy against its real track)")
     realism.add_argument("benchmark", metavar="DIR", help="a `benchmark make` output directory")
     realism.add_argument("--plot", metavar="PNG", help="write the points-versus-range plot")
     realism.add_argument("--json", metavar="FILE", help="write the binned figures as JSON")
@@ -140,11 +143,15 @@ def _run_build(args: argparse.Namespace) -> int:
 
 
 def _run_realism(args: argparse.Namespace) -> int:
-    from ..benchmark.realism import format_realism, points_versus_range, write_plot
+    from ..benchmark.realism import format_realism, format_replicas, points_versus_range, replica_counts, write_plot
     from ..io.atomic import write_json
 
     curves = points_versus_range(Path(args.benchmark))
     print(format_realism(curves))
+    replicas = replica_counts(Path(args.benchmark))
+    if replicas:
+        print()
+        print(format_replicas(replicas))
     if args.plot:
         write_plot(curves, Path(args.plot))
         print(f"plot -> {args.plot}")

@@ -38,8 +38,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     fit.add_argument("--min-separation", type=float, default=0.09,
                      help="minimum angle between two beams in degrees (default 0.09)")
     fit.add_argument("--origin-z", type=float, default=0.0,
-                     help="height of the optical centre above the LiDAR frame origin (m); PandaSet's pose origin "
-                          "sits about 1.6-1.9 m below it; --align searches the full offset (docs/lidar_sim.md)")
+                     help="height of the optical centre above the LiDAR frame origin (m, default 0; the PandaSet "
+                          "reader already puts the LiDAR frame at the measured optical centre); --align searches the "
+                          "full offset (docs/lidar_sim.md)")
     fit.add_argument("--align", action="store_true",
                      help="first search the optical centre (offset from the LiDAR frame origin) and roll, pitch that "
                           "sharpen the beams (for sweeps not given in the optical-centre frame, e.g. PandaSet)")

@@ -6,7 +6,7 @@ For each annotated track (default: the 9 PandaSet dev tracks) and up to ``--fram
 1. a bank entry is built from the track's points in every frame EXCEPT k (de-skewed into the object frame
    with boxes interpolated at each point's capture time, ground cut 0.15 m above the box bottom), meshed
    with surfels (with and without mirror completion);
-2. it is simulated with the sensor (default ``pandar64``) at frame k's box pose relative to the sensor,
+2. it is simulated with the sensor (default ``pandaset_pandar64``) at frame k's box pose relative to the sensor,
    inserted into frame k's real sweep (the real returns inside the box are removed first) so real
    occluders hide it as they hid the real car; range noise and grazing drop on;
 3. simulated and real points in the box at frame k (object frame, same ground cut) are compared:
@@ -47,7 +47,7 @@ class Row:
         return self.sim_points / self.real_points if self.real_points else float("nan")
 
 
-def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandar64", frames_per_track: int = 3,
+def evaluate_realism(seq, track_prefixes, sensor_name: str = "pandaset_pandar64", frames_per_track: int = 3,
                      min_points: int = 20, origin_z: float = 0.0, seed: int = 0, progress: bool = True,
                      origin: tuple[float, float, float] | None = None) -> list[Row]:
     from tqdm import tqdm
