@@ -51,8 +51,8 @@ __all__ = ["is_pandaset", "read_pandaset", "pose_to_matrix", "seconds_to_ns", "P
            "ego_from_pandar64"]
 
 # The Pandar64's optical centre in the frame of lidar/poses.json (x right, y forward, z up; metres): median of
-# `align_sensor_frame` over 5 sets of stationary-ego sweeps of pandaset_002 (spread about 0.1 m in x, y and
-# 0.02 m in z; the fitted tilts, -0.75..0.09 degrees, were not consistent and are left out). docs/lidar_sim.md.
+# `align_sensor_frame` over 5 sets of stationary-ego sweeps of pandaset_002 (spread 0.12 m in x, 0.3 m in y,
+# 0.03 m in z; the fitted tilts, -0.75..0.09 degrees, were not consistent and are left out). docs/lidar_sim.md.
 PANDAR64_IN_POSE_FRAME = (-0.06, 1.87, 1.97)
 
 

@@ -127,6 +127,15 @@ def test_replicas_stand_in_for_real_tracks_on_their_own_path(background, tmp_pat
         pts = copy.points_world(k)
         assert points_in_box(pts[instance < 0], real_box).sum() == 0  # no real point of the car is left
         assert (instance == 0).sum() > 50
+    # `benchmark realism` pairs the copy with its real track, frame by frame
+    from sot_apps.benchmark.realism import format_replicas, replica_counts
+
+    (pair,) = replica_counts(out)
+    assert pair.track == tid and len(pair.real) == len(copy) == 6
+    for k in range(len(copy)):
+        assert pair.real[k] == points_in_box(seq.points_world(k), seq.tracks()[tid].box_at(k)).sum()
+        assert pair.copy[k] == points_in_box(copy.points_world(k), copy.tracks()[entry.id].box_at(k)).sum()
+    assert f"| {tid[:8]} |" in format_replicas([pair])
 
 
 def test_realism_curve_and_plot(small_benchmark, tmp_path, capsys):
