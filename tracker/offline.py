@@ -21,8 +21,8 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    A = (1 − β) n nᵀ + β I (β = 0: point-to-plane, β = 1: point-to-point; default 0.3), and
    c_k = min(1, ``effective_points`` / N_k), so a dense frame counts as at most that many independent
    points (LiDAR residuals are strongly correlated). It is solved by Gauss–Newton with iteratively
-   re-weighted Huber weights on one sparse (block-tridiagonal) 4K × 4K normal-equation system
-   (scipy.sparse), with a cost check and step halving; correspondences are recomputed at every step;
+   re-weighted Huber weights on one banded 4K × 4K normal-equation system
+   (Cholesky of its band), with a cost check and step halving; correspondences are recomputed at every step;
 4. gauge: the joint problem fixes the trajectory only up to where the shape sits in the object frame.
    With ``gauge="regauge"`` (default) all states are free and afterwards every pose is composed with the
    one object-frame correction that maps the refined S_0 onto the given start box (so S_0 is exact and
@@ -39,13 +39,12 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
+from scipy.linalg import solveh_banded
 from scipy.spatial import cKDTree
 
 from .config import TrackerConfig
 from .frames import FrameSource, LidarFrame
-from .geometry import Box, State, points_in_box, wrap_angle
+from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
 from .metrics import voxel_downsample_centres
 from .sotracker import FrameEstimate, TrackResult, deskew_points
@@ -96,6 +95,34 @@ def _box(state: np.ndarray, size: np.ndarray) -> Box:
                float(size[0]), float(size[1]), float(size[2]))
 
 
+def _square_candidates(points_ego: np.ndarray, world_from_ego: np.ndarray, centre_xy: np.ndarray,
+                       reach: float) -> np.ndarray:
+    """Indices of the ego points whose world x, y may lie within ``reach`` of ``centre_xy`` (a superset:
+    a single-precision test padded by 1 cm, so the exact test on the survivors decides as on all points)."""
+    rotation = world_from_ego[:2, :3].T.astype(np.float32)
+    rel = (np.asarray(centre_xy, dtype=np.float64) - world_from_ego[:2, 3]).astype(np.float32)
+    xy = points_ego.astype(np.float32, copy=False) @ rotation - rel
+    limit = np.float32(reach + 0.01)
+    return np.flatnonzero((np.abs(xy[:, 0]) <= limit) & (np.abs(xy[:, 1]) <= limit))
+
+
+def _deskew_reach(points_ego: np.ndarray, frame: LidarFrame, previous: tuple[int, np.ndarray]) -> float:
+    """Upper bound (m) of how far de-skew moves any point of ``frame`` from its plain world position:
+    the pose at a point's time differs from the frame's by at most |1 - s| of the frame-to-frame motion
+    (translation, and rotation angle times the point's range)."""
+    dt = float(frame.timestamp_ns - previous[0])
+    if dt == 0:
+        return 0.0
+    offsets = np.asarray(frame.point_time_offset_ns, dtype=np.float64)
+    s_off = float(np.max(np.abs(offsets))) / abs(dt) if len(offsets) else 0.0
+    r0, r1 = previous[1][:3, :3], np.asarray(frame.world_from_ego, dtype=np.float64)[:3, :3]
+    angle = float(np.arccos(np.clip((np.trace(r0.T @ r1) - 1.0) / 2.0, -1.0, 1.0)))
+    shift = float(np.linalg.norm(np.asarray(frame.world_from_ego)[:3, 3] - previous[1][:3, 3]))
+    finite = np.asarray(points_ego)[np.all(np.isfinite(points_ego), axis=1)]
+    radius = float(np.sqrt(np.max(np.sum(finite.astype(np.float64) ** 2, axis=1)))) if len(finite) else 0.0
+    return s_off * (shift + angle * radius) + 0.1
+
+
 def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, params: OfflineParams,
                         previous: tuple[int, np.ndarray] | None = None,
                         world: np.ndarray | None = None) -> np.ndarray:
@@ -107,11 +134,18 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
                   and len(frame.point_time_offset_ns) == len(pts_ego))
-    if use_deskew:
+    if world is None:  # only the part of the sweep that can reach the region is moved to the world frame
+        world_from_ego = np.asarray(frame.world_from_ego, dtype=np.float64)
+        pad = _deskew_reach(pts_ego, frame, previous) if use_deskew else 0.0
+        idx = _square_candidates(pts_ego, world_from_ego, box.center[:2], reach + pad)
+        if use_deskew:
+            world = deskew_points(pts_ego[idx], np.asarray(frame.point_time_offset_ns)[idx], frame.timestamp_ns,
+                                  world_from_ego, previous[0], previous[1])
+        else:
+            world = transform_points(world_from_ego, pts_ego[idx])
+    elif use_deskew:
         world = deskew_points(pts_ego, frame.point_time_offset_ns, frame.timestamp_ns, frame.world_from_ego,
                               previous[0], previous[1])
-    elif world is None:
-        world = frame.points_world()
     near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
     local = world[near]
     local = local[np.all(np.isfinite(local), axis=1)]
@@ -150,25 +184,49 @@ def _rebuild_shape(points: list[np.ndarray], states: np.ndarray, size: np.ndarra
     return voxel_downsample_centres(np.vstack(parts), voxel) if parts else np.zeros((0, 3))
 
 
-def _normals(shape: np.ndarray, k: int) -> np.ndarray:
-    """Unit normals (M, 3) by PCA of each point's k nearest neighbours (smallest-eigenvalue direction)."""
+def _normals(shape: np.ndarray, k: int, tree: cKDTree | None = None) -> np.ndarray:
+    """Unit normals (M, 3) by PCA of each point's k nearest neighbours (smallest-eigenvalue direction);
+    ``tree``: a kd-tree of ``shape`` when the caller has one."""
     k = int(min(k, len(shape)))
     if k < 3:
         return np.tile([0.0, 0.0, 1.0], (len(shape), 1))
-    _, idx = cKDTree(shape).query(shape, k=k)
+    _, idx = (tree or cKDTree(shape)).query(shape, k=k)
     nb = shape[idx] - shape[idx].mean(axis=1, keepdims=True)
     cov = np.einsum("mki,mkj->mij", nb, nb) / k
     _, vectors = np.linalg.eigh(cov)
     return vectors[:, :, 0]
 
 
-def _second_difference(k: int) -> sp.csr_matrix:
-    if k < 3:
-        return sp.csr_matrix((0, k))
-    rows = np.repeat(np.arange(k - 2), 3)
-    cols = (np.arange(k - 2)[:, None] + np.arange(3)[None, :]).ravel()
-    vals = np.tile([1.0, -2.0, 1.0], k - 2)
-    return sp.csr_matrix((vals, (rows, cols)), shape=(k - 2, k))
+_SECOND_DIFFERENCE = np.array([1.0, -2.0, 1.0])
+_BANDS = 8  # super-diagonals of the 4K x 4K normal equations: 3 within a frame's block, 4 and 8 for the prior
+
+
+def _second_difference(x: np.ndarray) -> np.ndarray:
+    """Second differences along axis 0 (rows k-1, k, k+1 -> row k-1); (K-2, ...) or empty."""
+    return x[2:] - 2.0 * x[1:-1] + x[:-2]
+
+
+def _second_difference_transpose(v: np.ndarray, k: int) -> np.ndarray:
+    """D' v for the (k-2, k) second-difference operator D (the adjoint of :func:`_second_difference`)."""
+    out = np.zeros((k,) + v.shape[1:])
+    for a, coefficient in enumerate(_SECOND_DIFFERENCE):
+        out[a:a + len(v)] += coefficient * v
+    return out
+
+
+def _prior_band(k: int, sig: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+    """Upper band storage (``scipy.linalg.solveh_banded``, 8 super-diagonals) of the prior's 4K x 4K Hessian
+    kron(D'D, diag(1/sig^2)) + kron(I, diag(1/anchor^2)), variables ordered 4 * frame + component."""
+    band = np.zeros((_BANDS + 1, 4 * k))
+    dtd = np.zeros((3, k))  # dtd[q, j]: (D'D)[j - q, j], the q-th super-diagonal at column j
+    for q in range(3):
+        for a in range(3 - q):  # row r of D touches columns r + a and r + a + q
+            dtd[q, a + q:a + q + max(k - 2, 0)] += _SECOND_DIFFERENCE[a] * _SECOND_DIFFERENCE[a + q]
+    inv_sig, inv_anchor = 1.0 / sig**2, 1.0 / anchor**2
+    for q in range(3):
+        band[_BANDS - 4 * q] = (dtd[q][:, None] * inv_sig[None, :]).ravel()
+    band[_BANDS] += np.tile(inv_anchor, k)
+    return band
 
 
 class _Solver:
@@ -185,13 +243,10 @@ class _Solver:
         self.rng = rng
         sig = np.array([params.smooth_sigma_xy, params.smooth_sigma_xy, params.smooth_sigma_z, params.smooth_sigma_heading])
         anchor = np.array([params.anchor_sigma_xyz] * 3 + [params.anchor_sigma_heading])
-        d = _second_difference(self.k)
-        dtd = (d.T @ d).tocsr()
-        # variable order: 4 * frame + component
-        self.h_prior = (sp.kron(dtd, sp.diags(1.0 / sig**2)) + sp.kron(sp.identity(self.k), sp.diags(1.0 / anchor**2))).tocsr()
-        self.d = d
+        self.h_prior = _prior_band(self.k, sig, anchor)  # variable order: 4 * frame + component
         self.sig = sig
         self.anchor = anchor
+        self._matched: tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
     def set_shapes(self, states: np.ndarray) -> bool:
         """Build, for each fold f, the shape from the frames NOT in f (a frame never matches its own points).
@@ -207,9 +262,11 @@ class _Solver:
             shape = _rebuild_shape(others, states, self.size, p.voxel, p.shape_points_per_frame)
             if len(shape) < p.min_shape_points:
                 return False
+            tree = cKDTree(shape)
             self.shapes.append(shape)
-            self.trees.append(cKDTree(shape))
-            self.normals.append(_normals(shape, p.normal_neighbours))
+            self.trees.append(tree)
+            self.normals.append(_normals(shape, p.normal_neighbours, tree))
+        self._matched = None
         return True
 
     def _match(self, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -244,6 +301,7 @@ class _Solver:
         scale = np.where(counts > 0, np.minimum(1.0, p.effective_points / np.maximum(counts, 1.0)), 0.0)
         scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
+        self._matched = None
 
     def _data(self, states: np.ndarray, with_jacobian: bool):
         """Data cost and, optionally, per-frame 4x4 Gauss-Newton blocks J'WJ and gradients J'Wr.
@@ -259,7 +317,11 @@ class _Solver:
         lx = c * d[:, 0] + si * d[:, 1]
         ly = -si * d[:, 0] + c * d[:, 1]
         local = np.stack([lx, ly, d[:, 2]], axis=1)
-        dist, m, n = self._match(local)
+        if self._matched is not None and np.array_equal(self._matched[0], states):
+            dist, m, n = self._matched[1]  # the accepted trial of the previous step: same states, same pairs
+        else:
+            dist, m, n = self._match(local)
+            self._matched = (states.copy(), (dist, m, n))
         e = local - m
         ne = np.sum(n * e, axis=1)
         r = (1.0 - beta) * n * ne[:, None] + beta * e
@@ -279,17 +341,16 @@ class _Solver:
         j = (1.0 - beta) * n[:, :, None] * nj[:, None, :] + beta * jd
         jtj = np.matmul(j.transpose(0, 2, 1), j)  # (P, 4, 4)
         jtr = np.matmul(j.transpose(0, 2, 1), r[:, :, None])[:, :, 0]  # (P, 4)
-        blocks = np.stack([np.bincount(self.frame_idx, weights=w * jtj[:, a, b], minlength=self.k)
-                           for a in range(4) for b in range(4)], axis=1).reshape(self.k, 4, 4)
-        grads = np.stack([np.bincount(self.frame_idx, weights=w * jtr[:, a], minlength=self.k)
-                          for a in range(4)], axis=1)
-        return cost, blocks, grads
+        per_point = w[:, None] * np.concatenate([jtj.reshape(-1, 16), jtr], axis=1)  # (P, 20)
+        slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()
+        sums = np.bincount(slots, weights=per_point.ravel(), minlength=20 * self.k).reshape(self.k, 20)
+        return cost, sums[:, :16].reshape(self.k, 4, 4), sums[:, 16:]
 
     def _prior(self, states: np.ndarray) -> tuple[float, np.ndarray]:
-        diff2 = self.d @ states
+        diff2 = _second_difference(states)
         dev = states - self.online
         cost = float(np.sum(diff2**2 / self.sig**2) + np.sum(dev**2 / self.anchor**2))
-        grad = (self.d.T @ (diff2 / self.sig**2)) + dev / self.anchor**2
+        grad = _second_difference_transpose(diff2 / self.sig**2, self.k) + dev / self.anchor**2
         return cost, grad
 
     def cost(self, states: np.ndarray) -> float:
@@ -298,12 +359,18 @@ class _Solver:
     def step(self, states: np.ndarray) -> np.ndarray:
         cost_d, blocks, grads = self._data(states, True)
         cost_p, grad_p = self._prior(states)
-        h = (sp.block_diag(list(blocks), format="csr") + self.h_prior).tocsc()
+        h = self.h_prior.copy()  # + the data's 4x4 block of each frame (upper band storage)
+        for a in range(4):
+            for b in range(a, 4):
+                h[_BANDS + a - b, b::4] += blocks[:, a, b]
+        h[_BANDS] += 1e-9 * (1.0 + h[_BANDS])
         g = (grads + grad_p).reshape(-1)
-        h = h + sp.diags(1e-9 * (1.0 + h.diagonal()))
         delta = np.zeros(4 * self.k)
-        free = np.arange(4 * self.fixed, 4 * self.k)
-        delta[free] = -spsolve(h[free][:, free].tocsc(), g[free])
+        first = 4 * self.fixed  # the free variables are the trailing ones: their block is a band too
+        try:
+            delta[first:] = -solveh_banded(h[:, first:], g[first:], check_finite=False)
+        except np.linalg.LinAlgError:
+            return states
         if not np.all(np.isfinite(delta)):
             return states
         before = cost_d + cost_p
