@@ -191,10 +191,43 @@ def _normals(shape: np.ndarray, k: int, tree: cKDTree | None = None) -> np.ndarr
     if k < 3:
         return np.tile([0.0, 0.0, 1.0], (len(shape), 1))
     _, idx = (tree or cKDTree(shape)).query(shape, k=k)
-    nb = shape[idx] - shape[idx].mean(axis=1, keepdims=True)
-    cov = np.einsum("mki,mkj->mij", nb, nb) / k
-    _, vectors = np.linalg.eigh(cov)
-    return vectors[:, :, 0]
+    nb = shape[idx]
+    nb -= nb.mean(axis=1, keepdims=True)
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    xx, yy, zz, xy, xz, yz = (np.einsum("mk,mk->m", nb[:, :, a], nb[:, :, b]) / k for a, b in pairs)
+    return _smallest_eigenvectors(xx, yy, zz, xy, xz, yz)
+
+
+def _smallest_eigenvectors(xx: np.ndarray, yy: np.ndarray, zz: np.ndarray, xy: np.ndarray, xz: np.ndarray,
+                           yz: np.ndarray) -> np.ndarray:
+    """Unit eigenvectors of the smallest eigenvalue of symmetric 3x3 matrices given by their six entries.
+
+    Closed form: the smallest eigenvalue by the trigonometric solution of the characteristic cubic, the
+    eigenvector as the largest cross product of two rows of A - lambda I. Where that is ill-conditioned
+    (a repeated smallest eigenvalue: points on a line or a blob), ``numpy.linalg.eigh`` decides."""
+    q = (xx + yy + zz) / 3.0
+    off = xy**2 + xz**2 + yz**2
+    p = np.sqrt(((xx - q) ** 2 + (yy - q) ** 2 + (zz - q) ** 2 + 2.0 * off) / 6.0)
+    safe = np.where(p > 0, p, 1.0)
+    bx, by, bz = (xx - q) / safe, (yy - q) / safe, (zz - q) / safe
+    cxy, cxz, cyz = xy / safe, xz / safe, yz / safe
+    det = bx * (by * bz - cyz**2) - cxy * (cxy * bz - cyz * cxz) + cxz * (cxy * cyz - by * cxz)
+    phi = np.arccos(np.clip(det / 2.0, -1.0, 1.0)) / 3.0
+    lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    rows = np.stack([np.stack([xx - lam, xy, xz], 1), np.stack([xy, yy - lam, yz], 1),
+                     np.stack([xz, yz, zz - lam], 1)], 1)  # (M, 3, 3)
+    crosses = np.stack([np.cross(rows[:, 0], rows[:, 1]), np.cross(rows[:, 0], rows[:, 2]),
+                        np.cross(rows[:, 1], rows[:, 2])], 1)
+    norms = np.linalg.norm(crosses, axis=2)
+    best = np.argmax(norms, axis=1)
+    length = norms[np.arange(len(best)), best]
+    out = crosses[np.arange(len(best)), best] / np.maximum(length, 1e-300)[:, None]
+    # the cross product's length is ~ the product of the other two eigenvalue gaps (times |A|^2 scale)
+    bad = ~(length > 1e-6 * np.maximum(p, 1e-300) ** 2)
+    if bad.any():
+        a = np.stack([np.stack([xx, xy, xz], 1), np.stack([xy, yy, yz], 1), np.stack([xz, yz, zz], 1)], 1)[bad]
+        out[bad] = np.linalg.eigh(a)[1][:, :, 0]
+    return out
 
 
 _SECOND_DIFFERENCE = np.array([1.0, -2.0, 1.0])
@@ -284,15 +317,21 @@ class _Solver:
         return dist, m, n
 
     def select(self, states: np.ndarray) -> None:
-        """Data points of each frame: inside the current box scaled crop_scale, random subset (fixed for a shape)."""
+        """Data points of each free frame: inside the current box scaled crop_scale, random subset (fixed
+        for a shape). A held frame's data term is a constant, so its points are left out (its random draw
+        is still made, so the free frames' subsets do not depend on how many frames are held)."""
         p = self.params
         pts, frame_idx = [], []
+        self.any_points = False
         for k, (raw, s) in enumerate(zip(self.raw, states)):
             if len(raw) == 0:
                 continue
             sel = raw[points_in_box(raw, _box(s, self.size), p.crop_scale)]
+            self.any_points |= len(sel) > 0
             if len(sel) > p.max_points:
                 sel = sel[np.sort(self.rng.choice(len(sel), p.max_points, replace=False))]
+            if k < self.fixed:
+                continue
             pts.append(sel)
             frame_idx.append(np.full(len(sel), k))
         self.pts = np.vstack(pts) if pts else np.zeros((0, 3))
@@ -427,7 +466,7 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
         if not solver.set_shapes(states):
             break
         solver.select(states)
-        if len(solver.pts) == 0:
+        if not solver.any_points:
             break
         for _ in range(params.gn_iterations):
             states = solver.step(states)
