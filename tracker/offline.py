@@ -99,11 +99,12 @@ def _square_candidates(points_ego: np.ndarray, world_from_ego: np.ndarray, centr
                        reach: float) -> np.ndarray:
     """Indices of the ego points whose world x, y may lie within ``reach`` of ``centre_xy`` (a superset:
     a single-precision test padded by 1 cm, so the exact test on the survivors decides as on all points)."""
-    rotation = world_from_ego[:2, :3].T.astype(np.float32)
+    rotation = np.ascontiguousarray(world_from_ego[:2, :3], dtype=np.float32)
     rel = (np.asarray(centre_xy, dtype=np.float64) - world_from_ego[:2, 3]).astype(np.float32)
-    xy = points_ego.astype(np.float32, copy=False) @ rotation - rel
-    limit = np.float32(reach + 0.01)
-    return np.flatnonzero((np.abs(xy[:, 0]) <= limit) & (np.abs(xy[:, 1]) <= limit))
+    xy = rotation @ np.asarray(points_ego).astype(np.float32, copy=False).T  # (2, N): contiguous rows
+    xy -= rel[:, None]
+    np.abs(xy, out=xy)
+    return np.flatnonzero(np.maximum(xy[0], xy[1]) <= np.float32(reach + 0.01))  # NaN: False
 
 
 def _deskew_reach(points_ego: np.ndarray, frame: LidarFrame, previous: tuple[int, np.ndarray]) -> float:
@@ -168,20 +169,42 @@ def gather_frame_points(source: FrameSource, result: TrackResult, config: Tracke
     return out
 
 
-def _to_object(points: np.ndarray, state: np.ndarray) -> np.ndarray:
-    c, s = np.cos(state[3]), np.sin(state[3])
-    d = points - state[:3]
+def _to_object_per_point(points: np.ndarray, states: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """Points (N, 3) in the object frame of their frames' states (``states[frame]``)."""
+    c, s = np.cos(states[:, 3])[frame], np.sin(states[:, 3])[frame]
+    d = points - states[frame, :3]
     return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+
+
+def _stack_frames(points: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """All frames' points (N, 3) and each point's frame index (N,)."""
+    counts = [len(p) for p in points]
+    if sum(counts) == 0:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    return np.vstack([p for p in points if len(p)]), np.repeat(np.arange(len(points)), counts)
+
+
+def _object_points(stacked: tuple[np.ndarray, np.ndarray], states: np.ndarray, size: np.ndarray,
+                   per_frame: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Object-frame points inside each frame's box (each frame's at most ``per_frame``, an even subsample
+    when > 0) and their frame indices, from :func:`_stack_frames` output."""
+    pts, frame = stacked
+    local = _to_object_per_point(pts, states, frame)
+    keep = np.all(np.abs(local) <= np.asarray(size, dtype=np.float64) / 2.0, axis=1)
+    if per_frame > 0 and keep.any():
+        frame_in = frame[keep]
+        counts = np.bincount(frame_in, minlength=len(states))
+        first = np.cumsum(counts) - counts  # frames are contiguous in ``stacked``
+        rank = np.arange(len(frame_in)) - first[frame_in]
+        step = np.maximum(1, -(-counts // per_frame))[frame_in]  # ceil(n / per_frame): n <= per_frame keeps all
+        keep[np.flatnonzero(keep)] = rank % step == 0
+    return local[keep], frame[keep]
 
 
 def _rebuild_shape(points: list[np.ndarray], states: np.ndarray, size: np.ndarray, voxel: float,
                    per_frame: int = 0) -> np.ndarray:
-    def inside(p: np.ndarray, s: np.ndarray) -> np.ndarray:
-        p = p[points_in_box(p, _box(s, size), 1.0)]
-        return p[::-(-len(p) // per_frame)] if per_frame > 0 and len(p) > per_frame else p
-
-    parts = [_to_object(inside(p, s), s) for p, s in zip(points, states) if len(p)]
-    return voxel_downsample_centres(np.vstack(parts), voxel) if parts else np.zeros((0, 3))
+    """The shape (object frame, voxel centres) of the points inside each frame's box."""
+    return voxel_downsample_centres(_object_points(_stack_frames(points), states, size, per_frame)[0], voxel)
 
 
 def _normals(shape: np.ndarray, k: int, tree: cKDTree | None = None) -> np.ndarray:
@@ -272,7 +295,7 @@ class _Solver:
         self.size = size
         self.online = online
         self.k = len(online)
-        self.raw = points
+        self.stacked = _stack_frames(points)
         self.rng = rng
         sig = np.array([params.smooth_sigma_xy, params.smooth_sigma_xy, params.smooth_sigma_z, params.smooth_sigma_heading])
         anchor = np.array([params.anchor_sigma_xyz] * 3 + [params.anchor_sigma_heading])
@@ -289,10 +312,9 @@ class _Solver:
         folds = max(2, int(p.folds))
         self.folds = folds
         self.shapes, self.trees, self.normals = [], [], []
-        frame_fold = np.arange(self.k) % folds
+        local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame)
         for f in range(folds):
-            others = [pts if frame_fold[k] != f else pts[:0] for k, pts in enumerate(self.raw)]
-            shape = _rebuild_shape(others, states, self.size, p.voxel, p.shape_points_per_frame)
+            shape = voxel_downsample_centres(local[frame % folds != f], p.voxel)
             if len(shape) < p.min_shape_points:
                 return False
             tree = cKDTree(shape)
@@ -321,25 +343,25 @@ class _Solver:
         for a shape). A held frame's data term is a constant, so its points are left out (its random draw
         is still made, so the free frames' subsets do not depend on how many frames are held)."""
         p = self.params
-        pts, frame_idx = [], []
-        self.any_points = False
-        for k, (raw, s) in enumerate(zip(self.raw, states)):
-            if len(raw) == 0:
-                continue
-            sel = raw[points_in_box(raw, _box(s, self.size), p.crop_scale)]
-            self.any_points |= len(sel) > 0
-            if len(sel) > p.max_points:
-                sel = sel[np.sort(self.rng.choice(len(sel), p.max_points, replace=False))]
-            if k < self.fixed:
-                continue
-            pts.append(sel)
-            frame_idx.append(np.full(len(sel), k))
-        self.pts = np.vstack(pts) if pts else np.zeros((0, 3))
-        self.frame_idx = np.concatenate(frame_idx) if frame_idx else np.zeros(0, dtype=np.int64)
+        raw, raw_frame = self.stacked
+        local = _to_object_per_point(raw, states, raw_frame)
+        inside = np.all(np.abs(local) <= self.size * p.crop_scale / 2.0, axis=1)
+        counts = np.bincount(raw_frame[inside], minlength=self.k)
+        self.any_points = bool(inside.any())
+        keep = inside & (raw_frame >= self.fixed)
+        for k in np.flatnonzero(counts > p.max_points):  # the same draws, in frame order, as frame by frame
+            chosen = np.sort(self.rng.choice(counts[k], p.max_points, replace=False))
+            if k >= self.fixed:
+                members = np.flatnonzero(inside & (raw_frame == k))
+                keep[members] = False
+                keep[members[chosen]] = True
+        self.pts = raw[keep]
+        self.frame_idx = raw_frame[keep]
         counts = np.bincount(self.frame_idx, minlength=self.k).astype(np.float64)
         scale = np.where(counts > 0, np.minimum(1.0, p.effective_points / np.maximum(counts, 1.0)), 0.0)
         scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
+        self.slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()  # (frame, block entry) of _data
         self._matched = None
 
     def _data(self, states: np.ndarray, with_jacobian: bool):
@@ -350,9 +372,8 @@ class _Solver:
         """
         p = self.params
         beta = p.tangent_weight
-        s = states[self.frame_idx]
-        c, si = np.cos(s[:, 3]), np.sin(s[:, 3])
-        d = self.pts - s[:, :3]
+        c, si = np.cos(states[:, 3])[self.frame_idx], np.sin(states[:, 3])[self.frame_idx]
+        d = self.pts - states[self.frame_idx, :3]
         lx = c * d[:, 0] + si * d[:, 1]
         ly = -si * d[:, 0] + c * d[:, 1]
         local = np.stack([lx, ly, d[:, 2]], axis=1)
@@ -372,17 +393,26 @@ class _Solver:
         if not with_jacobian:
             return cost, None, None
         w = weight * np.where(norm <= delta, 1.0, delta / np.maximum(norm, 1e-12))
-        # d(local)/d(tx, ty, tz, theta): rows (-c, -s, 0, ly), (s, -c, 0, -lx), (0, 0, -1, 0)
-        zeros = np.zeros_like(c)
-        jd = np.stack([np.stack([-c, -si, zeros, ly], 1), np.stack([si, -c, zeros, -lx], 1),
-                       np.stack([zeros, zeros, -np.ones_like(c), zeros], 1)], axis=1)  # (P, 3, 4)
-        nj = np.sum(n[:, :, None] * jd, axis=1)  # (P, 4)
-        j = (1.0 - beta) * n[:, :, None] * nj[:, None, :] + beta * jd
-        jtj = np.matmul(j.transpose(0, 2, 1), j)  # (P, 4, 4)
-        jtr = np.matmul(j.transpose(0, 2, 1), r[:, :, None])[:, :, 0]  # (P, 4)
-        per_point = w[:, None] * np.concatenate([jtj.reshape(-1, 16), jtr], axis=1)  # (P, 20)
-        slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()
-        sums = np.bincount(slots, weights=per_point.ravel(), minlength=20 * self.k).reshape(self.k, 20)
+        # J = A D with D = d(local)/d(tx, ty, tz, theta), rows (-c, -s, 0, ly), (s, -c, 0, -lx), (0, 0, -1, 0).
+        # With |n| = 1, A'A = (1 - beta^2) n n' + beta^2 I, so J'J = (1 - beta^2) (D'n)(D'n)' + beta^2 D'D
+        # and J'r = D'A'r = (1 - beta) (D'n)(n.e) + beta D'r (n.r = n.e); D'D is 1 on the diagonal but
+        # (theta, theta) = lx^2 + ly^2, with (tx, theta) = -c ly - s lx and (ty, theta) = c lx - s ly.
+        nj = np.stack([-c * n[:, 0] + si * n[:, 1], -si * n[:, 0] - c * n[:, 1], -n[:, 2],
+                       ly * n[:, 0] - lx * n[:, 1]], axis=1)  # D'n, (P, 4)
+        dr = np.stack([-c * r[:, 0] + si * r[:, 1], -si * r[:, 0] - c * r[:, 1], -r[:, 2],
+                       ly * r[:, 0] - lx * r[:, 1]], axis=1)  # D'r
+        per_point = np.empty((len(w), 20))
+        jtj = per_point[:, :16].reshape(-1, 4, 4)
+        np.multiply(nj[:, :, None], ((1.0 - beta**2) * nj)[:, None, :], out=jtj)
+        b2 = beta**2
+        jtj[:, [0, 1, 2], [0, 1, 2]] += b2
+        jtj[:, 3, 3] += b2 * (lx**2 + ly**2)
+        for a, g in ((0, -c * ly - si * lx), (1, c * lx - si * ly)):
+            jtj[:, a, 3] += b2 * g
+            jtj[:, 3, a] += b2 * g
+        per_point[:, 16:] = (1.0 - beta) * nj * ne[:, None] + beta * dr
+        per_point *= w[:, None]
+        sums = np.bincount(self.slots, weights=per_point.ravel(), minlength=20 * self.k).reshape(self.k, 20)
         return cost, sums[:, :16].reshape(self.k, 4, 4), sums[:, 16:]
 
     def _prior(self, states: np.ndarray) -> tuple[float, np.ndarray]:
