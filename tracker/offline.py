@@ -21,8 +21,8 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    A = (1 − β) n nᵀ + β I (β = 0: point-to-plane, β = 1: point-to-point; default 0.3), and
    c_k = min(1, ``effective_points`` / N_k), so a dense frame counts as at most that many independent
    points (LiDAR residuals are strongly correlated). It is solved by Gauss–Newton with iteratively
-   re-weighted Huber weights on one sparse (block-tridiagonal) 4K × 4K normal-equation system
-   (scipy.sparse), with a cost check and step halving; correspondences are recomputed at every step;
+   re-weighted Huber weights on one banded 4K × 4K normal-equation system
+   (Cholesky of its band), with a cost check and step halving; correspondences are recomputed at every step;
 4. gauge: the joint problem fixes the trajectory only up to where the shape sits in the object frame.
    With ``gauge="regauge"`` (default) all states are free and afterwards every pose is composed with the
    one object-frame correction that maps the refined S_0 onto the given start box (so S_0 is exact and
@@ -39,13 +39,12 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
+from scipy.linalg import solveh_banded
 from scipy.spatial import cKDTree
 
 from .config import TrackerConfig
 from .frames import FrameSource, LidarFrame
-from .geometry import Box, State, points_in_box, wrap_angle
+from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
 from .metrics import voxel_downsample_centres
 from .sotracker import FrameEstimate, TrackResult, deskew_points
@@ -96,6 +95,35 @@ def _box(state: np.ndarray, size: np.ndarray) -> Box:
                float(size[0]), float(size[1]), float(size[2]))
 
 
+def _square_candidates(points_ego: np.ndarray, world_from_ego: np.ndarray, centre_xy: np.ndarray,
+                       reach: float) -> np.ndarray:
+    """Indices of the ego points whose world x, y may lie within ``reach`` of ``centre_xy`` (a superset:
+    a single-precision test padded by 1 cm, so the exact test on the survivors decides as on all points)."""
+    rotation = np.ascontiguousarray(world_from_ego[:2, :3], dtype=np.float32)
+    rel = (np.asarray(centre_xy, dtype=np.float64) - world_from_ego[:2, 3]).astype(np.float32)
+    xy = rotation @ np.asarray(points_ego).astype(np.float32, copy=False).T  # (2, N): contiguous rows
+    xy -= rel[:, None]
+    np.abs(xy, out=xy)
+    return np.flatnonzero(np.maximum(xy[0], xy[1]) <= np.float32(reach + 0.01))  # NaN: False
+
+
+def _deskew_reach(points_ego: np.ndarray, frame: LidarFrame, previous: tuple[int, np.ndarray]) -> float:
+    """Upper bound (m) of how far de-skew moves any point of ``frame`` from its plain world position:
+    the pose at a point's time differs from the frame's by at most |1 - s| of the frame-to-frame motion
+    (translation, and rotation angle times the point's range)."""
+    dt = float(frame.timestamp_ns - previous[0])
+    if dt == 0:
+        return 0.0
+    offsets = np.asarray(frame.point_time_offset_ns, dtype=np.float64)
+    s_off = float(np.max(np.abs(offsets))) / abs(dt) if len(offsets) else 0.0
+    r0, r1 = previous[1][:3, :3], np.asarray(frame.world_from_ego, dtype=np.float64)[:3, :3]
+    angle = float(np.arccos(np.clip((np.trace(r0.T @ r1) - 1.0) / 2.0, -1.0, 1.0)))
+    shift = float(np.linalg.norm(np.asarray(frame.world_from_ego)[:3, 3] - previous[1][:3, 3]))
+    finite = np.asarray(points_ego)[np.all(np.isfinite(points_ego), axis=1)]
+    radius = float(np.sqrt(np.max(np.sum(finite.astype(np.float64) ** 2, axis=1)))) if len(finite) else 0.0
+    return s_off * (shift + angle * radius) + 0.1
+
+
 def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, params: OfflineParams,
                         previous: tuple[int, np.ndarray] | None = None,
                         world: np.ndarray | None = None) -> np.ndarray:
@@ -107,11 +135,18 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
                   and len(frame.point_time_offset_ns) == len(pts_ego))
-    if use_deskew:
+    if world is None:  # only the part of the sweep that can reach the region is moved to the world frame
+        world_from_ego = np.asarray(frame.world_from_ego, dtype=np.float64)
+        pad = _deskew_reach(pts_ego, frame, previous) if use_deskew else 0.0
+        idx = _square_candidates(pts_ego, world_from_ego, box.center[:2], reach + pad)
+        if use_deskew:
+            world = deskew_points(pts_ego[idx], np.asarray(frame.point_time_offset_ns)[idx], frame.timestamp_ns,
+                                  world_from_ego, previous[0], previous[1])
+        else:
+            world = transform_points(world_from_ego, pts_ego[idx])
+    elif use_deskew:
         world = deskew_points(pts_ego, frame.point_time_offset_ns, frame.timestamp_ns, frame.world_from_ego,
                               previous[0], previous[1])
-    elif world is None:
-        world = frame.points_world()
     near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
     local = world[near]
     local = local[np.all(np.isfinite(local), axis=1)]
@@ -134,41 +169,120 @@ def gather_frame_points(source: FrameSource, result: TrackResult, config: Tracke
     return out
 
 
-def _to_object(points: np.ndarray, state: np.ndarray) -> np.ndarray:
-    c, s = np.cos(state[3]), np.sin(state[3])
-    d = points - state[:3]
+def _to_object_per_point(points: np.ndarray, states: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """Points (N, 3) in the object frame of their frames' states (``states[frame]``)."""
+    c, s = np.cos(states[:, 3])[frame], np.sin(states[:, 3])[frame]
+    d = points - states[frame, :3]
     return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+
+
+def _stack_frames(points: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """All frames' points (N, 3) and each point's frame index (N,)."""
+    counts = [len(p) for p in points]
+    if sum(counts) == 0:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    return np.vstack([p for p in points if len(p)]), np.repeat(np.arange(len(points)), counts)
+
+
+def _object_points(stacked: tuple[np.ndarray, np.ndarray], states: np.ndarray, size: np.ndarray,
+                   per_frame: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Object-frame points inside each frame's box (each frame's at most ``per_frame``, an even subsample
+    when > 0) and their frame indices, from :func:`_stack_frames` output."""
+    pts, frame = stacked
+    local = _to_object_per_point(pts, states, frame)
+    keep = np.all(np.abs(local) <= np.asarray(size, dtype=np.float64) / 2.0, axis=1)
+    if per_frame > 0 and keep.any():
+        frame_in = frame[keep]
+        counts = np.bincount(frame_in, minlength=len(states))
+        first = np.cumsum(counts) - counts  # frames are contiguous in ``stacked``
+        rank = np.arange(len(frame_in)) - first[frame_in]
+        step = np.maximum(1, -(-counts // per_frame))[frame_in]  # ceil(n / per_frame): n <= per_frame keeps all
+        keep[np.flatnonzero(keep)] = rank % step == 0
+    return local[keep], frame[keep]
 
 
 def _rebuild_shape(points: list[np.ndarray], states: np.ndarray, size: np.ndarray, voxel: float,
                    per_frame: int = 0) -> np.ndarray:
-    def inside(p: np.ndarray, s: np.ndarray) -> np.ndarray:
-        p = p[points_in_box(p, _box(s, size), 1.0)]
-        return p[::-(-len(p) // per_frame)] if per_frame > 0 and len(p) > per_frame else p
-
-    parts = [_to_object(inside(p, s), s) for p, s in zip(points, states) if len(p)]
-    return voxel_downsample_centres(np.vstack(parts), voxel) if parts else np.zeros((0, 3))
+    """The shape (object frame, voxel centres) of the points inside each frame's box."""
+    return voxel_downsample_centres(_object_points(_stack_frames(points), states, size, per_frame)[0], voxel)
 
 
-def _normals(shape: np.ndarray, k: int) -> np.ndarray:
-    """Unit normals (M, 3) by PCA of each point's k nearest neighbours (smallest-eigenvalue direction)."""
+def _normals(shape: np.ndarray, k: int, tree: cKDTree | None = None) -> np.ndarray:
+    """Unit normals (M, 3) by PCA of each point's k nearest neighbours (smallest-eigenvalue direction);
+    ``tree``: a kd-tree of ``shape`` when the caller has one."""
     k = int(min(k, len(shape)))
     if k < 3:
         return np.tile([0.0, 0.0, 1.0], (len(shape), 1))
-    _, idx = cKDTree(shape).query(shape, k=k)
-    nb = shape[idx] - shape[idx].mean(axis=1, keepdims=True)
-    cov = np.einsum("mki,mkj->mij", nb, nb) / k
-    _, vectors = np.linalg.eigh(cov)
-    return vectors[:, :, 0]
+    _, idx = (tree or cKDTree(shape)).query(shape, k=k)
+    nb = shape[idx]
+    nb -= nb.mean(axis=1, keepdims=True)
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    xx, yy, zz, xy, xz, yz = (np.einsum("mk,mk->m", nb[:, :, a], nb[:, :, b]) / k for a, b in pairs)
+    return _smallest_eigenvectors(xx, yy, zz, xy, xz, yz)
 
 
-def _second_difference(k: int) -> sp.csr_matrix:
-    if k < 3:
-        return sp.csr_matrix((0, k))
-    rows = np.repeat(np.arange(k - 2), 3)
-    cols = (np.arange(k - 2)[:, None] + np.arange(3)[None, :]).ravel()
-    vals = np.tile([1.0, -2.0, 1.0], k - 2)
-    return sp.csr_matrix((vals, (rows, cols)), shape=(k - 2, k))
+def _smallest_eigenvectors(xx: np.ndarray, yy: np.ndarray, zz: np.ndarray, xy: np.ndarray, xz: np.ndarray,
+                           yz: np.ndarray) -> np.ndarray:
+    """Unit eigenvectors of the smallest eigenvalue of symmetric 3x3 matrices given by their six entries.
+
+    Closed form: the smallest eigenvalue by the trigonometric solution of the characteristic cubic, the
+    eigenvector as the largest cross product of two rows of A - lambda I. Where that is ill-conditioned
+    (a repeated smallest eigenvalue: points on a line or a blob), ``numpy.linalg.eigh`` decides."""
+    q = (xx + yy + zz) / 3.0
+    off = xy**2 + xz**2 + yz**2
+    p = np.sqrt(((xx - q) ** 2 + (yy - q) ** 2 + (zz - q) ** 2 + 2.0 * off) / 6.0)
+    safe = np.where(p > 0, p, 1.0)
+    bx, by, bz = (xx - q) / safe, (yy - q) / safe, (zz - q) / safe
+    cxy, cxz, cyz = xy / safe, xz / safe, yz / safe
+    det = bx * (by * bz - cyz**2) - cxy * (cxy * bz - cyz * cxz) + cxz * (cxy * cyz - by * cxz)
+    phi = np.arccos(np.clip(det / 2.0, -1.0, 1.0)) / 3.0
+    lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    rows = np.stack([np.stack([xx - lam, xy, xz], 1), np.stack([xy, yy - lam, yz], 1),
+                     np.stack([xz, yz, zz - lam], 1)], 1)  # (M, 3, 3)
+    crosses = np.stack([np.cross(rows[:, 0], rows[:, 1]), np.cross(rows[:, 0], rows[:, 2]),
+                        np.cross(rows[:, 1], rows[:, 2])], 1)
+    norms = np.linalg.norm(crosses, axis=2)
+    best = np.argmax(norms, axis=1)
+    length = norms[np.arange(len(best)), best]
+    out = crosses[np.arange(len(best)), best] / np.maximum(length, 1e-300)[:, None]
+    # the cross product's length is ~ the product of the other two eigenvalue gaps (times |A|^2 scale)
+    bad = ~(length > 1e-6 * np.maximum(p, 1e-300) ** 2)
+    if bad.any():
+        a = np.stack([np.stack([xx, xy, xz], 1), np.stack([xy, yy, yz], 1), np.stack([xz, yz, zz], 1)], 1)[bad]
+        out[bad] = np.linalg.eigh(a)[1][:, :, 0]
+    return out
+
+
+_SECOND_DIFFERENCE = np.array([1.0, -2.0, 1.0])
+_BANDS = 8  # super-diagonals of the 4K x 4K normal equations: 3 within a frame's block, 4 and 8 for the prior
+
+
+def _second_difference(x: np.ndarray) -> np.ndarray:
+    """Second differences along axis 0 (rows k-1, k, k+1 -> row k-1); (K-2, ...) or empty."""
+    return x[2:] - 2.0 * x[1:-1] + x[:-2]
+
+
+def _second_difference_transpose(v: np.ndarray, k: int) -> np.ndarray:
+    """D' v for the (k-2, k) second-difference operator D (the adjoint of :func:`_second_difference`)."""
+    out = np.zeros((k,) + v.shape[1:])
+    for a, coefficient in enumerate(_SECOND_DIFFERENCE):
+        out[a:a + len(v)] += coefficient * v
+    return out
+
+
+def _prior_band(k: int, sig: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+    """Upper band storage (``scipy.linalg.solveh_banded``, 8 super-diagonals) of the prior's 4K x 4K Hessian
+    kron(D'D, diag(1/sig^2)) + kron(I, diag(1/anchor^2)), variables ordered 4 * frame + component."""
+    band = np.zeros((_BANDS + 1, 4 * k))
+    dtd = np.zeros((3, k))  # dtd[q, j]: (D'D)[j - q, j], the q-th super-diagonal at column j
+    for q in range(3):
+        for a in range(3 - q):  # row r of D touches columns r + a and r + a + q
+            dtd[q, a + q:a + q + max(k - 2, 0)] += _SECOND_DIFFERENCE[a] * _SECOND_DIFFERENCE[a + q]
+    inv_sig, inv_anchor = 1.0 / sig**2, 1.0 / anchor**2
+    for q in range(3):
+        band[_BANDS - 4 * q] = (dtd[q][:, None] * inv_sig[None, :]).ravel()
+    band[_BANDS] += np.tile(inv_anchor, k)
+    return band
 
 
 class _Solver:
@@ -181,17 +295,14 @@ class _Solver:
         self.size = size
         self.online = online
         self.k = len(online)
-        self.raw = points
+        self.stacked = _stack_frames(points)
         self.rng = rng
         sig = np.array([params.smooth_sigma_xy, params.smooth_sigma_xy, params.smooth_sigma_z, params.smooth_sigma_heading])
         anchor = np.array([params.anchor_sigma_xyz] * 3 + [params.anchor_sigma_heading])
-        d = _second_difference(self.k)
-        dtd = (d.T @ d).tocsr()
-        # variable order: 4 * frame + component
-        self.h_prior = (sp.kron(dtd, sp.diags(1.0 / sig**2)) + sp.kron(sp.identity(self.k), sp.diags(1.0 / anchor**2))).tocsr()
-        self.d = d
+        self.h_prior = _prior_band(self.k, sig, anchor)  # variable order: 4 * frame + component
         self.sig = sig
         self.anchor = anchor
+        self._matched: tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
     def set_shapes(self, states: np.ndarray) -> bool:
         """Build, for each fold f, the shape from the frames NOT in f (a frame never matches its own points).
@@ -201,15 +312,16 @@ class _Solver:
         folds = max(2, int(p.folds))
         self.folds = folds
         self.shapes, self.trees, self.normals = [], [], []
-        frame_fold = np.arange(self.k) % folds
+        local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame)
         for f in range(folds):
-            others = [pts if frame_fold[k] != f else pts[:0] for k, pts in enumerate(self.raw)]
-            shape = _rebuild_shape(others, states, self.size, p.voxel, p.shape_points_per_frame)
+            shape = voxel_downsample_centres(local[frame % folds != f], p.voxel)
             if len(shape) < p.min_shape_points:
                 return False
+            tree = cKDTree(shape)
             self.shapes.append(shape)
-            self.trees.append(cKDTree(shape))
-            self.normals.append(_normals(shape, p.normal_neighbours))
+            self.trees.append(tree)
+            self.normals.append(_normals(shape, p.normal_neighbours, tree))
+        self._matched = None
         return True
 
     def _match(self, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -227,23 +339,30 @@ class _Solver:
         return dist, m, n
 
     def select(self, states: np.ndarray) -> None:
-        """Data points of each frame: inside the current box scaled crop_scale, random subset (fixed for a shape)."""
+        """Data points of each free frame: inside the current box scaled crop_scale, random subset (fixed
+        for a shape). A held frame's data term is a constant, so its points are left out (its random draw
+        is still made, so the free frames' subsets do not depend on how many frames are held)."""
         p = self.params
-        pts, frame_idx = [], []
-        for k, (raw, s) in enumerate(zip(self.raw, states)):
-            if len(raw) == 0:
-                continue
-            sel = raw[points_in_box(raw, _box(s, self.size), p.crop_scale)]
-            if len(sel) > p.max_points:
-                sel = sel[np.sort(self.rng.choice(len(sel), p.max_points, replace=False))]
-            pts.append(sel)
-            frame_idx.append(np.full(len(sel), k))
-        self.pts = np.vstack(pts) if pts else np.zeros((0, 3))
-        self.frame_idx = np.concatenate(frame_idx) if frame_idx else np.zeros(0, dtype=np.int64)
+        raw, raw_frame = self.stacked
+        local = _to_object_per_point(raw, states, raw_frame)
+        inside = np.all(np.abs(local) <= self.size * p.crop_scale / 2.0, axis=1)
+        counts = np.bincount(raw_frame[inside], minlength=self.k)
+        self.any_points = bool(inside.any())
+        keep = inside & (raw_frame >= self.fixed)
+        for k in np.flatnonzero(counts > p.max_points):  # the same draws, in frame order, as frame by frame
+            chosen = np.sort(self.rng.choice(counts[k], p.max_points, replace=False))
+            if k >= self.fixed:
+                members = np.flatnonzero(inside & (raw_frame == k))
+                keep[members] = False
+                keep[members[chosen]] = True
+        self.pts = raw[keep]
+        self.frame_idx = raw_frame[keep]
         counts = np.bincount(self.frame_idx, minlength=self.k).astype(np.float64)
         scale = np.where(counts > 0, np.minimum(1.0, p.effective_points / np.maximum(counts, 1.0)), 0.0)
         scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
+        self.slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()  # (frame, block entry) of _data
+        self._matched = None
 
     def _data(self, states: np.ndarray, with_jacobian: bool):
         """Data cost and, optionally, per-frame 4x4 Gauss-Newton blocks J'WJ and gradients J'Wr.
@@ -253,13 +372,16 @@ class _Solver:
         """
         p = self.params
         beta = p.tangent_weight
-        s = states[self.frame_idx]
-        c, si = np.cos(s[:, 3]), np.sin(s[:, 3])
-        d = self.pts - s[:, :3]
+        c, si = np.cos(states[:, 3])[self.frame_idx], np.sin(states[:, 3])[self.frame_idx]
+        d = self.pts - states[self.frame_idx, :3]
         lx = c * d[:, 0] + si * d[:, 1]
         ly = -si * d[:, 0] + c * d[:, 1]
         local = np.stack([lx, ly, d[:, 2]], axis=1)
-        dist, m, n = self._match(local)
+        if self._matched is not None and np.array_equal(self._matched[0], states):
+            dist, m, n = self._matched[1]  # the accepted trial of the previous step: same states, same pairs
+        else:
+            dist, m, n = self._match(local)
+            self._matched = (states.copy(), (dist, m, n))
         e = local - m
         ne = np.sum(n * e, axis=1)
         r = (1.0 - beta) * n * ne[:, None] + beta * e
@@ -271,25 +393,33 @@ class _Solver:
         if not with_jacobian:
             return cost, None, None
         w = weight * np.where(norm <= delta, 1.0, delta / np.maximum(norm, 1e-12))
-        # d(local)/d(tx, ty, tz, theta): rows (-c, -s, 0, ly), (s, -c, 0, -lx), (0, 0, -1, 0)
-        zeros = np.zeros_like(c)
-        jd = np.stack([np.stack([-c, -si, zeros, ly], 1), np.stack([si, -c, zeros, -lx], 1),
-                       np.stack([zeros, zeros, -np.ones_like(c), zeros], 1)], axis=1)  # (P, 3, 4)
-        nj = np.sum(n[:, :, None] * jd, axis=1)  # (P, 4)
-        j = (1.0 - beta) * n[:, :, None] * nj[:, None, :] + beta * jd
-        jtj = np.matmul(j.transpose(0, 2, 1), j)  # (P, 4, 4)
-        jtr = np.matmul(j.transpose(0, 2, 1), r[:, :, None])[:, :, 0]  # (P, 4)
-        blocks = np.stack([np.bincount(self.frame_idx, weights=w * jtj[:, a, b], minlength=self.k)
-                           for a in range(4) for b in range(4)], axis=1).reshape(self.k, 4, 4)
-        grads = np.stack([np.bincount(self.frame_idx, weights=w * jtr[:, a], minlength=self.k)
-                          for a in range(4)], axis=1)
-        return cost, blocks, grads
+        # J = A D with D = d(local)/d(tx, ty, tz, theta), rows (-c, -s, 0, ly), (s, -c, 0, -lx), (0, 0, -1, 0).
+        # With |n| = 1, A'A = (1 - beta^2) n n' + beta^2 I, so J'J = (1 - beta^2) (D'n)(D'n)' + beta^2 D'D
+        # and J'r = D'A'r = (1 - beta) (D'n)(n.e) + beta D'r (n.r = n.e); D'D is 1 on the diagonal but
+        # (theta, theta) = lx^2 + ly^2, with (tx, theta) = -c ly - s lx and (ty, theta) = c lx - s ly.
+        nj = np.stack([-c * n[:, 0] + si * n[:, 1], -si * n[:, 0] - c * n[:, 1], -n[:, 2],
+                       ly * n[:, 0] - lx * n[:, 1]], axis=1)  # D'n, (P, 4)
+        dr = np.stack([-c * r[:, 0] + si * r[:, 1], -si * r[:, 0] - c * r[:, 1], -r[:, 2],
+                       ly * r[:, 0] - lx * r[:, 1]], axis=1)  # D'r
+        per_point = np.empty((len(w), 20))
+        jtj = per_point[:, :16].reshape(-1, 4, 4)
+        np.multiply(nj[:, :, None], ((1.0 - beta**2) * nj)[:, None, :], out=jtj)
+        b2 = beta**2
+        jtj[:, [0, 1, 2], [0, 1, 2]] += b2
+        jtj[:, 3, 3] += b2 * (lx**2 + ly**2)
+        for a, g in ((0, -c * ly - si * lx), (1, c * lx - si * ly)):
+            jtj[:, a, 3] += b2 * g
+            jtj[:, 3, a] += b2 * g
+        per_point[:, 16:] = (1.0 - beta) * nj * ne[:, None] + beta * dr
+        per_point *= w[:, None]
+        sums = np.bincount(self.slots, weights=per_point.ravel(), minlength=20 * self.k).reshape(self.k, 20)
+        return cost, sums[:, :16].reshape(self.k, 4, 4), sums[:, 16:]
 
     def _prior(self, states: np.ndarray) -> tuple[float, np.ndarray]:
-        diff2 = self.d @ states
+        diff2 = _second_difference(states)
         dev = states - self.online
         cost = float(np.sum(diff2**2 / self.sig**2) + np.sum(dev**2 / self.anchor**2))
-        grad = (self.d.T @ (diff2 / self.sig**2)) + dev / self.anchor**2
+        grad = _second_difference_transpose(diff2 / self.sig**2, self.k) + dev / self.anchor**2
         return cost, grad
 
     def cost(self, states: np.ndarray) -> float:
@@ -298,12 +428,18 @@ class _Solver:
     def step(self, states: np.ndarray) -> np.ndarray:
         cost_d, blocks, grads = self._data(states, True)
         cost_p, grad_p = self._prior(states)
-        h = (sp.block_diag(list(blocks), format="csr") + self.h_prior).tocsc()
+        h = self.h_prior.copy()  # + the data's 4x4 block of each frame (upper band storage)
+        for a in range(4):
+            for b in range(a, 4):
+                h[_BANDS + a - b, b::4] += blocks[:, a, b]
+        h[_BANDS] += 1e-9 * (1.0 + h[_BANDS])
         g = (grads + grad_p).reshape(-1)
-        h = h + sp.diags(1e-9 * (1.0 + h.diagonal()))
         delta = np.zeros(4 * self.k)
-        free = np.arange(4 * self.fixed, 4 * self.k)
-        delta[free] = -spsolve(h[free][:, free].tocsc(), g[free])
+        first = 4 * self.fixed  # the free variables are the trailing ones: their block is a band too
+        try:
+            delta[first:] = -solveh_banded(h[:, first:], g[first:], check_finite=False)
+        except np.linalg.LinAlgError:
+            return states
         if not np.all(np.isfinite(delta)):
             return states
         before = cost_d + cost_p
@@ -360,7 +496,7 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
         if not solver.set_shapes(states):
             break
         solver.select(states)
-        if len(solver.pts) == 0:
+        if not solver.any_points:
             break
         for _ in range(params.gn_iterations):
             states = solver.step(states)

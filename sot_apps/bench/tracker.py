@@ -7,8 +7,10 @@ ground-truth box over its annotated span (default: the moving vehicle tracks, i.
 dev tracks on pandaset_002) with the streaming API; frames are read and cached before timing. The
 main figures are the CPU time of the tracking thread per ``Tracker.step`` (``time.thread_time``), which
 other processes on a shared machine do not inflate; the step's wall-clock time is shown
-too. Frame 1 (with the wide ICP search) is included in median/mean/p90 and also reported alone. The
-load average is printed with the table.
+too. Frame 1 (with the wide ICP search) is included in median/mean/p90 and also reported alone.
+``--lag N``: rows for the streaming fixed-lag tracker (a step's time includes its window solve).
+``--offline``: a row with the offline refinement's CPU time divided by the tracked frames (the ms per
+frame it adds to the online pass). The load average is printed with the table.
 """
 
 from __future__ import annotations
@@ -37,6 +39,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tracks", metavar="ID,...", help="track id prefixes (default: all moving vehicle tracks)")
     parser.add_argument("--lag", type=int, nargs="+", default=[], metavar="N",
                         help="also time fixed-lag tracking (streaming, each state final N frames later) per preset")
+    parser.add_argument("--offline", action="store_true",
+                        help="also time the offline refinement per preset (CPU time of refine_offline on the online "
+                             "result, divided by the track's frames: the ms it adds per frame)")
     parser.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     parser.add_argument("--in-process", action="store_true",
                         help="measure in this process (no single-threaded child; thread variables as they are)")
@@ -48,6 +53,8 @@ def _child_argv(args: argparse.Namespace) -> list[str]:
         argv += ["--tracks", args.tracks]
     if args.lag:
         argv += ["--lag", *(str(n) for n in args.lag)]
+    if args.offline:
+        argv += ["--offline"]
     if args.json:
         argv += ["--json", str(args.json)]
     return argv
@@ -83,8 +90,34 @@ def _time_track(source, spec, config, lag: int = 0) -> tuple[np.ndarray, np.ndar
     return np.array(boxes), np.array(wall), np.array(cpu)
 
 
+class _FramesOnly:
+    """A FrameSource view of a cached source without its ``points_world`` cache (as a user's source)."""
+
+    def __init__(self, source) -> None:
+        self.source = source
+
+    def __len__(self) -> int:
+        return len(self.source)
+
+    def lidar_frame(self, index: int):
+        return self.source.lidar_frame(index)
+
+
+def _time_offline(source, spec, config) -> tuple[np.ndarray, float]:
+    """Offline refinement of the online result over a track's span: boxes (n, 7) and the refinement's CPU ms
+    (gathering each frame's points included; the online pass is not timed here)."""
+    from tracker import refine_offline, track
+
+    online = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], config)
+    frames_only = _FramesOnly(source)  # no cached world points: the refinement moves what it needs itself
+    c0 = time.thread_time()
+    refined = refine_offline(frames_only, online, config)
+    cpu_ms = (time.thread_time() - c0) * 1e3
+    return np.array([e.box.to_array() for e in refined.estimates]), cpu_ms
+
+
 def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | None,
-                  lags: list[int] | None = None) -> dict[str, Any]:
+                  lags: list[int] | None = None, offline: bool = False) -> dict[str, Any]:
     from tracker import get_preset, pool_metrics, score_tracklet
 
     from ..evaluation.tracker import CachedSource, prepare_tracks, resolve_presets, select_moving_vehicle_tracks
@@ -116,17 +149,38 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
                      "cpu_p90_ms": float(np.percentile(c_all, 90)), "cpu_frame1_mean_ms": float(np.mean(first)),
                      "cpu_median_ms_k2": float(np.median(c_later)) if c_later.size else float("nan"),
                      "wall_median_ms": float(np.median(w_all)), "wall_mean_ms": float(w_all.mean())})
+        if offline and lag == [0, *(lags or [])][-1]:  # after the preset's online and fixed-lag rows
+            rows.append(_offline_row(source, specs, config, preset))
     machine = machine_description() | {"pinning": pinned}
     return {"sequence": str(sequence.root), "tracks": [t.track_id for t in specs],
             "frames_per_preset": rows[0]["frames"] if rows else 0, "machine": machine, "rows": rows}
 
 
+def _offline_row(source, specs, config, preset: str) -> dict[str, Any]:
+    """The ``PRESET+offline`` row: the refinement's CPU time per frame (k >= 1, as the other rows count),
+    amortised over all tracks, and per track; Acc/Rob of the refined boxes."""
+    from tracker import pool_metrics, score_tracklet
+
+    scores, per_track = [], []
+    for spec in specs:
+        boxes, cpu_ms = _time_offline(source, spec, config)
+        scores.append(score_tracklet(spec.track_id, boxes, np.array([b.to_array() for b in spec.boxes])))
+        per_track.append((cpu_ms, len(spec.frames) - 1))
+    pooled = pool_metrics(scores)
+    frames = sum(n for _, n in per_track)
+    track_ms = np.array([ms / max(n, 1) for ms, n in per_track])
+    return {"row": f"{preset}+offline", "acc": pooled.acc, "rob": pooled.rob, "frames": int(frames),
+            "offline_added_ms": float(sum(ms for ms, _ in per_track) / max(frames, 1)),
+            "offline_added_ms_per_track": [float(x) for x in track_ms]}
+
+
 def format_table(result: dict[str, Any]) -> str:
     header = ["preset", "median ms", "mean ms", "p90 ms", "frame-1 ms", "median k>=2", "wall median", "wall mean",
-              "Acc", "Rob"]
-    body = [[r["row"], f"{r['cpu_median_ms']:.1f}", f"{r['cpu_mean_ms']:.1f}", f"{r['cpu_p90_ms']:.1f}",
-             f"{r['cpu_frame1_mean_ms']:.1f}", f"{r['cpu_median_ms_k2']:.1f}", f"{r['wall_median_ms']:.1f}",
-             f"{r['wall_mean_ms']:.1f}", f"{100 * r['acc']:.1f}", f"{100 * r['rob']:.1f}"] for r in result["rows"]]
+              "added ms", "Acc", "Rob"]
+    timing = ("cpu_median_ms", "cpu_mean_ms", "cpu_p90_ms", "cpu_frame1_mean_ms", "cpu_median_ms_k2", "wall_median_ms",
+              "wall_mean_ms", "offline_added_ms")
+    body = [[r["row"], *(f"{r[key]:.1f}" if key in r else "-" for key in timing),
+             f"{100 * r['acc']:.1f}", f"{100 * r['rob']:.1f}"] for r in result["rows"]]
     widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(header)]
     fmt = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))  # noqa: E731
     lines = [f"sequence: {result['sequence']}",
@@ -136,6 +190,8 @@ def format_table(result: dict[str, Any]) -> str:
     lines += ["", "ms per frame = CPU time of the tracking thread in Tracker.step (crop, ground removal, association,",
               "optimisation; sweeps are read before timing), frames k >= 1 with frame 1's wide search included;",
               "'wall' = wall-clock time of the step (inflated when other processes share the cores).",
+              "'added ms' (PRESET+offline rows, --offline) = CPU time of the offline refinement of the online",
+              "result (gathering each frame's points included), divided by the tracked frames: what it adds per frame.",
               "Acc/Rob in % (pooled, frames 1..n-1).",
               "", "machine:", format_machine(result["machine"])]
     return "\n".join(lines)
@@ -150,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io.atomic import write_json
 
     tracks = [t for t in args.tracks.split(",") if t] if args.tracks else None
-    result = run_benchmark(args.sequence, args.preset, tracks, args.lag)
+    result = run_benchmark(args.sequence, args.preset, tracks, args.lag, args.offline)
     print(format_table(result))
     if args.json:
         write_json(args.json, result)

@@ -1,0 +1,39 @@
+"""``sot-apps bench tracker``'s rows on a synthetic sequence with known boxes: online, fixed-lag and the
+offline row (the refinement's CPU ms per tracked frame), and the table that prints them."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from sot_apps.bench.tracker import _offline_row, _time_track, format_table
+from tracker import get_preset, pool_metrics, score_tracklet
+
+from tracker_synthetic import make_sequence
+
+
+def test_offline_row_times_the_refinement_per_frame_and_scores_it():
+    seq = make_sequence(n_frames=10, seed=5)
+    spec = SimpleNamespace(track_id="synthetic", frames=tuple(range(10)), boxes=tuple(seq.boxes))
+    config = get_preset("full")
+    row = _offline_row(seq, [spec], config, "full")
+    assert row["row"] == "full+offline" and row["frames"] == 9
+    assert row["offline_added_ms"] > 0 and row["offline_added_ms_per_track"] == [row["offline_added_ms"]]
+    assert row["acc"] > 0.8 and row["rob"] > 0.8   # a clean synthetic car: the refinement keeps it
+
+    truth = np.array([b.to_array() for b in seq.boxes])
+    boxes, wall, cpu = _time_track(seq, spec, config, lag=3)
+    assert boxes.shape == (10, 7) and len(cpu) == 9 and np.all(cpu > 0) and np.all(wall > 0)
+    assert pool_metrics([score_tracklet("synthetic", boxes, truth)]).acc > 0.8
+
+    online = {"row": "full", "acc": 0.9, "rob": 0.9, "frames": 9, "cpu_median_ms": 10.0, "cpu_mean_ms": 11.0,
+              "cpu_p90_ms": 12.0, "cpu_frame1_mean_ms": 50.0, "cpu_median_ms_k2": 10.0, "wall_median_ms": 10.0,
+              "wall_mean_ms": 11.0}
+    machine = {"cpu": "test", "load_average": "0.00 0.00 0.00"}
+    table = format_table({"sequence": "synthetic", "tracks": ["synthetic"], "frames_per_preset": 9,
+                          "machine": machine, "rows": [online, row]})
+    line = next(ln for ln in table.splitlines() if ln.startswith("full+offline"))
+    cells = line.split()
+    assert cells[1:8] == ["-"] * 7 and cells[8] == f"{row['offline_added_ms']:.1f}"
+    assert "added ms" in table and next(ln for ln in table.splitlines() if ln.startswith("full ")).split()[8] == "-"

@@ -1,0 +1,132 @@
+"""The refinement's numerical pieces against independent computations: the banded normal equations
+against a dense Kronecker build, the closed-form normals against numpy's eigh, the Gauss-Newton blocks
+against finite differences of the residuals, and the cropped region points (with and without de-skew)
+against moving the whole sweep first."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from tracker.config import get_preset
+from tracker.frames import LidarFrame
+from tracker.geometry import Box, make_transform, points_in_box, rotation_z, transform_points
+from tracker.ground import ground_mask
+from tracker.offline import _BANDS, OfflineParams, _normals, _prior_band, _Solver, frame_region_points
+from tracker.sotracker import deskew_points
+
+from tracker_synthetic import make_sequence
+
+
+def _dense_from_upper_band(band: np.ndarray) -> np.ndarray:
+    u, n = band.shape[0] - 1, band.shape[1]
+    h = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i, min(n, i + u + 1)):
+            h[i, j] = h[j, i] = band[u + i - j, j]
+    return h
+
+
+@pytest.mark.parametrize("k", [2, 3, 7])
+def test_prior_band_is_the_kronecker_hessian(k):
+    sig, anchor = np.array([0.03, 0.03, 0.02, 0.01]), np.array([1.0, 1.0, 1.0, 0.3])
+    d = np.zeros((max(k - 2, 0), k))
+    for r in range(k - 2):
+        d[r, r:r + 3] = [1.0, -2.0, 1.0]
+    dense = np.kron(d.T @ d, np.diag(1.0 / sig**2)) + np.kron(np.eye(k), np.diag(1.0 / anchor**2))
+    band = _prior_band(k, sig, anchor)
+    assert band.shape == (_BANDS + 1, 4 * k)
+    np.testing.assert_allclose(_dense_from_upper_band(band), dense, rtol=1e-12)
+
+
+def test_closed_form_normals_are_the_pca_normals():
+    rng = np.random.default_rng(0)
+    plane = rng.normal(size=(400, 3)) * [1.0, 1.0, 0.01]
+    wall = rng.normal(size=(300, 3)) * [0.01, 1.0, 1.0] + [4.0, 0.0, 0.0]
+    line = np.c_[np.linspace(0, 2, 40), np.zeros(40), np.zeros(40)] + [0.0, 6.0, 0.0]   # degenerate: eigh decides
+    shape = np.unique(np.round(np.vstack([plane, wall, line]) / 0.1) * 0.1 + 0.05, axis=0)
+    normals = _normals(shape, 10)
+    _, idx = cKDTree(shape).query(shape, k=10)
+    nb = shape[idx] - shape[idx].mean(axis=1, keepdims=True)
+    cov = np.einsum("mki,mkj->mij", nb, nb) / 10
+    values, vectors = np.linalg.eigh(cov)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-12)
+    # every normal is an eigenvector of the smallest eigenvalue (Rayleigh quotient = that eigenvalue)
+    rayleigh = np.einsum("mi,mij,mj->m", normals, cov, normals)
+    assert np.all(rayleigh - values[:, 0] <= 1e-9 * (values[:, 2] + 1e-12))
+    separated = (values[:, 1] - values[:, 0]) > 1e-3 * values[:, 2]
+    assert separated.sum() > 0.9 * len(shape)
+    np.testing.assert_allclose(np.abs(np.sum(normals * vectors[:, :, 0], axis=1))[separated], 1.0, atol=1e-9)
+
+
+def test_gauss_newton_blocks_match_finite_differences_of_the_residuals():
+    seq = make_sequence(n_frames=6, seed=2)
+    params = OfflineParams()
+    points = [frame_region_points(seq.lidar_frame(k), b, get_preset("full"), params) for k, b in enumerate(seq.boxes)]
+    truth = np.array([[b.x, b.y, b.z, b.heading] for b in seq.boxes])
+    states = truth + np.random.default_rng(1).normal(0.0, [0.05, 0.05, 0.02, 0.02], truth.shape)
+    solver = _Solver(points, truth, np.array(seq.boxes[0].size), params, np.random.default_rng(0), fixed=1)
+    assert solver.set_shapes(states)
+    solver.select(states)
+    assert np.all(solver.frame_idx >= 1) and len(solver.pts) > 100   # the held frame's points are left out
+    _, blocks, grads = solver._data(states, True)
+
+    beta, delta = params.tangent_weight, params.huber_delta
+    local0 = np.empty_like(solver.pts)
+    for k in range(len(states)):
+        sel = solver.frame_idx == k
+        c, s = np.cos(states[k, 3]), np.sin(states[k, 3])
+        local0[sel] = (solver.pts[sel] - states[k, :3]) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    dist, m, n = solver._match(local0)   # correspondences held fixed, as within one Gauss-Newton step
+
+    def residuals(st: np.ndarray) -> np.ndarray:
+        s = st[solver.frame_idx]
+        c, si = np.cos(s[:, 3]), np.sin(s[:, 3])
+        d = solver.pts - s[:, :3]
+        e = np.c_[c * d[:, 0] + si * d[:, 1], -si * d[:, 0] + c * d[:, 1], d[:, 2]] - m
+        return (1 - beta) * n * np.sum(n * e, axis=1)[:, None] + beta * e
+
+    r = residuals(states)
+    norm = np.linalg.norm(r, axis=1)
+    w = solver.point_scale * (dist <= params.max_pair_distance) * np.where(norm <= delta, 1.0, delta / norm)
+    jac = np.zeros((len(r), 3, 4))
+    for comp in range(4):
+        step = np.zeros_like(states)
+        step[:, comp] = 1e-6
+        jac[:, :, comp] = (residuals(states + step) - residuals(states - step)) / 2e-6
+    for k in range(1, len(states)):
+        sel = solver.frame_idx == k
+        ref_block = np.einsum("p,pia,pib->ab", w[sel], jac[sel], jac[sel])
+        ref_grad = np.einsum("p,pia,pi->a", w[sel], jac[sel], r[sel])
+        np.testing.assert_allclose(blocks[k], ref_block, rtol=1e-5, atol=1e-6 * np.abs(ref_block).max())
+        np.testing.assert_allclose(grads[k], ref_grad, rtol=1e-5, atol=1e-6 * np.abs(ref_grad).max())
+
+
+def _naive_region(world: np.ndarray, box: Box, params: OfflineParams, config) -> np.ndarray:
+    reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
+    local = world[(np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)]
+    local = local[np.all(np.isfinite(local), axis=1)]
+    local = local[~ground_mask(local, config.ground_params())]
+    return local[points_in_box(local, box, params.region_scale)]
+
+
+@pytest.mark.parametrize("deskew", [False, True])
+def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deskew):
+    seq = make_sequence(n_frames=3, seed=4, nan_frames=(2,))
+    rng = np.random.default_rng(3)
+    config = get_preset("full", deskew=deskew)
+    params = OfflineParams()
+    previous = (seq.frames[0].timestamp_ns, make_transform(rotation_z(-0.15), np.array([-2.0, -0.5, 1.0])))
+    for k in (1, 2):
+        f = seq.lidar_frame(k)
+        offsets = rng.integers(-100_000_000, 0, len(f.points_ego))
+        frame = LidarFrame(f.index, f.timestamp_ns, f.points_ego, f.world_from_ego, offsets if deskew else None)
+        if deskew:
+            whole = deskew_points(frame.points_ego, offsets, frame.timestamp_ns, frame.world_from_ego, *previous)
+        else:
+            whole = transform_points(frame.world_from_ego, frame.points_ego)
+        expected = _naive_region(whole, seq.boxes[k], params, config)
+        got = frame_region_points(frame, seq.boxes[k], config, params, previous if deskew else None)
+        assert len(expected) > 100
+        np.testing.assert_array_equal(got, expected)
