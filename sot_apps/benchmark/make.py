@@ -166,7 +166,8 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
     Tracklet i gets profile i mod 8 and range band (i div 8) mod bands, shuffled by the seed, so every profile
     meets every band. A copy takes tracklets in turn until ``per_copy`` are placed; a (profile, band) that finds
     no place in a copy is not tried again in that copy (its tracklets wait for the next copy). One that finds no
-    place even in an empty copy is widened to the whole range; if that fails too, the background is unusable."""
+    place even in an empty copy is widened to the whole range; a profile that fails so in 3 empty copies makes the
+    background unusable."""
     frames = _frames(seq, config.frames)
     if config.replicas:
         return _plan_replicas(seq, bank, config, frames)
@@ -181,6 +182,7 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
     bar = tqdm(total=len(queue), desc="placing", unit="tracklet", disable=not progress, leave=False)
     base = _context(seq, frames, config)
     impossible: set[tuple] = set()   # (profile, band) that found no place even in an empty copy
+    hopeless: dict[str, int] = {}    # profile -> empty copies in which it found no place in the whole range
     for attempt in itertools.count():
         if not queue:
             break
@@ -202,8 +204,10 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
                 failed.add(cell)
                 if not vehicles:  # nowhere even in an empty copy: widen the band to the whole range, then give up
                     if band == tuple(config.range_m):
-                        raise InputError(seq.root, f"could not place a {profile} tracklet on free ground of the "
-                                                   "background even in an empty copy (try other --frames)")
+                        hopeless[profile] = hopeless.get(profile, 0) + 1
+                        if hopeless[profile] >= 3:
+                            raise InputError(seq.root, f"could not place a {profile} tracklet on free ground of the "
+                                                       "background even in 3 empty copies (try other --frames)")
                     impossible.add(cell)
                 left.append(cell)
                 continue

@@ -407,26 +407,32 @@ def place_vehicle(ctx: PlacementContext, rng: np.random.Generator, vid: str, ban
 
 
 def place_occluder(ctx: PlacementContext, rng: np.random.Generator, target: InsertedVehicle, vid: str, bank_id: str,
-                   label: str, size: tuple[float, float, float], attempts: int = 48) -> InsertedVehicle | None:
-    """An unlisted vehicle on the sensor-target line of sight at the middle frame, moving at constant speed."""
+                   label: str, size: tuple[float, float, float]) -> InsertedVehicle | None:
+    """An unlisted vehicle on the sensor-target line of sight at the middle frame, moving at constant speed.
+
+    All crossing points every 0.5 m over 25-80 % of the sight line, 4 headings (along the road either way, across
+    the sight line either way) and 3 speeds are tested at once (raster), then in random order (exact)."""
     mid = len(ctx.frame_times_ns) // 2
     t_mid = int(ctx.frame_times_ns[mid])
     p = target.states_at(t_mid)[:2]
     s = ctx.sensor_xyh[mid, :2]
     sight = math.atan2(p[1] - s[1], p[0] - s[0])
-    road = ctx.sensor_xyh[mid, 2]
-    for _ in range(attempts):
-        q = s + rng.uniform(0.25, 0.8) * (p - s)
-        heading = float(rng.choice([road, road + math.pi, sight + math.pi / 2, sight - math.pi / 2]))
-        spec = MotionSpec("constant_speed", float(rng.uniform(1.0, 6.0)))
+    road = float(ctx.sensor_xyh[mid, 2])
+    fractions = np.arange(0.25, 0.8, SAMPLE_M / max(float(np.hypot(*(p - s))), 1.0))
+    headings = [road, road + math.pi, sight + math.pi / 2, sight - math.pi / 2]
+    for speed in rng.permutation([1.5, 3.0, 5.0]):
+        spec = MotionSpec("constant_speed", float(speed) + float(rng.uniform(-0.5, 0.5)))
         path, times_ns = _path(ctx, spec)
-        back = spec.speed0 * (t_mid - times_ns[0]) * 1e-9  # where to start so that it is at q at t_mid
-        x0, y0 = q[0] - back * math.cos(heading), q[1] - back * math.sin(heading)
         fp = _footprint(path.states(), _window_index(ctx, times_ns), size, ctx.margin)
-        if not _raster_ok(ctx, _rigid(fp.points, x0, y0, heading)[None])[0]:
-            continue
-        boxes = _world_boxes(fp, x0, y0, heading, size[2])
-        if _exact_ok(ctx, boxes):
-            world = place_path(path, x0, y0, heading)
-            return _finish(ctx, vid, bank_id, label, size, spec, world, times_ns, boxes, False, target.id)
+        back = spec.speed0 * (t_mid - times_ns[0]) * 1e-9  # where to start so that it is at q at t_mid
+        q = s + fractions[:, None] * (p - s)
+        cand = np.array([(qx - back * math.cos(h), qy - back * math.sin(h), h) for h in headings for qx, qy in q])
+        cand = cand[rng.permutation(len(cand))]
+        for chunk in np.array_split(cand, max(1, len(cand) // 64)):
+            pts = _rigid(fp.points[None], chunk[:, None, None, 0], chunk[:, None, None, 1], chunk[:, None, None, 2])
+            for x0, y0, heading in chunk[_raster_ok(ctx, pts)]:
+                boxes = _world_boxes(fp, x0, y0, heading, size[2])
+                if _exact_ok(ctx, boxes):
+                    world = place_path(path, x0, y0, heading)
+                    return _finish(ctx, vid, bank_id, label, size, spec, world, times_ns, boxes, False, target.id)
     return None
