@@ -99,7 +99,8 @@ def _context(seq: Sequence, frames: list[int], config: MakeConfig) -> PlacementC
         m = seq.frames[k].world_from_ego @ seq.ego_from_lidar
         sensor_xyh.append((m[0, 3], m[1, 3], np.arctan2(m[1, 0], m[0, 0])))
     real = [boxes_array([a.box for a in (seq.annotations[k] if seq.annotations else [])]) for k in frames]
-    return PlacementContext(ground, times, np.array(sensor_xyh), real, config.range_m)
+    seam = fitted_sensor(seq, frames, load_sensor(config.sensor)).scan_start_deg
+    return PlacementContext(ground, times, np.array(sensor_xyh), real, config.range_m, seam_deg=seam)
 
 
 def box_size(bank: Bank, entry, sigma: float) -> tuple[float, float, float]:

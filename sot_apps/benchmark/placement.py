@@ -11,7 +11,8 @@ window, when the beams pass the vehicle's centre). A path is accepted when
 - at every frame its swept box overlaps no annotated real box of that frame, the ego's box and no other
   inserted vehicle's swept box of the same frame (exact bird's-eye-view polygon intersection): two
   vehicles may use the same ground at different times;
-- it stays at least 4 m from the sensor.
+- it stays at least 4 m from the sensor and never crosses the scan's seam (the azimuth where the sweep starts
+  and ends: a vehicle there is seen at both ends of the sweep, 0.1 s apart, and no box holds both).
 
 Search (fast, and shaped by the free road rather than by blind redraws): the static facts are rasters built
 once per background: blocked cells, ground cells, and per frame the cells of the real boxes and of the ego
@@ -114,6 +115,7 @@ class PlacementContext:
     range_m: tuple[float, float] = (5.0, 80.0)
     margin: float = 0.5
     min_sensor_distance: float = 4.0
+    seam_deg: float | None = None        # azimuth of the scan's seam (first column) in the sensor frame
 
     def __post_init__(self) -> None:
         self.placed: list[np.ndarray] = []  # (F, 7) swept boxes of the placed vehicles
@@ -288,10 +290,24 @@ def _overlaps(boxes: np.ndarray, others: np.ndarray) -> bool:
     return bool((iou_3d_batch(flat_a, flat_b) > 1e-9).any())
 
 
+def _on_seam(ctx: PlacementContext, boxes: np.ndarray) -> bool:
+    """Does any (F, 7) box cross the scan's seam ray (the sensor would see its two ends 0.1 s apart)?"""
+    if ctx.seam_deg is None:
+        return False
+    c, s = np.cos(boxes[:, 3])[:, None], np.sin(boxes[:, 3])[:, None]
+    u = np.array([1, 1, -1, -1])[None] * boxes[:, 4:5] / 2
+    v = np.array([1, -1, -1, 1])[None] * boxes[:, 5:6] / 2
+    dx = boxes[:, 0:1] + c * u - s * v - ctx.sensor_xyh[:, 0:1]
+    dy = boxes[:, 1:2] + s * u + c * v - ctx.sensor_xyh[:, 1:2]
+    seam = ctx.sensor_xyh[:, 2:3] + math.radians(ctx.seam_deg)
+    a = (np.arctan2(dy, dx) - seam + np.pi) % (2 * np.pi) - np.pi
+    return bool(((a.min(axis=1) < 0.0) & (a.max(axis=1) > 0.0) & (np.ptp(a, axis=1) < np.pi)).any())
+
+
 def _exact_ok(ctx: PlacementContext, boxes: np.ndarray) -> bool:
-    """The exact test of (F, 7) swept world boxes: sensor distance, ego, real boxes, placed vehicles."""
+    """The exact test of (F, 7) swept world boxes: sensor distance, scan seam, ego, real boxes, placed vehicles."""
     d = np.hypot(boxes[:, 0] - ctx.sensor_xyh[:, 0], boxes[:, 1] - ctx.sensor_xyh[:, 1])
-    if d.min() < ctx.min_sensor_distance:
+    if d.min() < ctx.min_sensor_distance or _on_seam(ctx, boxes):
         return False
     if _overlaps(boxes, ctx._ego):
         return False
