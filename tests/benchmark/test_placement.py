@@ -103,3 +103,18 @@ def test_planned_paths_never_meet_real_objects_or_each_other_in_space_time(backg
                 assert np.all(area < 1e-9), f"{plan.name} frame {k}: {plan.vehicles[i].id} meets another box"
                 checked += len(pa)
     assert checked > 10_000
+
+
+def test_a_box_across_the_scan_seam_is_refused():
+    from types import SimpleNamespace
+
+    ctx = SimpleNamespace(seam_deg=-90.0, sensor_xyh=np.array([[0.0, 0.0, 0.3]]))
+    seam = math.radians(-90.0) + 0.3
+
+    def box(angle: float, dist: float = 10.0) -> np.ndarray:
+        return np.array([[dist * math.cos(angle), dist * math.sin(angle), 0.0, 0.0, 4.5, 1.9, 1.5]])
+
+    assert placement._on_seam(ctx, box(seam))
+    assert placement._on_seam(ctx, box(seam + 0.1))      # 1 m off the ray: the 4.5 m box still crosses it
+    assert not placement._on_seam(ctx, box(seam + 0.4))
+    assert not placement._on_seam(ctx, box(seam + math.pi))  # the opposite direction is no seam
