@@ -8,7 +8,7 @@ per frame, box against box):
 - a cell's ground height is the lowest point in it;
 - a cell is *blocked* when a point stands 0.3-3.5 m above its ground (walls, poles, trees, unannotated
   objects), or when its lowest point is more than 0.6 m off the terrain (the 20th percentile of the cell
-  heights over 18 m: roofs, canopies, wall tops) or off an 8 % grade from the ground under the ego;
+  heights over 18 m: roofs, canopies, wall tops) or off an 8 % grade from the terrain under the ego;
   blocked cells are grown by ``margin`` metres;
 - a cell is *ground* when it, or a cell within ``reach`` metres, has points and is not blocked (far away the
   rings on the road are metres apart; the gaps between them are road too). Placement asks for no blocked
@@ -108,7 +108,9 @@ def build_ground_map(seq: Sequence, frames: list[int], cell: float = 0.5, margin
     # and no road climbs more than MAX_GRADE from the ground under the ego
     ego = np.array([(seq.frames[k].world_from_ego @ seq.ego_from_lidar)[:3, 3] for k in frames])
     ego_ij = np.floor((ego[:, :2] - lo) / cell).astype(np.int64)
-    ego_ground = float(np.median(height[ego_ij[:, 1], ego_ij[:, 0]]))
+    # the terrain there, not the lowest point of the ego's own cell (that is its roof or body when the ego hides
+    # the road under it: then every true ground cell near the ego was 'off the grade')
+    ego_ground = float(np.median(terrain[ego_ij[:, 1], ego_ij[:, 0]]))
     rows, cols = np.indices(shape)
     centre = ego[:, :2].mean(axis=0)
     dist = np.hypot(lo[0] + (cols + 0.5) * cell - centre[0], lo[1] + (rows + 0.5) * cell - centre[1])

@@ -19,6 +19,7 @@ where it stopped and the same seed gives the same bytes.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -63,6 +64,7 @@ class MakeConfig:
     workers: int = 1
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)   # the optical centre in the LiDAR frame
     replicas: tuple[str, ...] = ()   # instead of profiles: copies of these real tracks (bank entries of theirs)
+    band_edges_m: tuple[float, ...] = (17.0, 40.0)   # range bands filled in turn (pandar64: ~easy / medium / hard)
 
 
 @dataclass(frozen=True)
@@ -97,7 +99,8 @@ def _context(seq: Sequence, frames: list[int], config: MakeConfig) -> PlacementC
         m = seq.frames[k].world_from_ego @ seq.ego_from_lidar
         sensor_xyh.append((m[0, 3], m[1, 3], np.arctan2(m[1, 0], m[0, 0])))
     real = [boxes_array([a.box for a in (seq.annotations[k] if seq.annotations else [])]) for k in frames]
-    return PlacementContext(ground, times, np.array(sensor_xyh), real, config.range_m)
+    seam = fitted_sensor(seq, frames, load_sensor(config.sensor)).scan_start_deg
+    return PlacementContext(ground, times, np.array(sensor_xyh), real, config.range_m, seam_deg=seam)
 
 
 def box_size(bank: Bank, entry, sigma: float) -> tuple[float, float, float]:
@@ -109,11 +112,11 @@ def box_size(bank: Bank, entry, sigma: float) -> tuple[float, float, float]:
     return tuple(round(float(max(a, b)), 3) for a, b in zip(entry.box_size(), extent))  # type: ignore[return-value]
 
 
-def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, entry, profile: str, entries,
-                    sizes: dict) -> list[InsertedVehicle] | None:
-    """The tracklet's vehicle (and, for ``occluded``, its occluder: up to 6 target places are tried)."""
-    for _ in range(6 if profile == "occluded" else 1):
-        vehicle = place_vehicle(ctx, rng, vid, entry.id, entry.label or "Car", sizes[entry.id], profile)
+def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, entry, profile: str,
+                    band: tuple[float, float], entries, sizes: dict) -> list[InsertedVehicle] | None:
+    """The tracklet's vehicle (and, for ``occluded``, its occluder: up to 3 target places are tried)."""
+    for _ in range(3 if profile == "occluded" else 1):
+        vehicle = place_vehicle(ctx, rng, vid, entry.id, entry.label or "Car", sizes[entry.id], profile, band)
         if vehicle is None or profile != "occluded":
             return None if vehicle is None else [vehicle]
         occ = entries[int(rng.integers(len(entries)))]
@@ -121,8 +124,14 @@ def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, e
                                   sizes[occ.id])
         if occluder is not None:
             return [vehicle, occluder]
-        ctx.placed.pop()
+        ctx.remove_last()
     return None
+
+
+def range_bands(range_m: tuple[float, float], edges: tuple[float, ...]) -> list[tuple[float, float]]:
+    """``range_m`` cut at ``edges`` (bands narrower than 1 m are dropped)."""
+    cuts = [range_m[0]] + [e for e in edges if range_m[0] < e < range_m[1]] + [range_m[1]]
+    return [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b - a >= 1.0] or [tuple(range_m)]
 
 
 def _plan_replicas(seq: Sequence, bank: Bank, config: MakeConfig, frames: list[int]) -> list[CopyPlan]:
@@ -153,43 +162,61 @@ def _plan_replicas(seq: Sequence, bank: Bank, config: MakeConfig, frames: list[i
 
 
 def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = False) -> list[CopyPlan]:
-    """Every copy's inserted vehicles (deterministic in ``config.seed``)."""
+    """Every copy's inserted vehicles (deterministic in ``config.seed``).
+
+    Tracklet i gets profile i mod 8 and range band (i div 8) mod bands, shuffled by the seed, so every profile
+    meets every band. A copy takes tracklets in turn until ``per_copy`` are placed; a (profile, band) that finds
+    no place in a copy is not tried again in that copy (its tracklets wait for the next copy). One that finds no
+    place even in an empty copy is widened to the whole range; a profile that fails so in 3 empty copies makes the
+    background unusable."""
     frames = _frames(seq, config.frames)
     if config.replicas:
         return _plan_replicas(seq, bank, config, frames)
     rng = np.random.default_rng(config.seed)
-    profiles = [PROFILES[i % len(PROFILES)] for i in range(config.tracklets)]
-    profiles = [profiles[i] for i in rng.permutation(len(profiles))]
+    bands = range_bands(config.range_m, config.band_edges_m)
+    cells = [(PROFILES[i % len(PROFILES)], bands[(i // len(PROFILES)) % len(bands)]) for i in range(config.tracklets)]
+    queue = [cells[i] for i in rng.permutation(len(cells))]
     plans: list[CopyPlan] = []
-    queue = list(profiles)
     entries = sorted(bank.entries, key=lambda e: e.id)
     sigma = load_sensor(config.sensor).range_noise_sigma
     sizes = {e.id: box_size(bank, e, sigma) for e in entries}
     bar = tqdm(total=len(queue), desc="placing", unit="tracklet", disable=not progress, leave=False)
     base = _context(seq, frames, config)
-    while queue:
+    impossible: set[tuple] = set()   # (profile, band) that found no place even in an empty copy
+    hopeless: dict[str, int] = {}    # profile -> empty copies in which it found no place in the whole range
+    for attempt in itertools.count():
+        if not queue:
+            break
         c = len(plans)
-        ctx = PlacementContext(base.ground, base.frame_times_ns, base.sensor_xyh, base.real_boxes, config.range_m)
-        crng = np.random.default_rng([config.seed, c])
+        ctx = base.fresh()
+        crng = np.random.default_rng([config.seed, attempt])
         vehicles: list[InsertedVehicle] = []
         left = []
-        for profile in queue:
-            if sum(v.listed for v in vehicles) >= config.per_copy:
-                left.append(profile)
+        failed: set[tuple] = set()
+        for cell in queue:
+            profile, band = cell = (cell[0], tuple(config.range_m)) if cell in impossible else cell
+            if sum(v.listed for v in vehicles) >= config.per_copy or cell in failed:
+                left.append(cell)
                 continue
             entry = entries[int(crng.integers(len(entries)))]
             vid = f"ins_c{c:02d}_{len(vehicles):02d}"
-            placed = _place_tracklet(ctx, crng, vid, entry, profile, entries, sizes)
+            placed = _place_tracklet(ctx, crng, vid, entry, profile, band, entries, sizes)
             if placed is None:
-                left.append(profile)
+                failed.add(cell)
+                if not vehicles:  # nowhere even in an empty copy: widen the band to the whole range, then give up
+                    if band == tuple(config.range_m):
+                        hopeless[profile] = hopeless.get(profile, 0) + 1
+                        if hopeless[profile] >= 3:
+                            raise InputError(seq.root, f"could not place a {profile} tracklet on free ground of the "
+                                                       "background even in 3 empty copies (try other --frames)")
+                    impossible.add(cell)
+                left.append(cell)
                 continue
             vehicles += placed
             bar.update(1)
-        if not vehicles:
-            raise InputError(seq.root, f"could not place a {left[0]} tracklet on free ground of the background "
-                                       "even in an empty copy (try a shorter --range or other --frames)")
         queue = left
-        plans.append(CopyPlan(c, f"{seq.id}_c{c:02d}", vehicles))
+        if vehicles:
+            plans.append(CopyPlan(c, f"{seq.id}_c{c:02d}", vehicles))
     bar.close()
     return plans
 

@@ -55,7 +55,11 @@ def register(subparsers) -> argparse.ArgumentParser:
                       help="sensor preset or JSON (default pandaset_pandar64: PandaSet's Pandar64 with its range drop; "
                            "the scan phase is fitted to the background's point times)")
     make.add_argument("--range", type=_range, default=(5.0, 80.0), metavar="MIN:MAX",
-                      help="initial range of the tracklets in metres (default 5:80, log-uniform)")
+                      help="range of the tracklets at their first frame in metres (default 5:80, cut into --bands; a "
+                           "start is drawn uniformly over the free ground of its band)")
+    make.add_argument("--bands", type=float, nargs="*", default=(17.0, 40.0), metavar="M",
+                      help="range edges (m) of the bands that tracklets fill in turn, so that every difficulty is "
+                           "present (default 17 40: pandar64's easy / medium / hard ranges)")
     make.add_argument("--drop", type=float, default=0.0, help="random ray drop probability (default 0)")
     make.add_argument("--workers", type=int, default=1, help="processes simulating copies (default 1)")
     make.add_argument("--origin", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
@@ -106,7 +110,7 @@ def _run_make(args: argparse.Namespace) -> int:
         raise InputError(None, "--workers must be >= 1")
     config = MakeConfig(str(args.background), str(args.bank), args.tracklets, tuple(args.frames), args.seed,
                         str(args.out), args.per_copy, args.sensor, tuple(args.range), args.drop, args.workers,
-                        tuple(args.origin), tuple(args.replicas))
+                        tuple(args.origin), tuple(args.replicas), tuple(args.bands))
     report = make_benchmark(config, progress=sys.stderr.isatty())
     counts = report["counts"]
     print(f"{report['tracklets']} tracklets in {report['copies']} copies -> {Path(args.out) / 'benchmark.json'}")

@@ -140,7 +140,7 @@ def _commands(spec: MotionSpec, t: float, v: float, turned: float, state: dict, 
             return 0.0, 0.0
         # offset = v^2 A T^2 / (2 pi L) for a steer A sin(2 pi t / T) at speed v (small angles)
         amplitude = 2.0 * math.pi * limits.wheelbase * p["offset"] / (max(spec.speed0, 1.0) ** 2 * period ** 2)
-        return 0.0, float(np.clip(amplitude, -limits.max_steer, limits.max_steer)) * math.sin(2 * math.pi * (t - t0) / period)
+        return 0.0, min(max(amplitude, -limits.max_steer), limits.max_steer) * math.sin(2 * math.pi * (t - t0) / period)
     if name in ("turn", "u_turn"):
         if t < p["t_start"]:
             return 0.0, 0.0
@@ -157,21 +157,22 @@ def integrate_motion(spec: MotionSpec, duration_s: float, dt: float = 0.01,
                      limits: VehicleLimits = VehicleLimits()) -> MotionPath:
     """Integrate ``spec`` from the origin (heading +x) for ``duration_s`` at step ``dt`` (deterministic)."""
     n = int(round(duration_s / dt)) + 1
-    out = np.zeros((n, 6))
+    rows = []
     x = y = psi = 0.0
     a = 0.0
     delta = 0.0
     v = min(max(spec.speed0, 0.0), limits.max_speed)
     state: dict = {}
+    jerk_step, steer_step = limits.max_jerk * dt, limits.max_steer_rate * dt
     for i in range(n):  # a few hundred steps per path
         t = i * dt
-        out[i] = (t, x, y, psi, v, a)
+        rows.append((t, x, y, psi, v, a))
         a_cmd, d_cmd = _commands(spec, t, v, psi, state, limits)
         if a_cmd > 0.0:  # ease off before the top speed, as the brake eases off before a stop
             a_cmd = min(a_cmd, math.sqrt(limits.max_jerk * max(limits.max_speed - v, 0.0)))
-        a += float(np.clip(a_cmd - a, -limits.max_jerk * dt, limits.max_jerk * dt))
+        a += min(max(a_cmd - a, -jerk_step), jerk_step)  # python floats: np.clip per step costs 10x the step
         a = min(max(a, -limits.max_decel), limits.max_accel)
-        delta += float(np.clip(d_cmd - delta, -limits.max_steer_rate * dt, limits.max_steer_rate * dt))
+        delta += min(max(d_cmd - delta, -steer_step), steer_step)
         delta = min(max(delta, -limits.max_steer), limits.max_steer)
         beta = math.atan(math.tan(delta) / 2.0)
         x += v * math.cos(psi + beta) * dt
@@ -181,6 +182,7 @@ def integrate_motion(spec: MotionSpec, duration_s: float, dt: float = 0.01,
         if v_new <= 0.0:  # stopped: no reversing
             v_new, a = 0.0, max(a, 0.0)
         v = min(v_new, limits.max_speed)
+    out = np.array(rows, dtype=np.float64)
     return MotionPath(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4], out[:, 5])
 
 
