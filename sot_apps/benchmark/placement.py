@@ -45,7 +45,9 @@ from .deps import Trajectory
 __all__ = ["InsertedVehicle", "PlacementContext", "place_vehicle", "place_occluder", "swept_boxes", "EGO_SIZE",
            "STEP_S", "SPEED_SCALES"]
 
-EGO_SIZE = (5.0, 2.2)
+# The ego is kept out by a square around the sensor, whatever its heading: which ego axis points forward is
+# dataset-specific (PandaSet's pose frame has y forward) and the sensor sits up to ~2 m off the car's centre.
+EGO_SIZE = (6.0, 6.0)
 MIN_GROUND_FRACTION = 0.9
 STEP_S = 0.01
 SAMPLE_M = 0.5                          # footprint sample spacing
