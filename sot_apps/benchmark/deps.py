@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from ..evaluation.tracker import CachedSource, EvalConfig, TrackSpec, resolve_presets, score_result
+from ..evaluation.tracker import CachedSource, EvalConfig, TrackSpec, json_safe, resolve_presets, score_result
 from ..lidar_sim.bank import Bank, BankEntry, read_bank
 from ..lidar_sim.noise import Realism
 from ..raycast import RaycastScene
@@ -21,6 +21,6 @@ def eval_ground_params():
 
     return TrackerConfig().ground_params()
 
-__all__ = ["eval_ground_params", "CachedSource", "EvalConfig", "TrackSpec", "resolve_presets", "score_result", "Bank", "BankEntry", "read_bank", "Realism",
+__all__ = ["eval_ground_params", "CachedSource", "EvalConfig", "TrackSpec", "json_safe", "resolve_presets", "score_result", "Bank", "BankEntry", "read_bank", "Realism",
            "RaycastScene", "Scan", "SimObject", "Trajectory", "invert_transform_batch", "simulate_scan",
            "world_from_object", "OCCLUDER_MARGIN_M", "Sensor", "load_sensor"]
