@@ -53,7 +53,7 @@ class BenchmarkRun:
             ms = np.concatenate([self.records[(preset, seed, k)][1] for k in keys])
             per_seed.append({"acc": pooled.acc, "rob": pooled.rob, "shape": pooled.shape, "success": pooled.success,
                              "precision": pooled.precision, "ms": float(np.mean(ms)) if ms.size else float("nan")})
-        mean = {k: float(np.nanmean([s[k] for s in per_seed])) for k in per_seed[0]}
+        mean = {k: _nan_mean([s[k] for s in per_seed]) for k in per_seed[0]}
         mean["acc_std"] = float(np.std([s["acc"] for s in per_seed]))
         mean["n"] = len(keys)
         return mean
@@ -64,6 +64,12 @@ class BenchmarkRun:
             "presets": list(self.presets), "seeds": list(self.seeds),
             "tables": {p: {name: self.summary(p, keys) for name, keys in self.groups()} for p in self.presets},
             "tracklets": {k: {"difficulty": self.difficulty[k], "profile": self.profile[k]} for k in self.difficulty}})
+
+
+def _nan_mean(values: list[float]) -> float:
+    """Mean of the finite values; NaN when there is none (the Det row has no shape), without a warning."""
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
 
 
 def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSpec:
