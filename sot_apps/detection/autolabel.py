@@ -14,7 +14,8 @@
    the box sits); finally the box is fitted to the points the track gathered over all its frames
    (:func:`fit_to_points`): on every axis whose two faces the points show, the points give the extent (the
    detector's size and offset errors are correlated over time, so their median keeps a bias); on an axis
-   seen from one side only, the box keeps its size and moves just enough to hold the points.
+   seen from one side only, the box keeps its size and moves just enough to hold the points. Each axis weighs
+   the points' estimate against the detections' median by their errors (:func:`detection_sigma`).
 3. :func:`autolabel`: all tracks; each label box carries its track's mean detection score.
 """
 
@@ -31,7 +32,7 @@ from tracker import (align_heading, Box, ConstantVelocityFilter, FrameDetections
                      wrap_angle)
 
 __all__ = ["AssociationConfig", "DetectionTrack", "AutoLabel", "associate_tracks", "label_track", "anchor_to_detections",
-           "PointFit", "fit_to_points", "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",
+           "PointFit", "fit_to_points", "detection_sigma", "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",
            "write_autolabels"]
 
 
@@ -172,10 +173,18 @@ class PointFit:
     trim: float = 0.002              # share of the thinned points ignored at each end of an axis (stray returns)
     both_faces: float = 0.9          # the points span >= this share of the size: both faces seen
     min_points: int = 50             # fewer gathered points: the boxes are left as they are
+    point_sigma: float = 0.1         # error of a box read from the points (registration, labelling convention)
 
 
-def fit_to_points(source: FrameSource, boxes: dict[int, Box], fit: PointFit = PointFit()) -> dict[int, Box]:
+def fit_to_points(source: FrameSource, boxes: dict[int, Box], fit: PointFit = PointFit(),
+                  detection_track: DetectionTrack | None = None) -> dict[int, Box]:
     """The track's boxes moved and resized by one object-frame correction read from the points of all its frames.
+
+    With ``detection_track`` (the detections the boxes were anchored on, :func:`anchor_to_detections`), the
+    correction is weighed against the anchor by their errors: per axis, the points' estimate gets the weight
+    sigma_det^2 / (sigma_det^2 + ``point_sigma``^2), with sigma_det the error of the detections' median
+    (:func:`detection_sigma`). Many detections with uncorrelated errors: the anchor stays; a few, or errors
+    repeated from frame to frame: the points decide.
 
     Each frame's points in the box footprint grown by ``margin`` and above that frame's ground (median height
     of the points in the surrounding ring below the box centre, + ``ground_clearance``) go to the object
@@ -213,12 +222,49 @@ def fit_to_points(source: FrameSource, boxes: dict[int, Box], fit: PointFit = Po
         both[2] = True
     new_size = np.where(both, hi - lo, size)
     centre = np.where(both, (lo + hi) / 2.0, np.clip(0.0, hi - size / 2.0, lo + size / 2.0))
+    if detection_track is not None:
+        sigma_centre, sigma_size = detection_sigma(boxes, detection_track)
+        centre = centre * _weight(sigma_centre, fit.point_sigma)
+        new_size = size + (new_size - size) * _weight(sigma_size, fit.point_sigma)
     du, dv, dz = centre
     out = {}
     for k, box in boxes.items():
         c, s = np.cos(box.heading), np.sin(box.heading)
         out[k] = Box(box.x + c * du - s * dv, box.y + s * du + c * dv, box.z + dz, box.heading, *new_size)
     return out
+
+
+def _weight(sigma_det: np.ndarray, sigma_points: float) -> np.ndarray:
+    """Inverse-variance weight of the points' estimate against the detections' (1 where sigma_det is inf)."""
+    with np.errstate(invalid="ignore"):
+        w = sigma_det ** 2 / (sigma_det ** 2 + sigma_points ** 2)
+    return np.where(np.isfinite(sigma_det), w, 1.0)
+
+
+def detection_sigma(boxes: dict[int, Box], detection_track: DetectionTrack) -> tuple[np.ndarray, np.ndarray]:
+    """Errors (3,) of the median centre offset (length, width, up; object frame) and of the median size of the
+    track's detections relative to ``boxes``: robust spread (1.4826 MAD) / sqrt(effective count), the count
+    shrunk by the lag-1 autocorrelation rho of the series, n (1 - rho) / (1 + rho). Inf with < 3 detections."""
+    frames = sorted(k for k in detection_track.boxes if k in boxes)
+    if len(frames) < 3:
+        return np.full(3, np.inf), np.full(3, np.inf)
+    offsets, sizes = [], []
+    for k in frames:
+        det, box = detection_track.boxes[k], boxes[k]
+        offsets.append(_object_frame(det[None, :3], box)[0])
+        sizes.append(det[4:7])
+    return _median_sigma(np.array(offsets)), _median_sigma(np.array(sizes))
+
+
+def _median_sigma(series: np.ndarray) -> np.ndarray:
+    deviation = series - np.median(series, axis=0)
+    spread = 1.4826 * np.median(np.abs(deviation), axis=0)
+    a, b = deviation[:-1], deviation[1:]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.nan_to_num((a * b).sum(axis=0) / (deviation ** 2).sum(axis=0))
+    rho = np.clip(rho, 0.0, 0.95)
+    n_eff = np.maximum(len(series) * (1.0 - rho) / (1.0 + rho), 1.0)
+    return spread / np.sqrt(n_eff)
 
 
 def _grown(box: Box, margin: float, z_margin: float) -> Box:
@@ -258,7 +304,7 @@ def label_track(source: FrameSource, detection_track: DetectionTrack, config: Tr
         result = refine_offline(source, result, config)
     boxes = anchor_to_detections({e.frame: e.box for e in result.estimates}, detection_track)
     if fit is not None:
-        boxes = fit_to_points(source, boxes, fit)
+        boxes = fit_to_points(source, boxes, fit, detection_track)
     return AutoLabel(detection_track.track_id, boxes, detection_track.mean_score, result.shape, detection_track)
 
 

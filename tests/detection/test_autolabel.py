@@ -116,3 +116,26 @@ def test_fit_to_points_reads_the_box_from_the_points_where_both_faces_show():
     assert local_v - partial.width / 2 == pytest.approx(-truth.width / 2, abs=0.03)
     assert partial.length == pytest.approx(truth.length, abs=0.05)
     assert partial.height == pytest.approx(truth.height, abs=0.05)
+
+
+def test_detection_sigma_grows_when_errors_repeat_from_frame_to_frame():
+    from sot_apps.detection.autolabel import DetectionTrack, detection_sigma
+    from tracker.geometry import Box
+
+    rng = np.random.default_rng(0)
+    n = 60
+    iid = rng.normal(0.0, 0.2, n)
+    correlated = np.full(n, rng.normal(0.0, 0.2))  # starts from the stationary spread
+    for k in range(1, n):  # AR(1), rho 0.9, the same marginal spread
+        correlated[k] = 0.9 * correlated[k - 1] + np.sqrt(1 - 0.81) * rng.normal(0.0, 0.2)
+    boxes = {k: Box(0.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5) for k in range(n)}
+
+    def sigma(errors):
+        track = DetectionTrack("t", {k: np.array([e, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5]) for k, e in enumerate(errors)},
+                               {k: 0.9 for k in range(n)})
+        return detection_sigma(boxes, track)[0][0]
+
+    assert sigma(iid) == pytest.approx(0.2 / np.sqrt(n), rel=0.35)
+    assert sigma(correlated) > 1.5 * sigma(iid)  # rho 0.9: n_eff ~ n / 19 (estimated rho from 60 samples is lower)
+    few = DetectionTrack("t", {0: np.zeros(7), 1: np.zeros(7)}, {0: 0.9, 1: 0.9})
+    assert np.isinf(detection_sigma(boxes, few)[0]).all()
