@@ -96,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
     report = evaluate(sequence, ids, presets, offline=args.offline, seeds=list(range(args.seeds)),
                       end_frame=args.end_frame, progress=progress, detections=detections, lags=args.lag,
                       overrides=args.overrides)
+    if args.overrides:
+        print("set: " + " ".join(f"{k}={v}" for k, v in args.overrides.items()))
     print(format_report(report, per_track=not args.no_per_track))
     if args.json:
         write_json(args.json, report.to_dict())
