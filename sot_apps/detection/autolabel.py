@@ -180,18 +180,18 @@ def fit_to_points(source: FrameSource, boxes: dict[int, Box], fit: PointFit = Po
                   detection_track: DetectionTrack | None = None) -> dict[int, Box]:
     """The track's boxes moved and resized by one object-frame correction read from the points of all its frames.
 
-    With ``detection_track`` (the detections the boxes were anchored on, :func:`anchor_to_detections`), the
-    correction is weighed against the anchor by their errors: per axis, the points' estimate gets the weight
-    sigma_det^2 / (sigma_det^2 + ``point_sigma``^2), with sigma_det the error of the detections' median
-    (:func:`detection_sigma`). Many detections with uncorrelated errors: the anchor stays; a few, or errors
-    repeated from frame to frame: the points decide.
-
     Each frame's points in the box footprint grown by ``margin`` and above that frame's ground (median height
     of the points in the surrounding ring below the box centre, + ``ground_clearance``) go to the object
     frame and are pooled (one per ``voxel``). Per axis (length, width, height), with trimmed extremes lo..hi:
     if hi - lo >= ``both_faces`` x size, both faces are seen and the box spans lo..hi; otherwise the size
     stays and the centre moves the least that puts lo..hi inside the box. Where the ground is seen, the
-    height spans the ground to the highest point (a vehicle stands on the ground; LiDAR sees it from above)."""
+    height spans the ground to the highest point (a vehicle stands on the ground; LiDAR sees it from above).
+
+    With ``detection_track`` (the detections the boxes were anchored on, :func:`anchor_to_detections`), the
+    correction is weighed against the anchor by their errors: per axis, the points' estimate gets the weight
+    sigma_det^2 / (sigma_det^2 + ``point_sigma``^2), with sigma_det the error of the detections' median
+    (:func:`detection_sigma`). Many detections with uncorrelated errors: the anchor stays; a few, or errors
+    repeated from frame to frame: the points decide."""
     pooled, bottoms = [], []
     for k, box in boxes.items():
         points = source.lidar_frame(k).points_world()
