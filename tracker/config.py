@@ -31,6 +31,7 @@ class TrackerConfig:
     weight_det: float = 0.0
     det_min_score: float = 0.5           # a detection below this score is never used
     det_min_iou: float = 0.1             # BEV IoU with the motion model's prediction needed to associate
+    det_max_distance: float = 0.0        # > 0: no detection passes min_iou -> the nearest centre within this (m)
     method: str = "sot"                  # "sot" (SOTracker, with Det when weight_det > 0) or "det" (baseline)
     # --- search regions (box size factors, applied to length, width AND height)
     search_scale: float = 1.5            # gamma_in

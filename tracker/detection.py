@@ -3,7 +3,10 @@
 A frame's detections are (N, 7) WORLD boxes [x, y, z, heading, length, width, height] with (N,) scores.
 The Detection term (Pang et al. 2021, "Det+SOT") uses, at frame k, the one detection with the largest
 bird's-eye-view IoU with the motion model's prediction S^_k, among those with score >= ``min_score``
-and IoU >= ``min_iou``; if none qualifies, the term is off for that frame. Its target motion is
+and IoU >= ``min_iou``; if none qualifies, the term is off for that frame. With ``max_distance`` > 0
+(``TrackerConfig.det_max_distance``), a frame with no such detection takes instead the confident detection
+whose centre is nearest the prediction's, if within ``max_distance``: after an occlusion the coasting
+prediction drifts off the re-appearing object (BEV IoU 0) and only a detection can re-anchor the track. Its target motion is
 S_D - S_{k-1} (:func:`detection_motion`), compared with the estimated motion in
 :func:`tracker.terms.detection_block`.
 """
@@ -57,9 +60,10 @@ def align_heading(heading: float, reference: float) -> float:
 
 
 def associate_detection(prediction: Box, detections: FrameDetections | None, min_score: float = 0.5,
-                        min_iou: float = 0.1) -> np.ndarray | None:
+                        min_iou: float = 0.1, max_distance: float = 0.0) -> np.ndarray | None:
     """The detection box (7,) with the largest BEV IoU with ``prediction`` among those with score >=
-    ``min_score`` and IoU >= ``min_iou``; None when no detection qualifies."""
+    ``min_score`` and IoU >= ``min_iou``; failing that (``max_distance`` > 0), the one with the nearest
+    centre within ``max_distance`` metres (BEV); None when no detection qualifies."""
     if detections is None or len(detections) == 0:
         return None
     candidates = detections.boxes[detections.scores >= min_score]
@@ -68,7 +72,14 @@ def associate_detection(prediction: Box, detections: FrameDetections | None, min
     pred = np.broadcast_to(prediction.to_array(), candidates.shape)
     ious = iou_bev_batch(pred, candidates)
     best = int(np.argmax(ious))
-    return candidates[best].copy() if ious[best] >= min_iou else None
+    if ious[best] >= min_iou:
+        return candidates[best].copy()
+    if max_distance > 0:
+        distances = np.hypot(candidates[:, 0] - prediction.x, candidates[:, 1] - prediction.y)
+        nearest = int(np.argmin(distances))
+        if distances[nearest] <= max_distance:
+            return candidates[nearest].copy()
+    return None
 
 
 def detection_motion(previous: Box, detection: np.ndarray, predicted_heading: float) -> np.ndarray:

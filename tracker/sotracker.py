@@ -479,7 +479,7 @@ class Tracker:
         c = self.config
         if c.weight_det <= 0 or detections is None:
             return None
-        det = associate_detection(prediction, detections, c.det_min_score, c.det_min_iou)
+        det = associate_detection(prediction, detections, c.det_min_score, c.det_min_iou, c.det_max_distance)
         return None if det is None else detection_motion(self.box, det, prediction.heading)
 
     def _motion_model(self, box: Box) -> AverageMotion | CTRVMotion:

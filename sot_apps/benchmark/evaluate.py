@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty, get_preset
 
 from ..errors import InputError
 from ..io import open_sequence
-from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params, score_result
+from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params, json_safe, score_result
 from .lists import SequenceResolver, Tracklet
 
 __all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
@@ -53,15 +53,23 @@ class BenchmarkRun:
             ms = np.concatenate([self.records[(preset, seed, k)][1] for k in keys])
             per_seed.append({"acc": pooled.acc, "rob": pooled.rob, "shape": pooled.shape, "success": pooled.success,
                              "precision": pooled.precision, "ms": float(np.mean(ms)) if ms.size else float("nan")})
-        mean = {k: float(np.nanmean([s[k] for s in per_seed])) for k in per_seed[0]}
+        mean = {k: _nan_mean([s[k] for s in per_seed]) for k in per_seed[0]}
         mean["acc_std"] = float(np.std([s["acc"] for s in per_seed]))
         mean["n"] = len(keys)
         return mean
 
     def to_dict(self) -> dict:
-        return {"presets": list(self.presets), "seeds": list(self.seeds),
-                "tables": {p: {name: self.summary(p, keys) for name, keys in self.groups()} for p in self.presets},
-                "tracklets": {k: {"difficulty": self.difficulty[k], "profile": self.profile[k]} for k in self.difficulty}}
+        """JSON-ready dict (non-finite numbers, e.g. the Det row's Shape, become null)."""
+        return json_safe({
+            "presets": list(self.presets), "seeds": list(self.seeds),
+            "tables": {p: {name: self.summary(p, keys) for name, keys in self.groups()} for p in self.presets},
+            "tracklets": {k: {"difficulty": self.difficulty[k], "profile": self.profile[k]} for k in self.difficulty}})
+
+
+def _nan_mean(values: list[float]) -> float:
+    """Mean of the finite values; NaN when there is none (the Det row has no shape), without a warning."""
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
 
 
 def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSpec:
@@ -85,10 +93,15 @@ def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSp
 
 def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, presets: Iterable[str],
                        seeds: Iterable[int] = (0,), config: EvalConfig = EvalConfig(),
-                       progress: Callable[[int], Callable[[], None]] | None = None) -> BenchmarkRun:
+                       progress: Callable[[int], Callable[[], None]] | None = None,
+                       detections: Callable[[Any, int], Any] | None = None,
+                       overrides: Mapping[str, Any] | None = None) -> BenchmarkRun:
     """Track every tracklet with every preset and seed (sequence by sequence: one sweep cache at a time).
 
-    ``progress(total)`` returns a callable ticked once per (tracklet, preset, seed) run."""
+    ``progress(total)`` returns a callable ticked once per (tracklet, preset, seed) run. ``detections(sequence,
+    seed)``: the per-frame detections of a sequence for the Det / Det+SOT presets (e.g. simulated from its
+    ground truth with that seed). ``overrides``: TrackerConfig fields replaced in every preset."""
+    overrides = dict(overrides or {})
     presets, seeds = tuple(presets), tuple(int(s) for s in seeds)
     if not tracklets:
         raise InputError(None, "the list has no tracklet")
@@ -102,12 +115,14 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
     for path, group in by_sequence.items():
         seq = open_sequence(path)
         source = CachedSource(seq)
+        per_seed = {seed: detections(seq, seed) for seed in seeds} if detections else {}
         for t in group:
             spec = _spec(seq, source, t, config)
             levels[t.key], profiles[t.key] = spec.difficulty, t.profile
             for preset in presets:
                 for seed in seeds:
-                    result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], get_preset(preset, seed=seed))
+                    result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1],
+                                   get_preset(preset, seed=seed, **overrides), detections=per_seed.get(seed))
                     ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
                     records[(preset, seed, t.key)] = (dataclasses.replace(score_result(spec, result, config),
                                                                           track_id=t.key), ms)

@@ -23,6 +23,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "sot-apps eval ../shared/data/pandaset_002 --all-moving --preset det full det_sot "
                   "--simulate-detections learned --seeds 3",
                   "sot-apps eval --benchmark out/bench/benchmark.json --preset full faithful --seeds 3",
+                  "sot-apps eval --benchmark out/bench/benchmark.json --preset det_sot --simulate-detections learned "
+                  "--set weight_det=0.1 --seeds 3",
                   "sot-apps eval --benchmark lidar-sot --lists ../shared/data/readers/lidar_sot_benchmark/vehicle "
                   "WAYMO_DIR"])
     parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", default=None,
@@ -53,6 +55,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--simulate-detections", metavar="PROFILE",
                         help="instead of --detections: ground truth with a detector's errors, simulated per seed "
                              "(profiles: learned, noisy, clean; docs/detection.md)")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="FIELD=VALUE",
+                        help="replace a tracker setting (a TrackerConfig field, e.g. weight_det=0.1) in every preset; "
+                             "repeatable; the value is read as the field's type")
     parser.set_defaults(func=run)
     declare_outputs(parser, files=("json",))
     return parser
@@ -72,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     if args.detections and args.simulate_detections:
         raise InputError(None, "give --detections or --simulate-detections, not both")
     presets = resolve_presets(args.preset, with_detections=bool(args.detections or args.simulate_detections))
+    args.overrides = parse_overrides(args.overrides, presets)
     if args.benchmark:
         return _run_benchmark(args, presets)
     if args.sequence is None or not (args.tracks or args.all_moving):
@@ -88,7 +94,10 @@ def run(args: argparse.Namespace) -> int:
         sequence.check_index(args.end_frame)
     progress = lambda jobs: tqdm(jobs, desc="eval", unit="track", file=sys.stderr, leave=False)  # noqa: E731
     report = evaluate(sequence, ids, presets, offline=args.offline, seeds=list(range(args.seeds)),
-                      end_frame=args.end_frame, progress=progress, detections=detections, lags=args.lag)
+                      end_frame=args.end_frame, progress=progress, detections=detections, lags=args.lag,
+                      overrides=args.overrides)
+    if args.overrides:
+        print("set: " + " ".join(f"{k}={v}" for k, v in args.overrides.items()))
     print(format_report(report, per_track=not args.no_per_track))
     if args.json:
         write_json(args.json, report.to_dict())
@@ -107,6 +116,8 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
 
     if args.tracks or args.all_moving:
         raise InputError(None, "--benchmark takes its tracklets from the list: drop --tracks/--all-moving")
+    if args.detections:
+        raise InputError(None, "--benchmark spans several sequences: use --simulate-detections, not --detections")
     if args.benchmark == "lidar-sot":
         if not args.lists or args.sequence is None:
             raise InputError(None, "--benchmark lidar-sot needs --lists DIR and the Waymo DATA_DIR as SEQUENCE")
@@ -125,8 +136,63 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
         bar = tqdm(total=total, desc="eval", unit="run", file=sys.stderr, leave=False)
         return lambda: bar.update(1)
 
-    run = evaluate_tracklets(tracklets, resolve, presets, range(args.seeds), progress=progress)
-    print(format_benchmark(run, f"benchmark: {source} ({len(tracklets)} tracklets)"))
+    detections = None
+    if args.simulate_detections:
+        check_profile(args.simulate_detections)
+        detections = lambda seq, seed: simulated_detections(seq, args.simulate_detections, seed)  # noqa: E731
+    run = evaluate_tracklets(tracklets, resolve, presets, range(args.seeds), progress=progress, detections=detections,
+                             overrides=args.overrides)
+    title = f"benchmark: {source} ({len(tracklets)} tracklets)"
+    if args.overrides:
+        title += "; set " + " ".join(f"{k}={v}" for k, v in args.overrides.items())
+    print(format_benchmark(run, title))
     if args.json:
         write_json(args.json, run.to_dict())
     return 0
+
+
+def parse_overrides(items: list[str], presets: list[str]) -> dict:
+    """``FIELD=VALUE`` strings as TrackerConfig field replacements, each value read as the field's type
+    (bool: true/false/1/0); an unknown field, a bad value, or a result every preset rejects is an InputError."""
+    import dataclasses
+    import difflib
+
+    from tracker import get_preset, TrackerConfig
+
+    from ..errors import InputError
+
+    defaults = TrackerConfig()
+    names = [f.name for f in dataclasses.fields(TrackerConfig)]
+    out: dict = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name, text = name.strip(), text.strip()
+        if not sep or not name:
+            raise InputError(None, f"--set {item!r}: expected FIELD=VALUE")
+        if name not in names:
+            close = difflib.get_close_matches(name, names, n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise InputError(None, f"--set: unknown tracker setting {name!r}{hint} (fields: docs/tracker.md)")
+        default = getattr(defaults, name)
+        kind = ("true or false" if isinstance(default, bool) else "an integer" if isinstance(default, int)
+                else "a number" if isinstance(default, float) else "")
+        try:
+            if isinstance(default, bool):
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(text)
+                value = text.lower() in ("true", "1")
+            elif isinstance(default, int):
+                value = int(text)
+            elif isinstance(default, float):
+                value = float(text)
+            else:
+                value = text
+        except ValueError:
+            raise InputError(None, f"--set {name}={text}: {name} takes {kind}") from None
+        out[name] = value
+    for preset in presets:
+        try:
+            get_preset(preset, **out)
+        except ValueError as exc:
+            raise InputError(None, f"--set: preset {preset}: {exc}") from None
+    return out

@@ -11,7 +11,11 @@
    with the Detection term on the track's own detections (``det_sot``); then the offline refinement
    (:mod:`tracker.offline`) over the whole span, and the whole track is moved by the median offset of its
    detections (:func:`anchor_to_detections`: SOT is exact relative to its seed box, the detections fix where
-   the box sits).
+   the box sits); finally the box is fitted to the points the track gathered over all its frames
+   (:func:`fit_to_points`): on every axis whose two faces the points show, the points give the extent (the
+   detector's size and offset errors are correlated over time, so their median keeps a bias); on an axis
+   seen from one side only, the box keeps its size and moves just enough to hold the points. Each axis weighs
+   the points' estimate against the detections' median by their errors (:func:`detection_sigma`).
 3. :func:`autolabel`: all tracks; each label box carries its track's mean detection score.
 """
 
@@ -24,10 +28,11 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from tracker import (align_heading, Box, ConstantVelocityFilter, FrameDetections, FrameSource, get_preset,
-                     iou_bev_batch, LidarFrame, track, TrackerConfig, TrackResult, wrap_angle)
+                     iou_bev_batch, LidarFrame, points_in_box, track, TrackerConfig, TrackResult, voxel_downsample,
+                     wrap_angle)
 
 __all__ = ["AssociationConfig", "DetectionTrack", "AutoLabel", "associate_tracks", "label_track", "anchor_to_detections",
-           "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",
+           "PointFit", "fit_to_points", "detection_sigma", "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",
            "write_autolabels"]
 
 
@@ -156,8 +161,125 @@ def _detection_velocity(detection_track: DetectionTrack, frame: int, window: int
     return np.array([slope[0], slope[1], slope[2], 0.0])
 
 
+@dataclass(frozen=True)
+class PointFit:
+    """How :func:`fit_to_points` gathers a track's points and reads its box from them (metres)."""
+
+    margin: float = 0.3              # points up to this far outside the box footprint may grow it
+    ground_ring: float = 1.0         # the ground height of a frame: median height of the points in this ring
+    ground_clearance: float = 0.2    # points less than this above the ground are ground, not vehicle
+    min_ground_points: int = 10      # fewer ring points below the box centre: no ground estimate that frame
+    voxel: float = 0.05              # pooled points are thinned to one per voxel (dense frames do not dominate)
+    trim: float = 0.002              # share of the thinned points ignored at each end of an axis (stray returns)
+    both_faces: float = 0.9          # the points span >= this share of the size: both faces seen
+    min_points: int = 50             # fewer gathered points: the boxes are left as they are
+    point_sigma: float = 0.1         # error of a box read from the points (registration, labelling convention)
+
+
+def fit_to_points(source: FrameSource, boxes: dict[int, Box], fit: PointFit = PointFit(),
+                  detection_track: DetectionTrack | None = None) -> dict[int, Box]:
+    """The track's boxes moved and resized by one object-frame correction read from the points of all its frames.
+
+    Each frame's points in the box footprint grown by ``margin`` and above that frame's ground (median height
+    of the points in the surrounding ring below the box centre, + ``ground_clearance``) go to the object
+    frame and are pooled (one per ``voxel``). Per axis (length, width, height), with trimmed extremes lo..hi:
+    if hi - lo >= ``both_faces`` x size, both faces are seen and the box spans lo..hi; otherwise the size
+    stays and the centre moves the least that puts lo..hi inside the box. Where the ground is seen, the
+    height spans the ground to the highest point (a vehicle stands on the ground; LiDAR sees it from above).
+
+    With ``detection_track`` (the detections the boxes were anchored on, :func:`anchor_to_detections`), the
+    correction is weighed against the anchor by their errors: per axis, the points' estimate gets the weight
+    sigma_det^2 / (sigma_det^2 + ``point_sigma``^2), with sigma_det the error of the detections' median
+    (:func:`detection_sigma`). Many detections with uncorrelated errors: the anchor stays; a few, or errors
+    repeated from frame to frame: the points decide."""
+    pooled, bottoms = [], []
+    for k, box in boxes.items():
+        points = source.lidar_frame(k).points_world()
+        near = points[points_in_box(points, _grown(box, fit.ground_ring, 1.0))]
+        if len(near) == 0:
+            continue
+        local = _object_frame(near, box)
+        half = np.array([box.length, box.width]) / 2.0
+        inside = np.all(np.abs(local[:, :2]) <= half + fit.margin, axis=1)
+        ring = ~np.all(np.abs(local[:, :2]) <= half + fit.margin + 0.2, axis=1) & (local[:, 2] < 0.0)
+        ground = -box.height / 2.0
+        if ring.sum() >= fit.min_ground_points:
+            ground = float(np.median(local[ring, 2]))
+            bottoms.append(ground)
+        keep = inside & (local[:, 2] > ground + fit.ground_clearance) & (local[:, 2] <= box.height / 2.0 + fit.margin)
+        pooled.append(local[keep])
+    points = voxel_downsample(np.vstack(pooled), fit.voxel) if pooled else np.zeros((0, 3))
+    if len(points) < fit.min_points:
+        return boxes
+    first = next(iter(boxes.values()))
+    size = np.array([first.length, first.width, first.height])
+    cut = max(1, int(fit.trim * len(points)))
+    ordered = np.sort(points, axis=0)
+    lo, hi = ordered[cut], ordered[-cut - 1]
+    both = hi - lo >= fit.both_faces * size
+    if bottoms:  # a vehicle stands on the ground and LiDAR sees it from above: ground to the highest point
+        lo[2] = float(np.median(bottoms))
+        both[2] = True
+    new_size = np.where(both, hi - lo, size)
+    centre = np.where(both, (lo + hi) / 2.0, np.clip(0.0, hi - size / 2.0, lo + size / 2.0))
+    if detection_track is not None:
+        sigma_centre, sigma_size = detection_sigma(boxes, detection_track)
+        centre = centre * _weight(sigma_centre, fit.point_sigma)
+        new_size = size + (new_size - size) * _weight(sigma_size, fit.point_sigma)
+    du, dv, dz = centre
+    out = {}
+    for k, box in boxes.items():
+        c, s = np.cos(box.heading), np.sin(box.heading)
+        out[k] = Box(box.x + c * du - s * dv, box.y + s * du + c * dv, box.z + dz, box.heading, *new_size)
+    return out
+
+
+def _weight(sigma_det: np.ndarray, sigma_points: float) -> np.ndarray:
+    """Inverse-variance weight of the points' estimate against the detections' (1 where sigma_det is inf)."""
+    with np.errstate(invalid="ignore"):
+        w = sigma_det ** 2 / (sigma_det ** 2 + sigma_points ** 2)
+    return np.where(np.isfinite(sigma_det), w, 1.0)
+
+
+def detection_sigma(boxes: dict[int, Box], detection_track: DetectionTrack) -> tuple[np.ndarray, np.ndarray]:
+    """Errors (3,) of the median centre offset (length, width, up; object frame) and of the median size of the
+    track's detections relative to ``boxes``: robust spread (1.4826 MAD) / sqrt(effective count), the count
+    shrunk by the lag-1 autocorrelation rho of the series, n (1 - rho) / (1 + rho). Inf with < 3 detections."""
+    frames = sorted(k for k in detection_track.boxes if k in boxes)
+    if len(frames) < 3:
+        return np.full(3, np.inf), np.full(3, np.inf)
+    offsets, sizes = [], []
+    for k in frames:
+        det, box = detection_track.boxes[k], boxes[k]
+        offsets.append(_object_frame(det[None, :3], box)[0])
+        sizes.append(det[4:7])
+    return _median_sigma(np.array(offsets)), _median_sigma(np.array(sizes))
+
+
+def _median_sigma(series: np.ndarray) -> np.ndarray:
+    deviation = series - np.median(series, axis=0)
+    spread = 1.4826 * np.median(np.abs(deviation), axis=0)
+    a, b = deviation[:-1], deviation[1:]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.nan_to_num((a * b).sum(axis=0) / (deviation ** 2).sum(axis=0))
+    rho = np.clip(rho, 0.0, 0.95)
+    n_eff = np.maximum(len(series) * (1.0 - rho) / (1.0 + rho), 1.0)
+    return spread / np.sqrt(n_eff)
+
+
+def _grown(box: Box, margin: float, z_margin: float) -> Box:
+    return Box(box.x, box.y, box.z, box.heading, box.length + 2 * margin, box.width + 2 * margin,
+               box.height + 2 * z_margin)
+
+
+def _object_frame(points: np.ndarray, box: Box) -> np.ndarray:
+    c, s = np.cos(box.heading), np.sin(box.heading)
+    d = points - box.center
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+
+
 def label_track(source: FrameSource, detection_track: DetectionTrack, config: TrackerConfig | None = None,
-                offline: bool = True) -> AutoLabel:
+                offline: bool = True, fit: PointFit | None = PointFit()) -> AutoLabel:
     """SOT forward and backward from the track's most reliable detection, then the offline refinement."""
     config = config or get_preset("det_sot")
     frames = detection_track.frames
@@ -181,6 +303,8 @@ def label_track(source: FrameSource, detection_track: DetectionTrack, config: Tr
 
         result = refine_offline(source, result, config)
     boxes = anchor_to_detections({e.frame: e.box for e in result.estimates}, detection_track)
+    if fit is not None:
+        boxes = fit_to_points(source, boxes, fit, detection_track)
     return AutoLabel(detection_track.track_id, boxes, detection_track.mean_score, result.shape, detection_track)
 
 

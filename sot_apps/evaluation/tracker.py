@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -203,7 +203,7 @@ class EvalReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (non-finite numbers become null)."""
-        return _json_safe({
+        return json_safe({
             "sequence": self.sequence,
             "eval_config": self.eval_config.to_dict(),
             "tracks": [t.summary() for t in self.tracks],
@@ -212,13 +212,13 @@ class EvalReport:
         })
 
 
-def _json_safe(value: Any) -> Any:
+def json_safe(value: Any) -> Any:
     if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
+        return {str(k): json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
+        return [json_safe(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _json_safe(value.tolist())
+        return json_safe(value.tolist())
     if isinstance(value, (float, np.floating)):
         return float(value) if np.isfinite(value) else None
     if isinstance(value, np.integer):
@@ -325,12 +325,14 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
              end_frame: int | None = None, progress: Callable[[Iterable], Iterable] | None = None,
              refine: Callable[..., TrackResult] | None = None, with_shape: bool = True,
              detections: Detections | Callable[[int], Detections] | None = None,
-             lags: Sequence[int] = ()) -> EvalReport:
+             lags: Sequence[int] = (), overrides: Mapping[str, Any] | None = None) -> EvalReport:
     """Evaluate ``presets`` (online, plus fixed-lag rows ``preset+lagN`` for each N in ``lags`` (ms/frame: the
     online step plus the window solve) and offline-refined rows when ``offline``) on ``track_ids``
     (default: all moving vehicle tracks). ``refine(source, result, config) -> TrackResult`` overrides the
     offline refinement (default: :func:`tracker.offline.refine_offline`). ``detections``: per-frame
-    detections for the Det / Det+SOT presets, or a function seed -> detections (e.g. simulated per seed)."""
+    detections for the Det / Det+SOT presets, or a function seed -> detections (e.g. simulated per seed).
+    ``overrides``: TrackerConfig fields replaced in every preset (``sot-apps eval --set``)."""
+    overrides = dict(overrides or {})
     per_seed: dict[int, Detections | None] = {}
 
     def detections_for(seed: int) -> Detections | None:
@@ -351,8 +353,8 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     lagged: dict[tuple[str, int], list[RunRecord]] = {(p, n): [] for p in presets for n in lags}
     tracker_configs: dict[str, dict[str, Any]] = {}
     for preset, seed, spec in (progress(jobs) if progress else jobs):
-        tconfig = get_preset(preset, seed=int(seed))
-        tracker_configs[preset] = get_preset(preset).to_dict()
+        tconfig = get_preset(preset, seed=int(seed), **overrides)
+        tracker_configs[preset] = get_preset(preset, **overrides).to_dict()
         result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], tconfig,
                        detections=detections_for(int(seed)))
         ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)

@@ -87,3 +87,22 @@ def test_eval_benchmark_prints_difficulty_and_profile_rows(small_benchmark, caps
     assert table["all"]["n"] == 8
     assert sum(table[d]["n"] for d in ("easy", "medium", "hard") if d in table) == 8
     assert 0.0 <= table["all"]["acc"] <= 1.0
+
+
+def test_eval_benchmark_with_simulated_detections_and_set(small_benchmark, capsys, tmp_path):
+    """The benchmark's exact ground truth gives simulated detections; clean ones make the Det row exact, and
+    ``--set`` replaces a tracker setting in every preset (reported in the title)."""
+    listing = str(small_benchmark / "benchmark.json")
+    report = tmp_path / "det.json"
+    assert main(["eval", "--benchmark", listing, "--first", "2", "--preset", "det", "--simulate-detections", "clean",
+                 "--json", str(report)]) == 0
+    assert json.loads(report.read_text())["tables"]["det"]["all"]["acc"] > 0.85
+    capsys.readouterr()
+    assert main(["eval", "--benchmark", listing, "--first", "2", "--preset", "det_sot", "--simulate-detections",
+                 "learned", "--set", "weight_det=0.1", "--set", "det_min_iou=0.2"]) == 0
+    assert "set weight_det=0.1 det_min_iou=0.2" in capsys.readouterr().out
+    assert main(["eval", "--benchmark", listing, "--preset", "det"]) == 2  # a detection preset needs detections
+    assert main(["eval", "--benchmark", listing, "--set", "weight_dett=0.1"]) == 2
+    assert "unknown tracker setting 'weight_dett'; did you mean weight_det" in capsys.readouterr().err
+    assert main(["eval", "--benchmark", listing, "--set", "max_points=many"]) == 2
+    assert "max_points takes an integer" in capsys.readouterr().err

@@ -40,7 +40,7 @@ def test_every_moving_vehicle_is_recovered_by_one_track(labelled):
     for trk in moving:
         bev, iou3d = _best_match(trk, labels)
         assert bev >= 0.7, (trk.track_id, bev)
-        assert iou3d >= 0.6, (trk.track_id, iou3d)
+        assert iou3d >= 0.7, (trk.track_id, iou3d)
 
 
 def test_the_three_label_formats_hold_the_same_boxes(labelled):
@@ -60,3 +60,82 @@ def test_the_three_label_formats_hold_the_same_boxes(labelled):
     # AV2 boxes are in the ego frame: unit yaw quaternions, positive sizes
     np.testing.assert_allclose(table.qw ** 2 + table.qz ** 2, 1.0, atol=1e-9)
     assert (table[["length_m", "width_m", "height_m"]] > 0).all().all()
+
+
+class _BoxOnGround:
+    """Frames whose points are the surface of one known box standing on a ground plane (z = 0), seen from the
+    sides listed in ``faces`` (+x, -x, +y, -y, top), plus the ground around it."""
+
+    def __init__(self, truth, faces, frames=5):
+        rng = np.random.default_rng(1)
+        l, w, h = truth.length, truth.width, truth.height
+        u, v, z = rng.uniform(-0.5, 0.5, (3, 4000))
+        sides = {"+x": np.column_stack([np.full(4000, l / 2), v * w, (z + 0.5) * h]),
+                 "-x": np.column_stack([np.full(4000, -l / 2), v * w, (z + 0.5) * h]),
+                 "+y": np.column_stack([u * l, np.full(4000, w / 2), (z + 0.5) * h]),
+                 "-y": np.column_stack([u * l, np.full(4000, -w / 2), (z + 0.5) * h]),
+                 "top": np.column_stack([u * l, v * w, np.full(4000, h)])}
+        local = np.vstack([sides[f] for f in faces])
+        c, s = np.cos(truth.heading), np.sin(truth.heading)
+        body = np.column_stack([truth.x + c * local[:, 0] - s * local[:, 1],
+                                truth.y + s * local[:, 0] + c * local[:, 1], local[:, 2]])
+        ground = np.column_stack([truth.x + rng.uniform(-5, 5, 6000), truth.y + rng.uniform(-5, 5, 6000),
+                                  rng.normal(0.0, 0.01, 6000)])
+        self.points = np.vstack([body, ground])
+        self.n = frames
+
+    def __len__(self):
+        return self.n
+
+    def lidar_frame(self, index):
+        from tracker.frames import LidarFrame
+
+        return LidarFrame(index=index, timestamp_ns=index * 100_000_000, points_ego=self.points,
+                          world_from_ego=np.eye(4))
+
+
+def test_fit_to_points_reads_the_box_from_the_points_where_both_faces_show():
+    from sot_apps.detection.autolabel import fit_to_points
+    from tracker.geometry import Box
+
+    truth = Box(10.0, 5.0, 0.75, 0.3, 4.5, 1.8, 1.5)
+    # the detector's bias: 0.25 m too far along, 0.15 m across, 0.12 m high, every size 6 % too large
+    c, s = np.cos(truth.heading), np.sin(truth.heading)
+    biased = Box(truth.x + 0.25 * c - 0.15 * s, truth.y + 0.25 * s + 0.15 * c, truth.z + 0.12, truth.heading,
+                 4.77, 1.91, 1.59)
+    before = float(iou_3d_batch(truth.to_array()[None], biased.to_array()[None])[0])
+    fitted = fit_to_points(_BoxOnGround(truth, ["+x", "-x", "+y", "-y", "top"]), {k: biased for k in range(5)})
+    after = np.array([b.to_array() for b in fitted.values()])
+    assert before < 0.75
+    assert iou_3d_batch(np.tile(truth.to_array(), (5, 1)), after).min() > 0.93
+    # one long side only (-y, as seen level from the side): the width stays, the box moves just enough to
+    # hold the points across; the side shows the length and the height
+    partial = fit_to_points(_BoxOnGround(truth, ["-y"]), {0: biased})[0]
+    assert partial.width == pytest.approx(biased.width)
+    local_v = -s * (partial.x - truth.x) + c * (partial.y - truth.y)
+    assert local_v - partial.width / 2 == pytest.approx(-truth.width / 2, abs=0.03)
+    assert partial.length == pytest.approx(truth.length, abs=0.05)
+    assert partial.height == pytest.approx(truth.height, abs=0.05)
+
+
+def test_detection_sigma_grows_when_errors_repeat_from_frame_to_frame():
+    from sot_apps.detection.autolabel import DetectionTrack, detection_sigma
+    from tracker.geometry import Box
+
+    rng = np.random.default_rng(0)
+    n = 60
+    iid = rng.normal(0.0, 0.2, n)
+    correlated = np.full(n, rng.normal(0.0, 0.2))  # starts from the stationary spread
+    for k in range(1, n):  # AR(1), rho 0.9, the same marginal spread
+        correlated[k] = 0.9 * correlated[k - 1] + np.sqrt(1 - 0.81) * rng.normal(0.0, 0.2)
+    boxes = {k: Box(0.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5) for k in range(n)}
+
+    def sigma(errors):
+        track = DetectionTrack("t", {k: np.array([e, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5]) for k, e in enumerate(errors)},
+                               {k: 0.9 for k in range(n)})
+        return detection_sigma(boxes, track)[0][0]
+
+    assert sigma(iid) == pytest.approx(0.2 / np.sqrt(n), rel=0.35)
+    assert sigma(correlated) > 1.5 * sigma(iid)  # rho 0.9: n_eff ~ n / 19 (estimated rho from 60 samples is lower)
+    few = DetectionTrack("t", {0: np.zeros(7), 1: np.zeros(7)}, {0: 0.9, 1: 0.9})
+    assert np.isinf(detection_sigma(boxes, few)[0]).all()

@@ -127,3 +127,28 @@ def test_a_frame_without_points_minimises_prior_plus_detection():
     step_prior = result.boxes[5].x - result.boxes[4].x       # the motion the prior predicts (constant here)
     expected = result.boxes[5].x + (0.1 * step_prior + 0.1 * (dets[6].boxes[0, 0] - result.boxes[5].x)) / 0.2
     assert abs(result.boxes[6].x - expected) < 0.15
+
+
+def test_distance_gate_takes_the_nearest_confident_detection_when_no_iou_qualifies():
+    pred = Box(0.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5)
+    dets = FrameDetections(np.array([[0.0, 4.0, 0.0, 0.0, 4.0, 2.0, 1.5], [0.0, -3.0, 0.0, 0.0, 4.0, 2.0, 1.5],
+                                     [2.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5]]), np.array([0.9, 0.9, 0.4]))
+    assert associate_detection(pred, dets, 0.5, 0.1) is None                  # no BEV overlap: the paper's rule
+    np.testing.assert_allclose(associate_detection(pred, dets, 0.5, 0.1, max_distance=5.0), dets.boxes[1])
+    assert associate_detection(pred, dets, 0.5, 0.1, max_distance=2.5) is None  # the low-score one never counts
+    overlapping = FrameDetections(np.vstack([dets.boxes, [[0.5, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5]]]),
+                                  np.array([0.9, 0.9, 0.4, 0.6]))
+    np.testing.assert_allclose(associate_detection(pred, overlapping, 0.5, 0.1, 5.0), overlapping.boxes[3])
+
+
+def test_distance_gate_reanchors_a_track_that_coasted_off_its_object():
+    """Points vanish for three frames (an occlusion); the detections then sit 2 m beside the coasting
+    prediction (no BEV overlap): only the distance gate lets them pull the track across."""
+    source = GapSource()
+    dets = {k: FrameDetections(np.array([[truth_x(k), 2.0 if k >= 5 else 0.0, 0.8, 0.0, 4.5, 1.9, 1.6]]),
+                               np.array([0.9])) for k in range(1, FRAMES)}
+    paper = track(source, START, config=get_preset("det_sot"), detections=dets)
+    gated = track(source, START, config=get_preset("det_sot", det_max_distance=5.0), detections=dets)
+    assert not any("det" in e.flags for e in paper.estimates[5:8])
+    assert all("det_only" in e.flags for e in gated.estimates[5:8])
+    assert abs(paper.boxes[7].y) < 0.05 and gated.boxes[7].y > 0.5
