@@ -426,10 +426,12 @@ def place_vehicle(ctx: PlacementContext, rng: np.random.Generator, vid: str, ban
 
 def place_occluder(ctx: PlacementContext, rng: np.random.Generator, target: InsertedVehicle, vid: str, bank_id: str,
                    label: str, size: tuple[float, float, float]) -> InsertedVehicle | None:
-    """An unlisted vehicle on the sensor-target line of sight at the middle frame, moving at constant speed.
+    """An unlisted vehicle on the sensor-target line of sight at the middle frame, at constant speed.
 
-    All crossing points every 0.5 m over 25-80 % of the sight line, 4 headings (along the road either way, across
-    the sight line either way) and 3 speeds are tested at once (raster), then in random order (exact)."""
+    All crossing points every 0.5 m over 25-80 % of the sight line and 6 headings (the target's own either way,
+    the sensor's either way, across the sight line either way) are tested at once (raster), then in random order
+    (exact), for 3 driving speeds in random order; where none fits (a busy street leaves little free lane for a
+    20 m swept path), a parked occluder (speed 0) on the sight line is tried last."""
     mid = len(ctx.frame_times_ns) // 2
     t_mid = int(ctx.frame_times_ns[mid])
     p = target.states_at(t_mid)[:2]
@@ -437,9 +439,11 @@ def place_occluder(ctx: PlacementContext, rng: np.random.Generator, target: Inse
     sight = math.atan2(p[1] - s[1], p[0] - s[0])
     road = float(ctx.sensor_xyh[mid, 2])
     fractions = np.arange(0.25, 0.8, SAMPLE_M / max(float(np.hypot(*(p - s))), 1.0))
-    headings = [road, road + math.pi, sight + math.pi / 2, sight - math.pi / 2]
-    for speed in rng.permutation([1.5, 3.0, 5.0]):
-        spec = MotionSpec("constant_speed", float(speed) + float(rng.uniform(-0.5, 0.5)))
+    own = float(target.states_at(t_mid)[3])
+    headings = [own, own + math.pi, road, road + math.pi, sight + math.pi / 2, sight - math.pi / 2]
+    for speed in list(rng.permutation([1.5, 3.0, 5.0])) + [0.0]:
+        jitter = float(rng.uniform(-0.5, 0.5)) if speed > 0 else 0.0
+        spec = MotionSpec("constant_speed", float(speed) + jitter)
         path, times_ns = _path(ctx, spec)
         fp = _footprint(path.states(), _window_index(ctx, times_ns), size, ctx.margin)
         back = spec.speed0 * (t_mid - times_ns[0]) * 1e-9  # where to start so that it is at q at t_mid

@@ -118,3 +118,36 @@ def test_a_box_across_the_scan_seam_is_refused():
     assert placement._on_seam(ctx, box(seam + 0.1))      # 1 m off the ray: the 4.5 m box still crosses it
     assert not placement._on_seam(ctx, box(seam + 0.4))
     assert not placement._on_seam(ctx, box(seam + math.pi))  # the opposite direction is no seam
+
+
+def test_occluder_falls_back_to_a_parked_car_on_the_line_of_sight(background, bank, monkeypatch):
+    """Where no driving occluder fits (here every moving candidate is refused, as on a busy street with no free
+    lane for a 20 m swept path), the occluder is a parked car that still stands on the sensor-target line of
+    sight at the middle frame, clear of the target."""
+    seq = open_sequence(background)
+    config = MakeConfig(str(background), str(bank), 1, (0, 6), 1, "unused", range_m=(10.0, 30.0))
+    ctx = _context(seq, list(range(6)), config)
+    entry = read_bank(bank).entries[0]
+    size = (4.7, 2.0, 1.6)
+    rng = np.random.default_rng(4)
+    target = None
+    for _ in range(5):
+        target = placement.place_vehicle(ctx, rng, "ins_t", entry.id, "Car", size, "constant_speed")
+        if target is not None:
+            break
+    assert target is not None
+    exact = placement._exact_ok
+    monkeypatch.setattr(placement, "_exact_ok",
+                        lambda c, boxes: bool(np.ptp(boxes[:, 0]) < 1e-9 and np.ptp(boxes[:, 1]) < 1e-9)
+                        and exact(c, boxes))
+    occ = placement.place_occluder(ctx, rng, target, "occ_t", entry.id, "Car", size)
+    assert occ is not None and occ.motion.speed0 == 0.0 and not occ.listed and occ.occluder_of == "ins_t"
+    mid = len(ctx.frame_times_ns) // 2
+    t_mid = int(ctx.frame_times_ns[mid])
+    s, p = ctx.sensor_xyh[mid, :2], target.states_at(t_mid)[:2]
+    o = occ.states_at(t_mid)
+    assert np.ptp(occ.states[:, :2], axis=0).max() < 1e-9               # parked for the whole tracklet
+    u = (p - s) / np.linalg.norm(p - s)
+    d = o[:2] - s
+    along, across = float(np.dot(d, u)), float(abs(u[0] * d[1] - u[1] * d[0]))
+    assert 0.2 * np.linalg.norm(p - s) < along < 0.85 * np.linalg.norm(p - s) and across < 1.0
