@@ -201,9 +201,12 @@ _FULL_V1 = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_it
                       min_target_points=3, max_points=600, gpf_seed_threshold=0.3, gpf_distance_threshold=0.2,
                       z_mode="ground",
                       preset="full_v1")
-# full = full_v1 + the robust online pieces of issue 12 (each one a field; the full_no_* presets switch one off)
-_FULL = _FULL_V1.replace(first_hypotheses=9, first_max_yaw=0.1, z_mode="filter", prior_per_second=True,
-                         preset="full")
+# full_v2 = full_v1 + the robust online pieces of issue 12 (each one a field)
+_FULL_V2 = _FULL_V1.replace(first_hypotheses=9, first_max_yaw=0.1, z_mode="filter", prior_per_second=True,
+                            preset="full_v2")
+# full = full_v2 with the motion prior averaged in the world frame and one ground plane per sweep (chosen on the
+# generated benchmark and the synthetic worlds, docs/tracker.md)
+_FULL = _FULL_V2.replace(prior_frame="world", ground_scope="sweep", preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
@@ -214,6 +217,7 @@ _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_i
 PRESETS: dict[str, TrackerConfig] = {
     "full": _FULL,
     "full_v1": _FULL_V1,
+    "full_v2": _FULL_V2,
     "faithful": _FAITHFUL,
     "icp_mp": _FULL.replace(use_shape=False, weight_mc=0.0, preset="icp_mp"),
     "icp_mp_s1": _FULL.replace(shape_update=False, weight_mc=0.0, preset="icp_mp_s1"),

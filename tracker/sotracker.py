@@ -228,11 +228,13 @@ class Tracker:
             flags.append("nan_points")
             near &= np.isfinite(pts).all(axis=1)
         sweep_ground = c.ground_removal and c.ground_scope == "sweep"
-        if sweep_ground:  # upstream: one plane for the whole sweep in the ego (sensor) frame
-            near &= ~cached_sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold,
-                                              c.gpf_distance_threshold, c.gpf_iterations)
         idx = np.flatnonzero(near)
         local = pts[idx].astype(np.float64)
+        is_ground = None
+        if sweep_ground:  # upstream: one plane for the whole sweep (sensor frame); its ground points near the box
+            # stay the road for the height (z_mode "filter" / "ground") and are removed below
+            is_ground = cached_sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold,
+                                                 c.gpf_distance_threshold, c.gpf_iterations)[idx]
         if deskew:
             prev_t, prev_pose = self._previous_pose
             world = deskew_points(local, np.asarray(frame.point_time_offset_ns)[idx], frame.timestamp_ns,
@@ -245,9 +247,13 @@ class Tracker:
         u = np.abs(d @ np.array([ca, sa]))
         v = np.abs(d @ np.array([-sa, ca]))
         gscale = scale + 0.5
-        world = world[(u <= 0.5 * box.length * gscale + c.gpf_margin) & (v <= 0.5 * box.width * gscale + c.gpf_margin)]
-        if c.ground_removal and not sweep_ground and len(world) >= 3:
+        region = (u <= 0.5 * box.length * gscale + c.gpf_margin) & (v <= 0.5 * box.width * gscale + c.gpf_margin)
+        world = world[region]
+        if is_ground is not None:
+            is_ground = is_ground[region]
+        elif c.ground_removal and not sweep_ground and len(world) >= 3:
             is_ground = ground_mask(world, self.ground_params)
+        if is_ground is not None:
             self._ground_points = world[is_ground]
             world = world[~is_ground]
         # keep only what a search box can contain (the box moves a little during the outer loop)

@@ -37,3 +37,29 @@ def test_offline_row_times_the_refinement_per_frame_and_scores_it():
     cells = line.split()
     assert cells[1:8] == ["-"] * 7 and cells[8] == f"{row['offline_added_ms']:.1f}"
     assert "added ms" in table and next(ln for ln in table.splitlines() if ln.startswith("full ")).split()[8] == "-"
+
+
+def test_sweep_ground_is_timed_once_per_sweep_and_shown_apart():
+    """``full`` and ``faithful`` remove the ground with one plane per sweep, shared by every object in the sweep:
+    the bench times it per sweep, warms the cache so that the step times exclude it, and prints it apart."""
+    from sot_apps.bench.tracker import _time_sweep_ground
+    from tracker.sweep_ground import _CACHE, sweep_ground_mask
+
+    seq = make_sequence(n_frames=4, seed=6)
+    config = get_preset("full")
+    ms = _time_sweep_ground(seq, [0, 1, 2, 3], config)
+    assert ms.shape == (4,) and np.all(ms > 0)
+    for k in range(4):
+        points = seq.lidar_frame(k).points_ego
+        entry = _CACHE[id(points)]
+        assert entry[0]() is points and np.array_equal(entry[2], sweep_ground_mask(
+            points, config.gpf_lpr_count, config.gpf_seed_threshold, config.gpf_distance_threshold,
+            config.gpf_iterations))
+    assert _time_sweep_ground(seq, [0, 1], get_preset("full_v2")).size == 0   # local ground: nothing shared
+
+    row = {"row": "full", "acc": 0.9, "rob": 0.9, "frames": 3, "cpu_median_ms": 10.0, "cpu_mean_ms": 11.0,
+           "cpu_p90_ms": 12.0, "cpu_frame1_mean_ms": 50.0, "cpu_median_ms_k2": 10.0, "wall_median_ms": 10.0,
+           "wall_mean_ms": 11.0, "sweep_ground_ms": float(np.median(ms))}
+    table = format_table({"sequence": "synthetic", "tracks": ["synthetic"], "frames_per_preset": 3,
+                          "machine": {"cpu": "test", "load_average": "0"}, "rows": [row]})
+    assert next(ln for ln in table.splitlines() if ln.startswith("full ")).split()[9] == f"{np.median(ms):.1f}"
