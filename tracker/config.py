@@ -107,6 +107,10 @@ class TrackerConfig:
     height_fit_sigma: float = 0.15       # z_mode "filter": noise of the registration's z (m)
     height_road_sigma: float = 0.05      # z_mode "filter": noise of road height + offset (m)
     height_offset_gain: float = 0.05     # z_mode "filter": the height above the road follows the estimate this slowly
+    reacquire: bool = False              # a start box holding fewer than min_target_points points: hold it and
+                                         # search ahead (first_max_speed x time since the start) and a third
+                                         # back along its heading; once min_target_points are found, restart
+                                         # there with the travelled motion as the prior (see docs/tracker.md)
     search_growth: float = 0.0           # > 0 (ctrv): the search box grows by this many sigmas of the predicted centre
     max_search_scale: float = 4.0        # cap of the grown search scale
     mp_reference: str = "prior"          # "prior" (paper) or "iteration" (upstream: previous outer iteration)

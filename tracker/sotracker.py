@@ -24,7 +24,7 @@ loss of step 3; a frame without points then takes the motion from the detection 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -303,6 +303,8 @@ class Tracker:
         self._started = True
         obj = local[points_in_box(local, box, 1.0)]
         self._start_points = obj  # the Finder's source (first_search="finder")
+        self._waiting = c.reacquire and len(obj) < c.min_target_points  # an empty start (see _reacquire)
+        self._start_ns = int(frame.timestamp_ns)
         if len(obj) == 0:
             flags.append("no_points")
         est = FrameEstimate(frame.index, box.state, box, len(obj), 1.0, tuple(["init"] + flags),
@@ -617,6 +619,8 @@ class Tracker:
         self._last_dt = self._elapsed(frame)
         if not frame.has_sweep:
             return self._predict_only(frame, prev, t0)
+        if self._waiting:
+            return self._reacquire(frame, t0)
         self.steps += 1
         flags: list[str] = []
         first = self.steps == 1
@@ -654,6 +658,43 @@ class Tracker:
         self.box = box
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)
+
+    def _reacquire(self, frame: LidarFrame, t0: float) -> FrameEstimate:
+        """An empty start (``reacquire``): the start box had fewer than ``min_target_points`` points, so there
+        is neither a shape nor a motion to follow. The box is held, and a region along its heading is searched
+        that grows with the time since the start: ``first_max_speed`` x elapsed ahead, a third of that behind,
+        the box's width + 0.5 m each side across. Once one box length of it holds ``min_target_points``
+        non-ground points, the box slides along its heading to where it holds the most of them (among equals,
+        where its face toward the sensor meets the points: that face is the visible one) and the track starts
+        again there, with the travelled distance over the elapsed time as the motion prior's start.
+        Flags: ``waiting`` (held), ``reacquired``."""
+        c = self.config
+        prev = self.box
+        elapsed = max((int(frame.timestamp_ns) - self._start_ns) * 1e-9, _NOMINAL_DT)
+        ahead, behind = c.first_max_speed * elapsed, c.first_max_speed * elapsed / 3.0
+        reach = Box(prev.x + 0.5 * (ahead - behind) * np.cos(prev.heading),
+                    prev.y + 0.5 * (ahead - behind) * np.sin(prev.heading), prev.z, prev.heading,
+                    prev.length + ahead + behind, prev.width + 1.0, prev.height)
+        local, _ = self._local_points(frame, reach, 1.0)
+        obj = to_object_frame(local[points_in_box(local, reach, 1.0)], reach)
+        u = obj[:, 0] + 0.5 * (ahead - behind)               # along the heading, from the start box's centre
+        shifts = np.arange(-behind, ahead + 0.05, 0.1)
+        counts = (np.abs(u[None, :] - shifts[:, None]) <= 0.5 * prev.length).sum(axis=1)
+        if counts.max(initial=0) < c.min_target_points:
+            self._coasting += 1
+            self._previous_pose = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+            return FrameEstimate(frame.index, prev.state, prev, 0, 0.0, ("no_points", "prior_only", "waiting"),
+                                 (time.perf_counter() - t0) * 1e3, np.zeros((0, 3)))
+        best = shifts[counts == counts.max()]
+        sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
+        sensor_u = float(np.dot(sensor[:2] - prev.center[:2], [np.cos(prev.heading), np.sin(prev.heading)]))
+        shift = float(best.min() if sensor_u > best.mean() else best.max())  # the visible face meets the points
+        motion = np.array([shift * np.cos(prev.heading), shift * np.sin(prev.heading), 0.0, 0.0])
+        first_box, previous = self.first_box, self._previous_pose
+        estimate = self.start(frame, _box_moved(prev, motion), previous, motion * (_NOMINAL_DT / elapsed))
+        self.first_box = first_box
+        return replace(estimate, flags=tuple(f for f in estimate.flags if f != "init") + ("reacquired",),
+                       time_ms=(time.perf_counter() - t0) * 1e3)
 
     def _predict_only(self, frame: LidarFrame, prev: Box, t0: float) -> FrameEstimate:
         """A frame without a sweep: move the box by the motion model over the elapsed time, measure nothing.
