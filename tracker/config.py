@@ -78,7 +78,8 @@ class TrackerConfig:
                                          # keeps all pairs
     # --- motion prior
     alpha: float = 0.5                   # prior <- alpha * prior + (1 - alpha) * delta
-    prior_frame: str = "world"           # "world" (paper) or "object": average the motion in the box frame
+    prior_frame: str = "world"           # "world" (paper); "object": average the motion in the box frame;
+                                         # "turn": world frame, turned by the averaged turn rate (tracker/motion.py)
     z_mode: str = "icp"                  # "icp": dz from the loss like dx, dy; "ground": the box keeps its start
                                          # height above the local road plane; "fixed": dz = 0; "filter": slow
                                          # estimate from the registration's z with the road as a prior
@@ -107,6 +108,9 @@ class TrackerConfig:
     height_fit_sigma: float = 0.15       # z_mode "filter": noise of the registration's z (m)
     height_road_sigma: float = 0.05      # z_mode "filter": noise of road height + offset (m)
     height_offset_gain: float = 0.05     # z_mode "filter": the height above the road follows the estimate this slowly
+    height_road: str = "local"           # z_mode "filter"/"ground": the road under the box from "local" per-cell
+                                         # planes (tracker/ground.py, fitted for this even when ground_scope is
+                                         # "sweep"), from the points the ground "removal" took, or "none"
     reacquire: bool = False              # a start box holding fewer than min_target_points points: hold it and
                                          # search ahead (first_max_speed x time since the start) and a third
                                          # back along its heading; once min_target_points are found, restart
@@ -178,14 +182,15 @@ class TrackerConfig:
             raise ValueError(f"z_mode must be 'icp', 'ground', 'fixed' or 'filter', not {self.z_mode!r}")
         if self.motion_model not in ("average", "ctrv"):
             raise ValueError(f"motion_model must be 'average' or 'ctrv', not {self.motion_model!r}")
-        if self.prior_frame not in ("world", "object"):
-            raise ValueError(f"prior_frame must be 'world' or 'object', not {self.prior_frame!r}")
+        if self.prior_frame not in ("world", "object", "turn"):
+            raise ValueError(f"prior_frame must be 'world', 'object' or 'turn', not {self.prior_frame!r}")
         if self.method not in ("sot", "det"):
             raise ValueError(f"method must be 'sot' or 'det', not {self.method!r}")
         if self.mp_reference not in ("prior", "iteration"):
             raise ValueError(f"mp_reference must be 'prior' or 'iteration', not {self.mp_reference!r}")
         choices = {"association": ("global", "crop"), "ransac_mode": ("fixed", "upstream"),
                    "first_search": ("moving", "finder"), "ground_scope": ("local", "sweep"),
+                   "height_road": ("local", "removal", "none"),
                    "data_free_frames": ("prior", "motion_terms")}
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
@@ -210,7 +215,7 @@ _FULL_V2 = _FULL_V1.replace(first_hypotheses=9, first_max_yaw=0.1, z_mode="filte
                             preset="full_v2")
 # full = full_v2 with the motion prior averaged in the world frame and one ground plane per sweep (chosen on the
 # generated benchmark and the synthetic worlds, docs/tracker.md)
-_FULL = _FULL_V2.replace(prior_frame="world", ground_scope="sweep", preset="full")
+_FULL = _FULL_V2.replace(prior_frame="world", ground_scope="sweep", height_road="removal", preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",

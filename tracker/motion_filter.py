@@ -238,7 +238,8 @@ class AverageMotion:
         self.per_second = per_second
 
     def predict(self, box: Box, dt: float, coasting: int = 0) -> np.ndarray:
-        out = self.prior.predict(box.heading) * (dt if self.per_second else 1.0)
+        interval = dt if self.per_second else 1.0
+        out = self.prior.predict(box.heading, interval) * interval
         out[3] *= self.coast_yaw_decay ** coasting  # coasting keeps the velocity, the turn rate dies out
         return out
 
@@ -247,5 +248,5 @@ class AverageMotion:
 
     def update(self, box: Box, x: np.ndarray, previous_centroid: np.ndarray | None,
                current_centroid: np.ndarray | None, dt: float = 0.1) -> np.ndarray:
-        self.prior.update(np.asarray(x) / dt if self.per_second else x, box.heading)
+        self.prior.update(np.asarray(x) / dt if self.per_second else x, box.heading, dt if self.per_second else 1.0)
         return x

@@ -231,8 +231,7 @@ class Tracker:
         idx = np.flatnonzero(near)
         local = pts[idx].astype(np.float64)
         is_ground = None
-        if sweep_ground:  # upstream: one plane for the whole sweep (sensor frame); its ground points near the box
-            # stay the road for the height (z_mode "filter" / "ground") and are removed below
+        if sweep_ground:  # upstream: one plane for the whole sweep (sensor frame), its ground removed below
             is_ground = cached_sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold,
                                                  c.gpf_distance_threshold, c.gpf_iterations)[idx]
         if deskew:
@@ -254,7 +253,14 @@ class Tracker:
         elif c.ground_removal and not sweep_ground and len(world) >= 3:
             is_ground = ground_mask(world, self.ground_params)
         if is_ground is not None:
-            self._ground_points = world[is_ground]
+            road = is_ground
+            if c.height_road == "none":
+                road = np.zeros(len(world), dtype=bool)
+            elif sweep_ground and c.height_road == "local" and c.z_mode in ("filter", "ground") and len(world) >= 3:
+                # the road under the box for the height from the local planes: one plane per sweep serves the
+                # removal, but can miss a far road's grade and camber by more than the height's 5 cm
+                road = ground_mask(world, self.ground_params)
+            self._ground_points = world[road]
             world = world[~is_ground]
         # keep only what a search box can contain (the box moves a little during the outer loop)
         d = world[:, :2] - box.center[:2]

@@ -176,6 +176,25 @@ def test_motion_prior_moving_average():
     np.testing.assert_allclose(turning.predict(np.pi / 2), [0.0, 1.0, 0.0, 0.1], atol=1e-12)
 
 
+def test_turn_prior_has_no_lag_in_a_steady_turn_and_ignores_the_box_heading():
+    """A steady arc: 1 m chords, turning 0.1 rad per frame. "turn" predicts the next chord exactly; "world"
+    lags (it averages chords of the past directions); neither depends on the box heading given."""
+    omega = 0.1
+    chords = [np.array([np.cos(omega * (k + 0.5)), np.sin(omega * (k + 0.5)), 0.0, omega]) for k in range(30)]
+    turn, world = MotionPrior(0.6, frame="turn"), MotionPrior(0.6, frame="world")
+    for chord in chords[:-1]:
+        turn.update(chord, heading=123.0)   # a wrong box heading: not used
+        world.update(chord, heading=-7.0)
+    np.testing.assert_allclose(turn.predict(heading=5.0), chords[-1], atol=1e-9)
+    lag = np.arctan2(*world.predict()[1::-1]) - omega * 29.5
+    assert lag < -0.1                       # the world-frame average points 0.15 rad behind
+    # per second (interval in seconds): the same arc at 10 Hz
+    per_s = MotionPrior(0.6, frame="turn")
+    for chord in chords[:-1]:
+        per_s.update(chord / 0.1, interval=0.1)
+    np.testing.assert_allclose(per_s.predict(interval=0.1) * 0.1, chords[-1], atol=1e-9)
+
+
 def test_config_presets_and_round_trip():
     full = get_preset("full")
     assert TrackerConfig.from_dict(full.to_dict()) == full
