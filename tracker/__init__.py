@@ -20,13 +20,14 @@ from .pseudo_gt import mean_points_in_boxes, pseudo_gt_shape
 from .shape import ShapeModel, SubShape, voxel_downsample
 from .solver import SolverResult, solve
 from .sotracker import FrameEstimate, Tracker, TrackResult, deskew_points, track
+from .sweep_ground import cached_sweep_ground_mask, sweep_ground_mask
 
 __all__ = [
     "Box", "State", "LidarFrame", "FrameSource", "points_in_box", "transform_points", "wrap_angle",
     "invert_transform", "make_transform", "rotation_z",
     "TrackerConfig", "PRESETS", "get_preset", "preset_names",
     "Tracker", "FrameEstimate", "TrackResult", "track", "deskew_points",
-    "GroundParams", "ground_mask", "remove_ground", "fit_plane",
+    "GroundParams", "ground_mask", "remove_ground", "fit_plane", "sweep_ground_mask", "cached_sweep_ground_mask",
     "NearestNeighbors", "RansacResult", "fit_rigid_2d", "ransac_rigid_2d",
     "MotionPrior", "ShapeModel", "SubShape", "voxel_downsample", "SolverResult", "solve",
     "refine_offline", "mean_points_in_boxes", "pseudo_gt_shape", "voxel_downsample_centres", "chamfer_distance",

@@ -213,9 +213,9 @@ _FULL_V1 = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_it
 # full_v2 = full_v1 + the robust online pieces of issue 12 (each one a field)
 _FULL_V2 = _FULL_V1.replace(first_hypotheses=9, first_max_yaw=0.1, z_mode="filter", prior_per_second=True,
                             preset="full_v2")
-# full = full_v2 with the motion prior averaged in the world frame and one ground plane per sweep (chosen on the
-# generated benchmark and the synthetic worlds, docs/tracker.md)
-_FULL = _FULL_V2.replace(prior_frame="world", ground_scope="sweep", height_road="removal", preset="full")
+# full = full_v2 with one ground plane per sweep, whose ground near the box is the height's road (chosen on the
+# generated benchmark and the synthetic worlds, docs/tracker.md "Choosing full on the generated benchmark")
+_FULL = _FULL_V2.replace(ground_scope="sweep", height_road="removal", preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",

@@ -165,7 +165,7 @@ def _time_sweep_ground(source, frames: list[int], config) -> np.ndarray:
     that follow exclude it. Other presets: empty."""
     if not (config.ground_removal and config.ground_scope == "sweep"):
         return np.zeros(0)
-    from tracker.sweep_ground import cached_sweep_ground_mask, sweep_ground_mask
+    from tracker import cached_sweep_ground_mask, sweep_ground_mask
 
     params = (config.gpf_lpr_count, config.gpf_seed_threshold, config.gpf_distance_threshold, config.gpf_iterations)
     ms = []

@@ -8,7 +8,7 @@ import pytest
 
 from tracker.association import fit_rigid_2d, ransac_rigid_2d
 from tracker.config import PRESETS, TrackerConfig, get_preset
-from tracker.geometry import Box, make_transform, rotation_z, transform_points
+from tracker.geometry import make_transform, rotation_z, transform_points
 from tracker.ground import GroundParams, ground_mask
 from tracker.motion import MotionPrior
 from tracker.shape import ShapeModel, voxel_downsample
