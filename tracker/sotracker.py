@@ -683,9 +683,10 @@ class Tracker:
                     prev.length + ahead + behind, prev.width + 1.0, prev.height)
         local, _ = self._local_points(frame, reach, 1.0)
         obj = to_object_frame(local[points_in_box(local, reach, 1.0)], reach)
-        u = obj[:, 0] + 0.5 * (ahead - behind)               # along the heading, from the start box's centre
+        u = np.sort(obj[:, 0] + 0.5 * (ahead - behind))      # along the heading, from the start box's centre
         shifts = np.arange(-behind, ahead + 0.05, 0.1)
-        counts = (np.abs(u[None, :] - shifts[:, None]) <= 0.5 * prev.length).sum(axis=1)
+        half = 0.5 * prev.length                             # points within a box length of each shift
+        counts = np.searchsorted(u, shifts + half, side="right") - np.searchsorted(u, shifts - half, side="left")
         if counts.max(initial=0) < c.min_target_points:
             self._coasting += 1
             self._previous_pose = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))

@@ -434,12 +434,13 @@ def place_occluder(ctx: PlacementContext, rng: np.random.Generator, target: Inse
     20 m swept path), a parked occluder (speed 0) on the sight line is tried last."""
     mid = len(ctx.frame_times_ns) // 2
     t_mid = int(ctx.frame_times_ns[mid])
-    p = target.states_at(t_mid)[:2]
+    at_mid = target.states_at(t_mid)
+    p = at_mid[:2]
     s = ctx.sensor_xyh[mid, :2]
     sight = math.atan2(p[1] - s[1], p[0] - s[0])
     road = float(ctx.sensor_xyh[mid, 2])
     fractions = np.arange(0.25, 0.8, SAMPLE_M / max(float(np.hypot(*(p - s))), 1.0))
-    own = float(target.states_at(t_mid)[3])
+    own = float(at_mid[3])
     headings = [own, own + math.pi, road, road + math.pi, sight + math.pi / 2, sight - math.pi / 2]
     for speed in list(rng.permutation([1.5, 3.0, 5.0])) + [0.0]:
         jitter = float(rng.uniform(-0.5, 0.5)) if speed > 0 else 0.0
