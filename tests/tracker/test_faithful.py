@@ -14,6 +14,7 @@ from sot_apps.evaluation.reference import compare_with_reference, load_reference
 from tracker.config import TrackerConfig, get_preset
 from tracker.finder import finder_icp, resample
 from tracker.geometry import Box
+from tracker.ground import fit_plane
 from tracker.sweep_ground import sweep_ground_mask
 from tracker.terms import apply_motion
 
@@ -54,6 +55,31 @@ def test_sweep_ground_on_a_real_sweep_removes_what_upstream_removed(pandaset):
     frame = pandaset.lidar_frame(0)
     removed = int(sweep_ground_mask(frame.points_ego).sum())
     assert 16_000 <= removed <= 21_000
+
+
+def _plain_refit_ground(points: np.ndarray, iterations: int = 10) -> np.ndarray:
+    """The GPF rounds written plainly (every round refits the plane on all current ground points)."""
+    finite = np.isfinite(points).all(axis=1)
+    valid = points[finite].astype(np.float64)
+    z = valid[:, 2]
+    skip = int(0.001 * len(z))
+    ground = z < np.sort(z)[skip:skip + 20].mean() + 1.2
+    for _ in range(iterations):
+        normal, offset = fit_plane(valid[ground])
+        ground = valid @ normal + offset < 0.3
+    mask = ~finite
+    mask[finite] = ground
+    return mask
+
+
+@pytest.mark.parametrize("frame_index", [0, 27, 55])
+def test_sweep_ground_with_updated_moments_is_the_plain_refit(pandaset, frame_index):
+    points = pandaset.lidar_frame(frame_index).points_ego.copy()
+    points[::997] = np.nan  # a few dropped returns
+    assert np.array_equal(sweep_ground_mask(points), _plain_refit_ground(points))
+    for iterations in (1, 3):
+        assert np.array_equal(sweep_ground_mask(points, iterations=iterations),
+                              _plain_refit_ground(points, iterations))
 
 
 def test_finder_registers_the_start_points_in_a_fixed_wide_crop():
