@@ -10,6 +10,7 @@ tracklets' frames; with several seeds each figure is the mean over seeds (± the
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections import defaultdict
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping
@@ -17,7 +18,7 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 
 from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty, get_preset, mean_points_in_boxes, pool_metrics,
-                     pseudo_gt_shape, track)
+                     pseudo_gt_shape, refine_fixed_lag, refine_offline, track)
 
 from ..errors import InputError
 from ..io import open_sequence
@@ -95,14 +96,19 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
                        seeds: Iterable[int] = (0,), config: EvalConfig = EvalConfig(),
                        progress: Callable[[int], Callable[[], None]] | None = None,
                        detections: Callable[[Any, int], Any] | None = None,
-                       overrides: Mapping[str, Any] | None = None) -> BenchmarkRun:
+                       overrides: Mapping[str, Any] | None = None, lags: Iterable[int] = (),
+                       offline: bool = False) -> BenchmarkRun:
     """Track every tracklet with every preset and seed (sequence by sequence: one sweep cache at a time).
 
     ``progress(total)`` returns a callable ticked once per (tracklet, preset, seed) run. ``detections(sequence,
     seed)``: the per-frame detections of a sequence for the Det / Det+SOT presets (e.g. simulated from its
-    ground truth with that seed). ``overrides``: TrackerConfig fields replaced in every preset."""
+    ground truth with that seed). ``overrides``: TrackerConfig fields replaced in every preset. ``lags``: a
+    row ``PRESET+lagN`` per N, the fixed-lag states of each online run (ms/frame: the online step plus the
+    window solve); ``offline``: a row ``PRESET+offline``, each online run refined offline (ms/frame: the
+    online step plus the refinement per frame), as ``sot-apps eval SEQUENCE`` does."""
     overrides = dict(overrides or {})
-    presets, seeds = tuple(presets), tuple(int(s) for s in seeds)
+    presets, seeds, lags = tuple(presets), tuple(int(s) for s in seeds), tuple(int(n) for n in lags)
+    rows = tuple(r for p in presets for r in (p, *(f"{p}+lag{n}" for n in lags), *((f"{p}+offline",) if offline else ())))
     if not tracklets:
         raise InputError(None, "the list has no tracklet")
     by_sequence: dict[str, list[Tracklet]] = defaultdict(list)
@@ -126,8 +132,19 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
                     ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
                     records[(preset, seed, t.key)] = (dataclasses.replace(score_result(spec, result, config),
                                                                           track_id=t.key), ms)
+                    for n in lags:
+                        smoothed = refine_fixed_lag(source, result, n, result.config)
+                        lag_ms = np.array([e.time_ms for e in smoothed.estimates[1:]], dtype=np.float64)
+                        records[(f"{preset}+lag{n}", seed, t.key)] = (
+                            dataclasses.replace(score_result(spec, smoothed, config), track_id=t.key), lag_ms)
+                    if offline:
+                        t0 = time.perf_counter()
+                        refined = refine_offline(source, result, result.config)
+                        extra = (time.perf_counter() - t0) * 1e3 / max(len(ms), 1)
+                        records[(f"{preset}+offline", seed, t.key)] = (
+                            dataclasses.replace(score_result(spec, refined, config), track_id=t.key), ms + extra)
                     tick()
-    return BenchmarkRun(presets, seeds, records, levels, profiles)
+    return BenchmarkRun(rows, seeds, records, levels, profiles)
 
 
 

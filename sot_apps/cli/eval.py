@@ -141,7 +141,7 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
         check_profile(args.simulate_detections)
         detections = lambda seq, seed: simulated_detections(seq, args.simulate_detections, seed)  # noqa: E731
     run = evaluate_tracklets(tracklets, resolve, presets, range(args.seeds), progress=progress, detections=detections,
-                             overrides=args.overrides)
+                             overrides=args.overrides, lags=args.lag, offline=args.offline)
     title = f"benchmark: {source} ({len(tracklets)} tracklets)"
     if args.overrides:
         title += "; set " + " ".join(f"{k}={v}" for k, v in args.overrides.items())

@@ -106,3 +106,20 @@ def test_eval_benchmark_with_simulated_detections_and_set(small_benchmark, capsy
     assert "unknown tracker setting 'weight_dett'; did you mean weight_det" in capsys.readouterr().err
     assert main(["eval", "--benchmark", listing, "--set", "max_points=many"]) == 2
     assert "max_points takes an integer" in capsys.readouterr().err
+
+
+def test_eval_benchmark_adds_fixed_lag_and_offline_rows(small_benchmark, capsys, tmp_path):
+    """--lag and --offline on a tracklet list give a row each per preset, as on a sequence (they were ignored)."""
+    report = tmp_path / "modes.json"
+    assert main(["eval", "--benchmark", str(small_benchmark / "benchmark.json"), "--first", "2", "--preset", "full",
+                 "--lag", "3", "--offline", "--json", str(report)]) == 0
+    out = capsys.readouterr().out
+    for row in ("preset full ", "preset full+lag3 ", "preset full+offline "):
+        assert row in out
+    doc = json.loads(report.read_text())
+    assert doc["presets"] == ["full", "full+lag3", "full+offline"]
+    online, lag, offline = (doc["tables"][r]["all"] for r in doc["presets"])
+    assert online["n"] == lag["n"] == offline["n"] == 2
+    # each fixed-lag frame pays the online step and the window solve; the offline row adds its refinement
+    assert lag["ms"] > online["ms"] and offline["ms"] > online["ms"]
+    assert (lag["acc"], offline["acc"]) != (online["acc"], online["acc"])  # the states were refined
