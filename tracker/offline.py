@@ -3,8 +3,9 @@
 Data-generation users have the whole sequence, so nothing forces the estimate of frame k to ignore
 frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
 
-1. every frame's points near its online box (ground removed with the tracker's GPF parameters, cropped
-   with the box scaled ``region_scale``) are gathered once (world frame);
+1. every frame's points near its online box (ground removed as the tracker removes it: the whole-sweep
+   plane with ``ground_scope="sweep"``, else local planes with its GPF parameters; cropped with the box
+   scaled ``region_scale``) are gathered once (world frame);
 2. frames are split into ``folds`` interleaved folds (k mod folds). For each fold a shape is rebuilt from
    the frames NOT in it: points in the current boxes (scale 1.0), moved to the object frame, voxelised
    (5 cm centres), with normals n from a PCA of each shape point's neighbours. A frame is registered
@@ -48,6 +49,7 @@ from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
 from .metrics import voxel_downsample_centres
 from .sotracker import FrameEstimate, TrackResult, deskew_points
+from .sweep_ground import cached_sweep_ground_mask
 
 __all__ = ["OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states", "refine_offline"]
 
@@ -129,9 +131,14 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
                         world: np.ndarray | None = None) -> np.ndarray:
     """Ground-removed world points of ``frame`` inside ``box`` scaled ``region_scale``.
 
+    The ground is the tracker's: with ``ground_scope="sweep"`` the whole-sweep plane's (cached per sweep, so
+    the online step has already paid for it), else planes fitted on the region grown by ``ground_margin``.
     ``previous``: (timestamp_ns, world_from_ego) of the frame before (de-skew only); ``world``: the frame's
-    world points when the caller has them cached."""
+    world points (all of the sweep's, in its order) when the caller has them cached."""
     pts_ego = np.asarray(frame.points_ego)
+    sweep_ground = config.ground_removal and config.ground_scope == "sweep"
+    above_ground = ~cached_sweep_ground_mask(pts_ego, config.gpf_lpr_count, config.gpf_seed_threshold,
+                                             config.gpf_distance_threshold, config.gpf_iterations) if sweep_ground else None
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
                   and len(frame.point_time_offset_ns) == len(pts_ego))
@@ -139,18 +146,23 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
         world_from_ego = np.asarray(frame.world_from_ego, dtype=np.float64)
         pad = _deskew_reach(pts_ego, frame, previous) if use_deskew else 0.0
         idx = _square_candidates(pts_ego, world_from_ego, box.center[:2], reach + pad)
+        if above_ground is not None:
+            idx = idx[above_ground[idx]]
         if use_deskew:
             world = deskew_points(pts_ego[idx], np.asarray(frame.point_time_offset_ns)[idx], frame.timestamp_ns,
                                   world_from_ego, previous[0], previous[1])
         else:
             world = transform_points(world_from_ego, pts_ego[idx])
-    elif use_deskew:
-        world = deskew_points(pts_ego, frame.point_time_offset_ns, frame.timestamp_ns, frame.world_from_ego,
-                              previous[0], previous[1])
+    else:
+        if use_deskew:
+            world = deskew_points(pts_ego, frame.point_time_offset_ns, frame.timestamp_ns, frame.world_from_ego,
+                                  previous[0], previous[1])
+        if above_ground is not None:
+            world = world[above_ground]
     near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
     local = world[near]
     local = local[np.all(np.isfinite(local), axis=1)]
-    if config.ground_removal and len(local) >= 3:
+    if config.ground_removal and not sweep_ground and len(local) >= 3:
         local = local[~ground_mask(local, config.ground_params())]
     return local[points_in_box(local, box, params.region_scale)]
 

@@ -15,6 +15,7 @@ from tracker.geometry import Box, make_transform, points_in_box, rotation_z, tra
 from tracker.ground import ground_mask
 from tracker.offline import _BANDS, OfflineParams, _normals, _prior_band, _Solver, frame_region_points
 from tracker.sotracker import deskew_points
+from tracker.sweep_ground import sweep_ground_mask
 
 from tracker_synthetic import make_sequence
 
@@ -103,19 +104,24 @@ def test_gauss_newton_blocks_match_finite_differences_of_the_residuals():
         np.testing.assert_allclose(grads[k], ref_grad, rtol=1e-5, atol=1e-6 * np.abs(ref_grad).max())
 
 
-def _naive_region(world: np.ndarray, box: Box, params: OfflineParams, config) -> np.ndarray:
+def _naive_region(world: np.ndarray, points_ego: np.ndarray, box: Box, params: OfflineParams, config) -> np.ndarray:
+    if config.ground_scope == "sweep":  # the whole sweep's one plane, on the sensor-frame points
+        world = world[~sweep_ground_mask(points_ego, config.gpf_lpr_count, config.gpf_seed_threshold,
+                                         config.gpf_distance_threshold, config.gpf_iterations)]
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     local = world[(np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)]
     local = local[np.all(np.isfinite(local), axis=1)]
-    local = local[~ground_mask(local, config.ground_params())]
+    if config.ground_scope != "sweep":
+        local = local[~ground_mask(local, config.ground_params())]
     return local[points_in_box(local, box, params.region_scale)]
 
 
+@pytest.mark.parametrize("preset", ["full", "full_v2"])  # whole-sweep ground / local planes
 @pytest.mark.parametrize("deskew", [False, True])
-def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deskew):
+def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deskew, preset):
     seq = make_sequence(n_frames=3, seed=4, nan_frames=(2,))
     rng = np.random.default_rng(3)
-    config = get_preset("full", deskew=deskew)
+    config = get_preset(preset, deskew=deskew)
     params = OfflineParams()
     previous = (seq.frames[0].timestamp_ns, make_transform(rotation_z(-0.15), np.array([-2.0, -0.5, 1.0])))
     for k in (1, 2):
@@ -126,7 +132,7 @@ def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deske
             whole = deskew_points(frame.points_ego, offsets, frame.timestamp_ns, frame.world_from_ego, *previous)
         else:
             whole = transform_points(frame.world_from_ego, frame.points_ego)
-        expected = _naive_region(whole, seq.boxes[k], params, config)
+        expected = _naive_region(whole, frame.points_ego, seq.boxes[k], params, config)
         got = frame_region_points(frame, seq.boxes[k], config, params, previous if deskew else None)
         assert len(expected) > 100
         np.testing.assert_array_equal(got, expected)
