@@ -213,9 +213,13 @@ _FULL_V1 = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_it
 # full_v2 = full_v1 + the robust online pieces of issue 12 (each one a field)
 _FULL_V2 = _FULL_V1.replace(first_hypotheses=9, first_max_yaw=0.1, z_mode="filter", prior_per_second=True,
                             preset="full_v2")
-# full = full_v2 with one ground plane per sweep, whose ground near the box is the height's road (chosen on the
+# full_v3 = full_v2 with one ground plane per sweep, whose ground near the box is the height's road (chosen on the
 # generated benchmark and the synthetic worlds, docs/tracker.md "Choosing full on the generated benchmark")
-_FULL = _FULL_V2.replace(ground_scope="sweep", height_road="removal", preset="full")
+_FULL_V3 = _FULL_V2.replace(ground_scope="sweep", height_road="removal", preset="full_v3")
+# full = full_v3 with the turn-rate prior: the world-frame average motion turned by the averaged turn rate, so
+# the box's heading error never steers the prediction (chosen on the generated benchmark and the synthetic
+# worlds with 3 seeds, docs/tracker.md "The motion prior's frame, again")
+_FULL = _FULL_V3.replace(prior_frame="turn", preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
@@ -227,6 +231,7 @@ PRESETS: dict[str, TrackerConfig] = {
     "full": _FULL,
     "full_v1": _FULL_V1,
     "full_v2": _FULL_V2,
+    "full_v3": _FULL_V3,
     "faithful": _FAITHFUL,
     "icp_mp": _FULL.replace(use_shape=False, weight_mc=0.0, preset="icp_mp"),
     "icp_mp_s1": _FULL.replace(shape_update=False, weight_mc=0.0, preset="icp_mp_s1"),
