@@ -3,9 +3,9 @@
 Data-generation users have the whole sequence, so nothing forces the estimate of frame k to ignore
 frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
 
-1. every frame's points near its online box (ground removed as the tracker removes it: the whole-sweep
-   plane with ``ground_scope="sweep"``, else local planes with its GPF parameters; cropped with the box
-   scaled ``region_scale``) are gathered once (world frame);
+1. every frame's points near its online box (ground removed by planes fitted on the region with the
+   tracker's GPF parameters, ``OfflineParams.ground="local"``; cropped with the box scaled
+   ``region_scale``) are gathered once (world frame);
 2. frames are split into ``folds`` interleaved folds (k mod folds). For each fold a shape is rebuilt from
    the frames NOT in it: points in the current boxes (scale 1.0), moved to the object frame, voxelised
    (5 cm centres), with normals n from a PCA of each shape point's neighbours. A frame is registered
@@ -63,6 +63,9 @@ class OfflineParams:
     region_scale: float = 1.6           # points gathered around the online box (l, w and h)
     crop_scale: float = 1.15            # data-term points: inside the current box scaled by this
     ground_margin: float = 3.0          # ground planes are fitted on the region grown by this (BEV)
+    ground: str = "local"               # "local": planes fitted on that region (a far vehicle's shape keeps less
+                                        # road than under one plane per sweep); "tracker": the tracker's own
+                                        # ground (ground_scope "sweep": the cached whole-sweep mask, no fit)
     max_points: int = 250               # per frame, random subset (seeded)
     point_sigma: float = 0.05
     effective_points: float = 40.0
@@ -131,12 +134,15 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
                         world: np.ndarray | None = None) -> np.ndarray:
     """Ground-removed world points of ``frame`` inside ``box`` scaled ``region_scale``.
 
-    The ground is the tracker's: with ``ground_scope="sweep"`` the whole-sweep plane's (cached per sweep, so
-    the online step has already paid for it), else planes fitted on the region grown by ``ground_margin``.
+    The ground: planes fitted on the region grown by ``ground_margin`` (``params.ground="local"``), or the
+    tracker's (``"tracker"``): with ``ground_scope="sweep"`` the whole-sweep plane's, cached per sweep so the
+    online step has already paid for it.
     ``previous``: (timestamp_ns, world_from_ego) of the frame before (de-skew only); ``world``: the frame's
     world points (all of the sweep's, in its order) when the caller has them cached."""
     pts_ego = np.asarray(frame.points_ego)
-    sweep_ground = config.ground_removal and config.ground_scope == "sweep"
+    if params.ground not in ("local", "tracker"):
+        raise ValueError(f"OfflineParams.ground must be 'local' or 'tracker', not {params.ground!r}")
+    sweep_ground = config.ground_removal and config.ground_scope == "sweep" and params.ground == "tracker"
     above_ground = ~cached_sweep_ground_mask(pts_ego, config.gpf_lpr_count, config.gpf_seed_threshold,
                                              config.gpf_distance_threshold, config.gpf_iterations) if sweep_ground else None
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin

@@ -9,8 +9,9 @@ ignores the lowest ``ignore_lowest`` share of the heights (PandaSet sweeps hold 
 metres below the road). The plane's normal points up (upstream takes the SVD's sign; on the PandaSet sweeps
 that is up: 16–20k of ~106k points are removed).
 
-Used by the ``faithful`` preset (``TrackerConfig.ground_scope="sweep"``); the other presets fit planes on
-the tracker's local region (:mod:`tracker.ground`).
+Used by ``full``, ``full_v3`` and ``faithful`` (``TrackerConfig.ground_scope="sweep"``): by their online
+steps and their fixed-lag window (the offline refinement fits local planes); ``full_v1`` and ``full_v2`` fit
+planes on the tracker's local region (:mod:`tracker.ground`).
 """
 
 from __future__ import annotations
@@ -51,12 +52,12 @@ def sweep_ground_mask(points: np.ndarray, lpr_count: int = 20, seed_threshold: f
     if iterations > 0 and len(seeds) >= 3:
         origin = seeds.mean(axis=0)
         centred = seeds - origin
-        first, second, count = centred.sum(axis=0), centred.T @ centred, len(seeds)
+        first, second, n_ground = centred.sum(axis=0), centred.T @ centred, len(seeds)
         for _ in range(iterations):
-            if count < 3:
+            if n_ground < 3:
                 break
-            mean = first / count
-            _, vectors = np.linalg.eigh(second / count - np.outer(mean, mean))
+            mean = first / n_ground
+            _, vectors = np.linalg.eigh(second / n_ground - np.outer(mean, mean))
             normal = vectors[:, 0] if vectors[2, 0] >= 0 else -vectors[:, 0]
             below = valid @ normal < distance_threshold + float(normal @ (mean + origin))
             changed = np.flatnonzero(below != ground)
@@ -66,7 +67,7 @@ def sweep_ground_mask(points: np.ndarray, lpr_count: int = 20, seed_threshold: f
             moved = valid[changed] - origin
             first = first + sign @ moved
             second = second + (moved * sign[:, None]).T @ moved
-            count += int(sign.sum())
+            n_ground += int(sign.sum())
             ground = below
     if all_finite:
         return ground

@@ -105,24 +105,27 @@ def test_gauss_newton_blocks_match_finite_differences_of_the_residuals():
 
 
 def _naive_region(world: np.ndarray, points_ego: np.ndarray, box: Box, params: OfflineParams, config) -> np.ndarray:
-    if config.ground_scope == "sweep":  # the whole sweep's one plane, on the sensor-frame points
+    sweep = params.ground == "tracker" and config.ground_scope == "sweep"
+    if sweep:  # the tracker's ground: the whole sweep's one plane, on the sensor-frame points
         world = world[~sweep_ground_mask(points_ego, config.gpf_lpr_count, config.gpf_seed_threshold,
                                          config.gpf_distance_threshold, config.gpf_iterations)]
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     local = world[(np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)]
     local = local[np.all(np.isfinite(local), axis=1)]
-    if config.ground_scope != "sweep":
+    if not sweep:
         local = local[~ground_mask(local, config.ground_params())]
     return local[points_in_box(local, box, params.region_scale)]
 
 
-@pytest.mark.parametrize("preset", ["full", "full_v2"])  # whole-sweep ground / local planes
+# the offline refinement's local planes; the fixed-lag window's tracker ground with a whole-sweep plane
+# (full) or with local planes (full_v2)
+@pytest.mark.parametrize("preset, ground", [("full", "local"), ("full", "tracker"), ("full_v2", "tracker")])
 @pytest.mark.parametrize("deskew", [False, True])
-def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deskew, preset):
+def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deskew, preset, ground):
     seq = make_sequence(n_frames=3, seed=4, nan_frames=(2,))
     rng = np.random.default_rng(3)
     config = get_preset(preset, deskew=deskew)
-    params = OfflineParams()
+    params = OfflineParams(ground=ground)
     previous = (seq.frames[0].timestamp_ns, make_transform(rotation_z(-0.15), np.array([-2.0, -0.5, 1.0])))
     for k in (1, 2):
         f = seq.lidar_frame(k)
