@@ -37,11 +37,11 @@ __all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_la
 # +0.2/+0.2 and 0.0/+0.3 on the 9 dev tracks, by -0.5/-0.3 and +0.2/+0.2 on a synthetic world (seed spread there
 # 0.5-0.8), and saves ~20 % of a window solve; one Gauss-Newton step per window instead of two lost 0.5-0.6 Acc
 # on the dev tracks, a context of 3 final frames instead of 5 lost 0.3-0.6 (docs/tracker.md). The window's points
-# lose the tracker's ground (the online step's cached whole-sweep mask with ground_scope="sweep": no plane fit per
-# frame): measured with 3 seeds against local planes, lag 5 / 10 Acc +1.3 / +1.2 on the benchmark's first 64,
-# +1.6 / +1.1 on the dev tracks, -0.2 to +0.5 on synthetic worlds W1-W3; the shape keeps more road (docs/tracker.md).
+# lose the tracker's ground (OfflineParams.ground; with ground_scope="sweep" the online step's cached whole-sweep
+# mask, no plane fit per frame): against local planes, 3 seeds, lag 5 / 10 Acc +1.3 / +1.2 on the benchmark's
+# first 64, +1.6 / +1.1 on the dev tracks, -0.2 to +0.5 on synthetic worlds W1-W3 (docs/tracker.md).
 LAG_PARAMS = OfflineParams(outer_iterations=1, gn_iterations=2, voxel=0.1, shape_points_per_frame=300,
-                           max_points=150, ground="tracker")
+                           max_points=150)
 
 
 class FixedLagSmoother:

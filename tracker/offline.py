@@ -3,9 +3,9 @@
 Data-generation users have the whole sequence, so nothing forces the estimate of frame k to ignore
 frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
 
-1. every frame's points near its online box (ground removed by planes fitted on the region with the
-   tracker's GPF parameters, ``OfflineParams.ground="local"``; cropped with the box scaled
-   ``region_scale``) are gathered once (world frame);
+1. every frame's points near its online box (ground removed as the tracker removes it: the cached
+   whole-sweep plane with ``ground_scope="sweep"``, else planes fitted on the region with its GPF
+   parameters; cropped with the box scaled ``region_scale``) are gathered once (world frame);
 2. frames are split into ``folds`` interleaved folds (k mod folds). For each fold a shape is rebuilt from
    the frames NOT in it: points in the current boxes (scale 1.0), moved to the object frame, voxelised
    (5 cm centres), with normals n from a PCA of each shape point's neighbours. A frame is registered
@@ -63,9 +63,8 @@ class OfflineParams:
     region_scale: float = 1.6           # points gathered around the online box (l, w and h)
     crop_scale: float = 1.15            # data-term points: inside the current box scaled by this
     ground_margin: float = 3.0          # ground planes are fitted on the region grown by this (BEV)
-    ground: str = "local"               # "local": planes fitted on that region (a far vehicle's shape keeps less
-                                        # road than under one plane per sweep); "tracker": the tracker's own
-                                        # ground (ground_scope "sweep": the cached whole-sweep mask, no fit)
+    ground: str = "tracker"             # "tracker": the tracker's own ground (ground_scope "sweep": the cached
+                                        # whole-sweep mask, no fit); "local": planes fitted on that region
     max_points: int = 250               # per frame, random subset (seeded)
     point_sigma: float = 0.05
     effective_points: float = 40.0
@@ -134,9 +133,9 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
                         world: np.ndarray | None = None) -> np.ndarray:
     """Ground-removed world points of ``frame`` inside ``box`` scaled ``region_scale``.
 
-    The ground: planes fitted on the region grown by ``ground_margin`` (``params.ground="local"``), or the
-    tracker's (``"tracker"``): with ``ground_scope="sweep"`` the whole-sweep plane's, cached per sweep so the
-    online step has already paid for it.
+    The ground is the tracker's (``params.ground="tracker"``): with ``ground_scope="sweep"`` the whole-sweep
+    plane's, cached per sweep so the online step has already paid for it; else (or with ``"local"``) planes
+    fitted on the region grown by ``ground_margin``.
     ``previous``: (timestamp_ns, world_from_ego) of the frame before (de-skew only); ``world``: the frame's
     world points (all of the sweep's, in its order) when the caller has them cached."""
     pts_ego = np.asarray(frame.points_ego)

@@ -10,8 +10,8 @@ metres below the road). The plane's normal points up (upstream takes the SVD's s
 that is up: 16–20k of ~106k points are removed).
 
 Used by ``full``, ``full_v3`` and ``faithful`` (``TrackerConfig.ground_scope="sweep"``): by their online
-steps and their fixed-lag window (the offline refinement fits local planes); ``full_v1`` and ``full_v2`` fit
-planes on the tracker's local region (:mod:`tracker.ground`).
+steps, their fixed-lag window and their offline refinement; ``full_v1`` and ``full_v2`` fit planes on the
+tracker's local region (:mod:`tracker.ground`).
 """
 
 from __future__ import annotations

@@ -117,8 +117,7 @@ def _naive_region(world: np.ndarray, points_ego: np.ndarray, box: Box, params: O
     return local[points_in_box(local, box, params.region_scale)]
 
 
-# the offline refinement's local planes; the fixed-lag window's tracker ground with a whole-sweep plane
-# (full) or with local planes (full_v2)
+# the tracker's ground: a whole-sweep plane (full) or local planes (full_v2); local planes on request
 @pytest.mark.parametrize("preset, ground", [("full", "local"), ("full", "tracker"), ("full_v2", "tracker")])
 @pytest.mark.parametrize("deskew", [False, True])
 def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deskew, preset, ground):
