@@ -221,9 +221,13 @@ class Tracker:
                   and len(frame.point_time_offset_ns) == len(pts))
         if deskew:
             radius += float(np.linalg.norm(frame.world_from_ego[:3, 3] - self._previous_pose[1][:3, 3])) + 0.5
-        # cheap BEV radius test in the ego frame on the whole sweep (contiguous ops only)
-        diff = pts - centre_ego.astype(pts.dtype)
-        near = (diff * diff) @ np.array([1.0, 1.0, 0.0], dtype=pts.dtype) <= radius * radius
+        # cheap BEV radius test in the ego frame on the whole sweep (x and y only, the sweep's precision)
+        dx = pts[:, 0] - pts.dtype.type(centre_ego[0])
+        dy = pts[:, 1] - pts.dtype.type(centre_ego[1])
+        dx *= dx
+        dy *= dy
+        dx += dy
+        near = dx <= radius * radius
         if not np.isfinite(pts).all():
             flags.append("nan_points")
             near &= np.isfinite(pts).all(axis=1)
