@@ -37,29 +37,32 @@ def sweep_ground_mask(points: np.ndarray, lpr_count: int = 20, seed_threshold: f
     no point changes (later rounds would repeat the same plane): the mask is the plain refit's, at the cost
     of one matrix-vector product over the sweep per round (test_faithful checks the two agree).
     """
-    pts = np.ascontiguousarray(np.asarray(points).reshape(-1, 3), dtype=np.float64)
-    all_finite = bool(np.isfinite(pts).all())
-    finite = None if all_finite else np.isfinite(pts).all(axis=1)
+    given = np.asarray(points).reshape(-1, 3)  # tests on the sweep as given (float32: half the memory traffic)
+    all_finite = bool(np.isfinite(given).all())
+    finite = None if all_finite else np.isfinite(given).all(axis=1)
+    pts = np.ascontiguousarray(given, dtype=np.float64)
     valid = pts if all_finite else pts[finite]
     if len(valid) < 3:
         return np.ones(len(pts), dtype=bool)
-    z = valid[:, 2]
+    z = given[:, 2] if all_finite else given[finite, 2]  # exact in float64: the same heights
     skip = int(ignore_lowest * len(z))
     count = max(1, min(lpr_count, len(z) - skip))
-    lowest = np.sort(np.partition(z, skip + count - 1)[:skip + count])[skip:]
-    ground = z < lowest.mean() + seed_threshold
+    lowest = np.sort(np.partition(z, skip + count - 1)[:skip + count])[skip:].astype(np.float64)
+    ground = z < np.float64(lowest.mean() + seed_threshold)  # compared in float64
     seeds = valid[ground]
     if iterations > 0 and len(seeds) >= 3:
         origin = seeds.mean(axis=0)
         centred = seeds - origin
         first, second, n_ground = centred.sum(axis=0), centred.T @ centred, len(seeds)
+        heights = np.empty(len(valid))
         for _ in range(iterations):
             if n_ground < 3:
                 break
             mean = first / n_ground
             _, vectors = np.linalg.eigh(second / n_ground - np.outer(mean, mean))
             normal = vectors[:, 0] if vectors[2, 0] >= 0 else -vectors[:, 0]
-            below = valid @ normal < distance_threshold + float(normal @ (mean + origin))
+            np.matmul(valid, normal, out=heights)
+            below = np.less(heights, distance_threshold + float(normal @ (mean + origin)))
             changed = np.flatnonzero(below != ground)
             if changed.size == 0:
                 break
