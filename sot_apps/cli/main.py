@@ -20,6 +20,19 @@ def _interrupted_while_starting(signum, frame) -> None:
     os._exit(130)
 
 
+def _raise_interrupt(signum, frame) -> None:
+    """Ctrl-C -> KeyboardInterrupt, except inside the import system: raised in importlib's module-lock
+    callbacks, Python prints it as "Exception ignored ..." and the command goes on. There the interrupt is
+    delivered again 10 ms later (SIGALRM, this same handler), once the import has moved on."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib") and hasattr(signal, "setitimer"):
+            signal.signal(signal.SIGALRM, _raise_interrupt)
+            signal.setitimer(signal.ITIMER_REAL, 0.01)
+            return
+        frame = frame.f_back
+    raise KeyboardInterrupt
+
+
 # As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles
 # it, exits quietly instead of printing a traceback
 _AS_PROGRAM = __name__ == "__main__" or sys.argv[0].endswith("sot-apps")
@@ -102,7 +115,7 @@ def _join_negative_values(argv: list[str]) -> list[str]:
 
 
 def main(argv: Seq[str] | None = None) -> int:
-    signal.signal(signal.SIGINT, signal.default_int_handler)   # Ctrl-C -> KeyboardInterrupt, handled below
+    signal.signal(signal.SIGINT, _raise_interrupt)   # Ctrl-C -> KeyboardInterrupt, handled below
     argv = _join_negative_values(list(sys.argv[1:] if argv is None else argv))
     debug = "--debug" in argv or os.environ.get("SOT_APPS_DEBUG") == "1"
     try:
