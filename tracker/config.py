@@ -147,6 +147,11 @@ class TrackerConfig:
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
+    def sweep_ground_args(self) -> tuple[int, float, float, int]:
+        """The whole-sweep ground's settings, in the order of :func:`~tracker.sweep_ground.sweep_ground_mask`
+        (and of its cache key: every user of one sweep's mask passes the same tuple)."""
+        return (self.gpf_lpr_count, self.gpf_seed_threshold, self.gpf_distance_threshold, self.gpf_iterations)
+
     def ground_params(self) -> GroundParams:
         """The ground-removal settings (the ``gpf_*`` fields) as :class:`~tracker.ground.GroundParams`."""
         return GroundParams(lpr_count=self.gpf_lpr_count, seed_threshold=self.gpf_seed_threshold,

@@ -84,6 +84,10 @@ class OfflineParams:
     first_frame_weight: float = 1.0     # data weight of frame 0 (its registration sets the gauge)
     gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
 
+    def __post_init__(self) -> None:
+        if self.ground not in ("local", "tracker"):
+            raise ValueError(f"OfflineParams.ground must be 'local' or 'tracker', not {self.ground!r}")
+
 
 @dataclass
 class OfflineProblem:
@@ -139,11 +143,8 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
     ``previous``: (timestamp_ns, world_from_ego) of the frame before (de-skew only); ``world``: the frame's
     world points (all of the sweep's, in its order) when the caller has them cached."""
     pts_ego = np.asarray(frame.points_ego)
-    if params.ground not in ("local", "tracker"):
-        raise ValueError(f"OfflineParams.ground must be 'local' or 'tracker', not {params.ground!r}")
     sweep_ground = config.ground_removal and config.ground_scope == "sweep" and params.ground == "tracker"
-    above_ground = ~cached_sweep_ground_mask(pts_ego, config.gpf_lpr_count, config.gpf_seed_threshold,
-                                             config.gpf_distance_threshold, config.gpf_iterations) if sweep_ground else None
+    above_ground = ~cached_sweep_ground_mask(pts_ego, *config.sweep_ground_args()) if sweep_ground else None
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
                   and len(frame.point_time_offset_ns) == len(pts_ego))

@@ -236,8 +236,7 @@ class Tracker:
         local = pts[idx].astype(np.float64)
         is_ground = None
         if sweep_ground:  # upstream: one plane for the whole sweep (sensor frame), its ground removed below
-            is_ground = cached_sweep_ground_mask(pts, c.gpf_lpr_count, c.gpf_seed_threshold,
-                                                 c.gpf_distance_threshold, c.gpf_iterations)[idx]
+            is_ground = cached_sweep_ground_mask(pts, *c.sweep_ground_args())[idx]
         if deskew:
             prev_t, prev_pose = self._previous_pose
             world = deskew_points(local, np.asarray(frame.point_time_offset_ns)[idx], frame.timestamp_ns,

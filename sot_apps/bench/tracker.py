@@ -167,7 +167,7 @@ def _time_sweep_ground(source, frames: list[int], config) -> np.ndarray:
         return np.zeros(0)
     from tracker import cached_sweep_ground_mask, sweep_ground_mask
 
-    params = (config.gpf_lpr_count, config.gpf_seed_threshold, config.gpf_distance_threshold, config.gpf_iterations)
+    params = config.sweep_ground_args()
     ms = []
     for k in frames:
         points = source.lidar_frame(k).points_ego

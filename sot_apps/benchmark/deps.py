@@ -8,7 +8,8 @@
 
 from __future__ import annotations
 
-from ..evaluation.tracker import CachedSource, EvalConfig, TrackSpec, json_safe, resolve_presets, score_result
+from ..evaluation.tracker import (CachedSource, EvalConfig, TrackSpec, json_safe, refined_modes, resolve_presets,
+                                  score_result)
 from ..objects.bank import Bank, BankEntry, read_bank
 from ..objects.trajectory import Trajectory, world_from_object
 from ..raycast import RaycastScene
@@ -26,6 +27,6 @@ def eval_ground_params():
 
 
 __all__ = ["eval_ground_params", "CachedSource", "EvalConfig", "TrackSpec", "json_safe", "resolve_presets",
-           "score_result", "Bank", "BankEntry", "read_bank", "Realism", "RaycastScene", "Scan", "SimObject",
+           "score_result", "refined_modes", "Bank", "BankEntry", "read_bank", "Realism", "RaycastScene", "Scan", "SimObject",
            "Trajectory", "invert_transform_batch", "simulate_scan", "world_from_object", "angular_tolerance",
            "blocked_by_real", "Sensor", "load_sensor"]

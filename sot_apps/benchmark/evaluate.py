@@ -10,7 +10,6 @@ tracklets' frames; with several seeds each figure is the mean over seeds (± the
 from __future__ import annotations
 
 import dataclasses
-import time
 from collections import defaultdict
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping
@@ -18,11 +17,11 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 
 from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty, get_preset, mean_points_in_boxes, pool_metrics,
-                     pseudo_gt_shape, refine_fixed_lag, refine_offline, track)
+                     pseudo_gt_shape, track)
 
 from ..errors import InputError
 from ..io import open_sequence
-from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params, json_safe, score_result
+from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params, json_safe, refined_modes, score_result
 from .lists import SequenceResolver, Tracklet
 
 __all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
@@ -132,17 +131,9 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
                     ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
                     records[(preset, seed, t.key)] = (dataclasses.replace(score_result(spec, result, config),
                                                                           track_id=t.key), ms)
-                    for n in lags:
-                        smoothed = refine_fixed_lag(source, result, n, result.config)
-                        lag_ms = np.array([e.time_ms for e in smoothed.estimates[1:]], dtype=np.float64)
-                        records[(f"{preset}+lag{n}", seed, t.key)] = (
-                            dataclasses.replace(score_result(spec, smoothed, config), track_id=t.key), lag_ms)
-                    if offline:
-                        t0 = time.perf_counter()
-                        refined = refine_offline(source, result, result.config)
-                        extra = (time.perf_counter() - t0) * 1e3 / max(len(ms), 1)
-                        records[(f"{preset}+offline", seed, t.key)] = (
-                            dataclasses.replace(score_result(spec, refined, config), track_id=t.key), ms + extra)
+                    for suffix, refined, refined_ms in refined_modes(source, result, result.config, lags, offline):
+                        records[(preset + suffix, seed, t.key)] = (
+                            dataclasses.replace(score_result(spec, refined, config), track_id=t.key), refined_ms)
                     tick()
     return BenchmarkRun(rows, seeds, records, levels, profiles)
 

@@ -45,6 +45,7 @@ __all__ = [
     "select_moving_vehicle_tracks",
     "prepare_tracks",
     "evaluate",
+    "refined_modes",
     "format_report",
     "resolve_presets",
 ]
@@ -320,6 +321,27 @@ def resolve_presets(names: Sequence[str] | None, with_detections: bool = False) 
     return out
 
 
+def refined_modes(source, result: TrackResult, config: TrackerConfig, lags: Sequence[int] = (),
+                  offline: bool = False, refine: Callable[..., TrackResult] | None = None
+                  ) -> list[tuple[str, TrackResult, np.ndarray]]:
+    """The fixed-lag and offline results of one online ``result``: (row suffix ``+lagN`` / ``+offline``, result,
+    ms per frame k >= 1). Fixed lag: the online step plus the window solve; offline: the online step plus the
+    refinement's time spread over the frames. ``refine`` overrides :func:`tracker.offline.refine_offline`."""
+    online_ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
+    out = []
+    for n in lags:
+        smoothed = refine_fixed_lag(source, result, int(n), config)
+        out.append((f"+lag{n}", smoothed, np.array([e.time_ms for e in smoothed.estimates[1:]], dtype=np.float64)))
+    if offline:
+        if refine is None:
+            from tracker import refine_offline as refine
+        t0 = time.perf_counter()
+        better = refine(source, result, config)
+        extra = (time.perf_counter() - t0) * 1e3 / max(len(online_ms), 1)
+        out.append(("+offline", better, online_ms + extra))
+    return out
+
+
 def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, presets: Sequence[str] = ("full",),
              offline: bool = False, seeds: Sequence[int] = (0,), config: EvalConfig = EvalConfig(),
              end_frame: int | None = None, progress: Callable[[Iterable], Iterable] | None = None,
@@ -345,12 +367,9 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     if not ids:
         raise InputError(sequence.root, "no track to evaluate (no moving vehicle track matches the selection)")
     specs = prepare_tracks(sequence, ids, source, config, end_frame, with_shape)
-    if offline and refine is None:
-        from tracker import refine_offline as refine
     jobs = [(p, s, spec) for p in presets for s in seeds for spec in specs]
     online: dict[str, list[RunRecord]] = {p: [] for p in presets}
-    refined: dict[str, list[RunRecord]] = {p: [] for p in presets}
-    lagged: dict[tuple[str, int], list[RunRecord]] = {(p, n): [] for p in presets for n in lags}
+    moded: dict[str, list[RunRecord]] = {}  # row name (PRESET+lagN, PRESET+offline) -> records
     tracker_configs: dict[str, dict[str, Any]] = {}
     for preset, seed, spec in (progress(jobs) if progress else jobs):
         tconfig = get_preset(preset, seed=int(seed), **overrides)
@@ -360,24 +379,17 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
         ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
         online[preset].append(RunRecord(preset, int(seed), spec.track_id, score_result(spec, result, config), ms,
                                         _flag_counts(result)))
-        for n in lags:
-            smoothed = refine_fixed_lag(source, result, int(n), tconfig)
-            lag_ms = np.array([e.time_ms for e in smoothed.estimates[1:]], dtype=np.float64)
-            lagged[(preset, n)].append(RunRecord(f"{preset}+lag{n}", int(seed), spec.track_id,
-                                                 score_result(spec, smoothed, config), lag_ms, _flag_counts(smoothed)))
-        if offline:
-            t0 = time.perf_counter()
-            better = refine(source, result, tconfig)
-            extra = (time.perf_counter() - t0) * 1e3 / max(len(ms), 1)
-            refined[preset].append(RunRecord(f"{preset}+offline", int(seed), spec.track_id,
-                                             score_result(spec, better, config), ms + extra, _flag_counts(better)))
+        for suffix, refined, refined_ms in refined_modes(source, result, tconfig, lags, offline, refine):
+            moded.setdefault(preset + suffix, []).append(RunRecord(
+                preset + suffix, int(seed), spec.track_id, score_result(spec, refined, config), refined_ms,
+                _flag_counts(refined)))
     rows = []
     for preset in presets:
         rows.append(_summarise_row(preset, preset, False, seeds, online[preset], specs))
         for n in lags:
-            rows.append(_summarise_row(f"{preset}+lag{n}", preset, False, seeds, lagged[(preset, n)], specs))
+            rows.append(_summarise_row(f"{preset}+lag{n}", preset, False, seeds, moded[f"{preset}+lag{n}"], specs))
         if offline:
-            rows.append(_summarise_row(f"{preset}+offline", preset, True, seeds, refined[preset], specs))
+            rows.append(_summarise_row(f"{preset}+offline", preset, True, seeds, moded[f"{preset}+offline"], specs))
     return EvalReport(str(sequence.root), config, specs, rows, tracker_configs)
 
 
