@@ -66,6 +66,22 @@ class RansacResult:
         return int(self.inliers.sum())
 
 
+def _distinct_samples(rng: np.random.Generator, count: int, population: int, size: int) -> np.ndarray:
+    """``count`` uniform random ``size``-subsets of range(population) as rows (count, size) of distinct indices.
+
+    Sizes up to 3 (the rigid 2D fit's minimal sample and one more) by drawing index j from population - j and
+    skipping the ones already drawn (exactly uniform); larger sizes by ranking uniform keys."""
+    if size > 3:
+        return np.argpartition(rng.random((count, population)), size - 1, axis=1)[:, :size]
+    draws = [rng.integers(0, population - j, count) for j in range(size)]
+    out = [draws[0]]
+    for d in draws[1:]:
+        for taken in np.sort(np.stack(out, axis=1), axis=1).T:  # skip the drawn ones, smallest first
+            d = d + (d >= taken)
+        out.append(d)
+    return np.stack(out, axis=1)
+
+
 def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, *, max_iterations: int = 200,
                     confidence: float = 0.99, sample_size: int = 3, threshold: float = 0.2,
                     batch_size: int = 50, max_score_pairs: int = 150, identity_first: bool = False) -> RansacResult:
@@ -74,17 +90,25 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
     Inlier: BEV residual <= ``threshold``. Hypotheses are scored on at most ``max_score_pairs`` random
     pairs (for speed); the best one is refitted on its inliers among all pairs once. With
     ``identity_first`` the identity is the starting best hypothesis (a sample must beat it; upstream).
+    A batch's squared residuals come from one product: with p, q the scored pairs (centred on the mean of
+    ``src``) and hypothesis (R, t), |R p + t - q|^2 = |p|^2 + |q|^2 + |t|^2 + 2 [t.R p - q.R p - t.q], and the
+    bracket is linear in the per-pair features (p_x, p_y, p.q, p x q, q_x, q_y).
     """
     src = np.asarray(src, dtype=np.float64)[:, :2]
     dst = np.asarray(dst, dtype=np.float64)[:, :2]
     n = len(src)
     if n < sample_size:
         return RansacResult(np.zeros(n, dtype=bool), 0.0, np.zeros(2), 0)
-    score_src, score_dst = src, dst
+    centre = src.mean(axis=0)   # a rigid fit commutes with a common shift: centred coordinates, small squares
+    src_c, dst_c = src - centre, dst - centre
+    score_src, score_dst = src_c, dst_c
     if n > max_score_pairs:
         pick = rng.choice(n, size=max_score_pairs, replace=False)
-        score_src, score_dst = src[pick], dst[pick]
+        score_src, score_dst = src_c[pick], dst_c[pick]
     m = len(score_src)
+    px, py, qx, qy = score_src[:, 0], score_src[:, 1], score_dst[:, 0], score_dst[:, 1]
+    features = np.stack([px, py, px * qx + py * qy, px * qy - py * qx, qx, qy])       # (6, m)
+    norms = px * px + py * py + qx * qx + qy * qy                                      # (m,)
     best_count, best_angle, best_t = -1, 0.0, np.zeros(2)
     if identity_first:
         best_count = int((((score_src - score_dst) ** 2).sum(axis=1) <= threshold * threshold).sum())
@@ -92,7 +116,7 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
     thr2 = threshold * threshold
     while done < min(needed, max_iterations):
         b = min(batch_size, max_iterations - done)
-        samples = np.argpartition(rng.random((b, m)), sample_size - 1, axis=1)[:, :sample_size]
+        samples = _distinct_samples(rng, b, m, sample_size)
         ps, pd = score_src[samples], score_dst[samples]                     # (b, s, 2)
         cs, cd = ps.mean(axis=1), pd.mean(axis=1)
         a, c_ = ps - cs[:, None], pd - cd[:, None]
@@ -102,9 +126,12 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
         co, si = np.cos(ang), np.sin(ang)
         tx = cd[:, 0] - (co * cs[:, 0] - si * cs[:, 1])
         ty = cd[:, 1] - (si * cs[:, 0] + co * cs[:, 1])
-        rx = co[:, None] * score_src[None, :, 0] - si[:, None] * score_src[None, :, 1] + tx[:, None] - score_dst[None, :, 0]
-        ry = si[:, None] * score_src[None, :, 0] + co[:, None] * score_src[None, :, 1] + ty[:, None] - score_dst[None, :, 1]
-        counts = ((rx * rx + ry * ry) <= thr2).sum(axis=1)
+        coefficients = np.stack([tx * co + ty * si, ty * co - tx * si, -co, -si, -tx, -ty], axis=1)  # (b, 6)
+        squared = coefficients @ features
+        squared *= 2.0
+        squared += norms
+        squared += (tx * tx + ty * ty)[:, None]
+        counts = (squared <= thr2).sum(axis=1)
         j = int(np.argmax(counts))
         if counts[j] > best_count:
             best_count, best_angle, best_t = int(counts[j]), float(ang[j]), np.array([tx[j], ty[j]])
@@ -115,13 +142,16 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
         elif ratio > 0:
             needed = int(np.ceil(np.log(1.0 - confidence) / np.log(1.0 - ratio ** sample_size)))
     co, si = np.cos(best_angle), np.sin(best_angle)
-    moved = src @ np.array([[co, si], [-si, co]]) + best_t
-    inliers = ((moved - dst) ** 2).sum(axis=1) <= thr2
+    moved = src_c @ np.array([[co, si], [-si, co]]) + best_t
+    inliers = ((moved - dst_c) ** 2).sum(axis=1) <= thr2
     if inliers.sum() >= sample_size:
-        angle, t = fit_rigid_2d(src[inliers], dst[inliers])
+        angle, t = fit_rigid_2d(src_c[inliers], dst_c[inliers])
         co, si = np.cos(angle), np.sin(angle)
-        moved = src @ np.array([[co, si], [-si, co]]) + t
-        refit = ((moved - dst) ** 2).sum(axis=1) <= thr2
+        moved = src_c @ np.array([[co, si], [-si, co]]) + t
+        refit = ((moved - dst_c) ** 2).sum(axis=1) <= thr2
         if refit.sum() >= inliers.sum():
             inliers, best_angle, best_t = refit, angle, t
-    return RansacResult(inliers, best_angle, best_t, done)
+    # back from centred coordinates: dst = R (src - centre) + t + centre
+    co, si = np.cos(best_angle), np.sin(best_angle)
+    translation = best_t + centre - np.array([co * centre[0] - si * centre[1], si * centre[0] + co * centre[1]])
+    return RansacResult(inliers, best_angle, translation, done)

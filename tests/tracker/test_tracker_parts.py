@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker.association import fit_rigid_2d, ransac_rigid_2d
+from tracker.association import _distinct_samples, fit_rigid_2d, ransac_rigid_2d
 from tracker.config import PRESETS, TrackerConfig, get_preset
 from tracker.geometry import make_transform, rotation_z, transform_points
 from tracker.ground import GroundParams, ground_mask
@@ -43,6 +43,8 @@ def test_point_pair_jacobian_matches_finite_differences(with_normals):
         lambda xx: point_pair_block("icp", xx, src, dst, pivot, 1.0, normals, 0.1).residuals, x)
     np.testing.assert_allclose(block.residuals, residuals)
     np.testing.assert_allclose(block.jacobian, numeric, atol=1e-6)
+    # the loss (closed form from the pairs' sums without normals, PairMoments) is the weighted sum of squares
+    assert block.loss == pytest.approx(block.weight * float(residuals @ residuals), rel=1e-10)
     if block.normal_equations is not None:  # the closed-form normal equations the solver uses
         hessian, gradient = block.normal_equations
         np.testing.assert_allclose(hessian, block.jacobian.T @ block.jacobian, atol=1e-9)
@@ -134,6 +136,35 @@ def test_ransac_finds_the_rigid_motion_among_outliers():
     assert (result.inliers == ~outliers).mean() > 0.98
     a2, t2 = fit_rigid_2d(src[~outliers], dst[~outliers])
     assert a2 == pytest.approx(angle, abs=0.005)
+
+
+def test_ransac_far_from_the_origin_returns_the_motion_in_the_given_coordinates():
+    rng = np.random.default_rng(5)
+    src = rng.uniform(-2, 2, (200, 2)) + [350.0, -1200.0]   # world coordinates far from the origin
+    angle, t = -0.1, np.array([3.0, 1.5])
+    c, s = np.cos(angle), np.sin(angle)
+    dst = src @ np.array([[c, s], [-s, c]]) + t + rng.normal(0, 0.01, src.shape)
+    result = ransac_rigid_2d(src, dst, np.random.default_rng(1), threshold=0.1, max_score_pairs=150)
+    assert result.inliers.all()
+    assert result.angle == pytest.approx(angle, abs=1e-3)
+    c, s = np.cos(result.angle), np.sin(result.angle)   # the motion about the origin, not the points' centre
+    np.testing.assert_allclose(src @ np.array([[c, s], [-s, c]]) + result.translation, dst, atol=0.05)
+
+
+@pytest.mark.parametrize("population, size", [(5, 3), (7, 2), (4, 1), (9, 4)])
+def test_ransac_samples_are_distinct_and_uniform(population, size):
+    from itertools import combinations
+
+    samples = _distinct_samples(np.random.default_rng(0), 60000, population, size)
+    assert samples.shape == (60000, size) and samples.min() >= 0 and samples.max() < population
+    ordered = np.sort(samples, axis=1)
+    assert np.all(np.diff(ordered, axis=1) > 0)   # no index twice in a sample
+    subsets = {c: 0 for c in combinations(range(population), size)}
+    for row in map(tuple, ordered):
+        subsets[row] += 1
+    counts = np.array(list(subsets.values()))
+    expected = 60000 / len(counts)
+    assert np.all(np.abs(counts - expected) < 5 * np.sqrt(expected))   # every subset equally likely
 
 
 def test_deskew_recovers_static_points_seen_during_ego_motion():
