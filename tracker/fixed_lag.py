@@ -27,7 +27,7 @@ from .config import TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box
 from .offline import OfflineParams, _box, _rebuild_shape, frame_region_points, refine_states
-from .sotracker import FrameEstimate, Tracker, TrackResult
+from .sotracker import FrameEstimate, LocalCrop, Tracker, TrackResult
 
 __all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag"]
 
@@ -61,10 +61,13 @@ class FixedLagSmoother:
         self.shape = np.zeros((0, 3))
         self._previous: tuple[int, np.ndarray] | None = None
 
-    def add(self, frame: LidarFrame, estimate: FrameEstimate, world: np.ndarray | None = None) -> list[FrameEstimate]:
-        """Add frame k's online estimate; returns the estimates that are now final (frame k - lag, or none)."""
+    def add(self, frame: LidarFrame, estimate: FrameEstimate, world: np.ndarray | None = None,
+            crop: LocalCrop | None = None) -> list[FrameEstimate]:
+        """Add frame k's online estimate; returns the estimates that are now final (frame k - lag, or none).
+        ``world``, ``crop``: see :func:`~tracker.offline.frame_region_points`."""
         t0 = time.perf_counter()
-        self.points.append(frame_region_points(frame, estimate.box, self.config, self.params, self._previous, world))
+        self.points.append(frame_region_points(frame, estimate.box, self.config, self.params, self._previous, world,
+                                               crop))
         self._previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
         self.online.append(estimate)
         self.states = np.vstack([self.states, estimate.state.to_array()[None]])
@@ -115,10 +118,11 @@ class FixedLagTracker:
         estimate = self.front.start(frame, box, previous_pose)
         self.smoother = FixedLagSmoother(self.config, self.lag, box.size, self.params, self.context)
         self.smoother._previous = previous_pose
-        return self._keep(self.smoother.add(frame, estimate))
+        return self._keep(self.smoother.add(frame, estimate, crop=self.front.last_crop))
 
     def step(self, frame: LidarFrame) -> list[FrameEstimate]:
-        return self._keep(self.smoother.add(frame, self.front.step(frame)))
+        estimate = self.front.step(frame)
+        return self._keep(self.smoother.add(frame, estimate, crop=self.front.last_crop))
 
     def finish(self) -> list[FrameEstimate]:
         return self._keep(self.smoother.finish())

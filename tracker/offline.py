@@ -48,7 +48,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
 from .metrics import voxel_downsample_centres
-from .sotracker import FrameEstimate, TrackResult, deskew_points
+from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
 
 __all__ = ["OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states", "refine_offline"]
@@ -134,16 +134,22 @@ def _deskew_reach(points_ego: np.ndarray, frame: LidarFrame, previous: tuple[int
 
 def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, params: OfflineParams,
                         previous: tuple[int, np.ndarray] | None = None,
-                        world: np.ndarray | None = None) -> np.ndarray:
+                        world: np.ndarray | None = None, crop: LocalCrop | None = None) -> np.ndarray:
     """Ground-removed world points of ``frame`` inside ``box`` scaled ``region_scale``.
 
     The ground is the tracker's (``params.ground="tracker"``): with ``ground_scope="sweep"`` the whole-sweep
     plane's, cached per sweep so the online step has already paid for it; else (or with ``"local"``) planes
     fitted on the region grown by ``ground_margin``.
     ``previous``: (timestamp_ns, world_from_ego) of the frame before (de-skew only); ``world``: the frame's
-    world points (all of the sweep's, in its order) when the caller has them cached."""
+    world points (all of the sweep's, in its order) when the caller has them cached; ``crop``: the points the
+    online step searched in this frame (:class:`~tracker.sotracker.LocalCrop`), used when the region lies
+    inside it and its ground is this one (the same points, in the same order, without another pass over the
+    sweep)."""
     pts_ego = np.asarray(frame.points_ego)
     sweep_ground = config.ground_removal and config.ground_scope == "sweep" and params.ground == "tracker"
+    if (crop is not None and crop.frame == frame.index and crop.ground == ("sweep" if sweep_ground else "none")
+            and (sweep_ground or not config.ground_removal) and crop.contains(box, params.region_scale)):
+        return crop.points[points_in_box(crop.points, box, params.region_scale)]
     above_ground = ~cached_sweep_ground_mask(pts_ego, *config.sweep_ground_args()) if sweep_ground else None
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
@@ -203,11 +209,13 @@ def _stack_frames(points: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _object_points(stacked: tuple[np.ndarray, np.ndarray], states: np.ndarray, size: np.ndarray,
-                   per_frame: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                   per_frame: int = 0, local: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Object-frame points inside each frame's box (each frame's at most ``per_frame``, an even subsample
-    when > 0) and their frame indices, from :func:`_stack_frames` output."""
+    when > 0) and their frame indices, from :func:`_stack_frames` output (``local``: its points already in
+    the object frames of ``states``)."""
     pts, frame = stacked
-    local = _to_object_per_point(pts, states, frame)
+    if local is None:
+        local = _to_object_per_point(pts, states, frame)
     keep = np.all(np.abs(local) <= np.asarray(size, dtype=np.float64) / 2.0, axis=1)
     if per_frame > 0 and keep.any():
         frame_in = frame[keep]
@@ -225,18 +233,25 @@ def _rebuild_shape(points: list[np.ndarray], states: np.ndarray, size: np.ndarra
     return voxel_downsample_centres(_object_points(_stack_frames(points), states, size, per_frame)[0], voxel)
 
 
-def _normals(shape: np.ndarray, k: int, tree: cKDTree | None = None) -> np.ndarray:
+def _normals(shape: np.ndarray, k: int, tree: cKDTree | None = None, rows: np.ndarray | None = None) -> np.ndarray:
     """Unit normals (M, 3) by PCA of each point's k nearest neighbours (smallest-eigenvalue direction);
-    ``tree``: a kd-tree of ``shape`` when the caller has one."""
+    ``tree``: a kd-tree of ``shape`` when the caller has one; ``rows``: only these points' normals (each row
+    is computed as it is for the whole shape)."""
+    if min(k, len(shape)) < 3:
+        return np.tile([0.0, 0.0, 1.0], (len(shape) if rows is None else len(rows), 1))
+    return _smallest_eigenvectors(*_neighbour_covariances(shape, k, tree or cKDTree(shape), rows))
+
+
+def _neighbour_covariances(shape: np.ndarray, k: int, tree: cKDTree, rows: np.ndarray | None = None
+                           ) -> tuple[np.ndarray, ...]:
+    """The six entries (xx, yy, zz, xy, xz, yz) of the covariance of each point's k nearest neighbours in
+    ``shape`` (k <= len(shape), at least 3); ``rows``: only these points."""
     k = int(min(k, len(shape)))
-    if k < 3:
-        return np.tile([0.0, 0.0, 1.0], (len(shape), 1))
-    _, idx = (tree or cKDTree(shape)).query(shape, k=k)
+    _, idx = tree.query(shape if rows is None else shape[rows], k=k)
     nb = shape[idx]
     nb -= nb.mean(axis=1, keepdims=True)
     pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
-    xx, yy, zz, xy, xz, yz = (np.einsum("mk,mk->m", nb[:, :, a], nb[:, :, b]) / k for a, b in pairs)
-    return _smallest_eigenvectors(xx, yy, zz, xy, xz, yz)
+    return tuple(np.einsum("mk,mk->m", nb[:, :, a], nb[:, :, b]) / k for a, b in pairs)
 
 
 def _smallest_eigenvectors(xx: np.ndarray, yy: np.ndarray, zz: np.ndarray, xy: np.ndarray, xz: np.ndarray,
@@ -255,11 +270,13 @@ def _smallest_eigenvectors(xx: np.ndarray, yy: np.ndarray, zz: np.ndarray, xy: n
     det = bx * (by * bz - cyz**2) - cxy * (cxy * bz - cyz * cxz) + cxz * (cxy * cyz - by * cxz)
     phi = np.arccos(np.clip(det / 2.0, -1.0, 1.0)) / 3.0
     lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
-    rows = np.stack([np.stack([xx - lam, xy, xz], 1), np.stack([xy, yy - lam, yz], 1),
-                     np.stack([xz, yz, zz - lam], 1)], 1)  # (M, 3, 3)
-    crosses = np.stack([np.cross(rows[:, 0], rows[:, 1]), np.cross(rows[:, 0], rows[:, 2]),
-                        np.cross(rows[:, 1], rows[:, 2])], 1)
-    norms = np.linalg.norm(crosses, axis=2)
+    r0, r1, r2 = (xx - lam, xy, xz), (xy, yy - lam, yz), (xz, yz, zz - lam)  # rows of A - lambda I
+    crosses = np.empty((len(xx), 3, 3))
+    for j, (u, v) in enumerate(((r0, r1), (r0, r2), (r1, r2))):  # u x v, written out (as numpy.cross computes it)
+        crosses[:, j, 0] = u[1] * v[2] - u[2] * v[1]
+        crosses[:, j, 1] = u[2] * v[0] - u[0] * v[2]
+        crosses[:, j, 2] = u[0] * v[1] - u[1] * v[0]
+    norms = np.sqrt(np.add.reduce(crosses * crosses, axis=2))
     best = np.argmax(norms, axis=1)
     length = norms[np.arange(len(best)), best]
     out = crosses[np.arange(len(best)), best] / np.maximum(length, 1e-300)[:, None]
@@ -321,6 +338,7 @@ class _Solver:
         self.sig = sig
         self.anchor = anchor
         self._matched: tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+        self._object_cache: tuple[np.ndarray, np.ndarray] | None = None
 
     def set_shapes(self, states: np.ndarray) -> bool:
         """Build, for each fold f, the shape from the frames NOT in f (a frame never matches its own points).
@@ -329,18 +347,29 @@ class _Solver:
         p = self.params
         folds = max(2, int(p.folds))
         self.folds = folds
-        self.shapes, self.trees, self.normals = [], [], []
-        local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame)
+        self.shapes, self.trees, self.normals, self.has_normal = [], [], [], []
+        local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame,
+                                      self._object_frame(states))
         for f in range(folds):
             shape = voxel_downsample_centres(local[frame % folds != f], p.voxel)
             if len(shape) < p.min_shape_points:
                 return False
-            tree = cKDTree(shape)
             self.shapes.append(shape)
-            self.trees.append(tree)
-            self.normals.append(_normals(shape, p.normal_neighbours, tree))
+            self.trees.append(cKDTree(shape))
+            self.normals.append(np.zeros((len(shape), 3)))   # computed for the points matched (_match)
+            self.has_normal.append(np.zeros(len(shape), dtype=bool))
         self._matched = None
         return True
+
+    def _object_frame(self, states: np.ndarray) -> np.ndarray:
+        """Every gathered point in its frame's object frame at ``states`` (kept for the next call with the
+        same states: a shape rebuild and the data selection that follows it)."""
+        if self._object_cache is not None and np.array_equal(self._object_cache[0], states):
+            return self._object_cache[1]
+        raw, raw_frame = self.stacked
+        local = _to_object_per_point(raw, states, raw_frame)
+        self._object_cache = (states.copy(), local)
+        return local
 
     def _match(self, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Distance, matched shape point and its normal for each data point (against its fold's shape)."""
@@ -348,11 +377,28 @@ class _Solver:
         m = np.empty_like(local)
         n = np.empty_like(local)
         fold = self.frame_idx % self.folds
+        matched, missing = [], []
         for f in range(self.folds):
             sel = fold == f
             if not sel.any():
                 continue
             d, idx = self.trees[f].query(local[sel], k=1)
+            matched.append((f, sel, d, idx))
+            rows = np.unique(idx[~self.has_normal[f][idx]])
+            if len(rows) and min(self.params.normal_neighbours, len(self.shapes[f])) < 3:
+                self.normals[f][rows] = _normals(self.shapes[f], self.params.normal_neighbours, rows=rows)
+                self.has_normal[f][rows] = True
+            elif len(rows):  # matched for the first time: their normals (as _normals gives them), all folds' at once
+                missing.append((f, rows, _neighbour_covariances(self.shapes[f], self.params.normal_neighbours,
+                                                                self.trees[f], rows)))
+        if missing:
+            normals = _smallest_eigenvectors(*(np.concatenate(parts) for parts in zip(*(c for _, _, c in missing))))
+            start = 0
+            for f, rows, _ in missing:
+                self.normals[f][rows] = normals[start:start + len(rows)]
+                self.has_normal[f][rows] = True
+                start += len(rows)
+        for f, sel, d, idx in matched:
             dist[sel], m[sel], n[sel] = d, self.shapes[f][idx], self.normals[f][idx]
         return dist, m, n
 
@@ -362,15 +408,16 @@ class _Solver:
         is still made, so the free frames' subsets do not depend on how many frames are held)."""
         p = self.params
         raw, raw_frame = self.stacked
-        local = _to_object_per_point(raw, states, raw_frame)
+        local = self._object_frame(states)
         inside = np.all(np.abs(local) <= self.size * p.crop_scale / 2.0, axis=1)
         counts = np.bincount(raw_frame[inside], minlength=self.k)
         self.any_points = bool(inside.any())
         keep = inside & (raw_frame >= self.fixed)
+        bounds = np.searchsorted(raw_frame, np.arange(self.k + 1))  # frames are contiguous in ``stacked``
         for k in np.flatnonzero(counts > p.max_points):  # the same draws, in frame order, as frame by frame
             chosen = np.sort(self.rng.choice(counts[k], p.max_points, replace=False))
             if k >= self.fixed:
-                members = np.flatnonzero(inside & (raw_frame == k))
+                members = bounds[k] + np.flatnonzero(inside[bounds[k]:bounds[k + 1]])
                 keep[members] = False
                 keep[members[chosen]] = True
         self.pts = raw[keep]

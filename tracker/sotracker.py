@@ -40,10 +40,10 @@ from .motion_filter import AverageMotion, CTRVMotion, CTRVParams, HeightFilter
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
 from .sweep_ground import cached_sweep_ground_mask
-from .terms import (ResidualBlock, apply_motion, detection_block, motion_consistency_block, motion_prior_block,
+from .terms import (PairMoments, ResidualBlock, apply_motion, detection_block, motion_consistency_block, motion_prior_block,
                     point_pair_block)
 
-__all__ = ["FrameEstimate", "TrackResult", "Tracker", "track", "deskew_points"]
+__all__ = ["FrameEstimate", "LocalCrop", "TrackResult", "Tracker", "track", "deskew_points"]
 
 
 @dataclass(frozen=True)
@@ -64,6 +64,32 @@ class FrameEstimate:
     flags: tuple[str, ...]
     time_ms: float
     points: np.ndarray = field(repr=False)
+
+
+@dataclass(frozen=True)
+class LocalCrop:
+    """The ground-removed world points the last step searched: every finite, non-ground point of sweep
+    ``frame`` whose BEV position lies in the rectangle centred on ``box`` (its heading) with half extents
+    ``half_length`` x ``half_width`` (no height limit), in the sweep's order. The fixed-lag window takes its
+    region from it when the region fits inside (:func:`tracker.offline.frame_region_points`)."""
+
+    frame: int
+    points: np.ndarray = field(repr=False)
+    box: Box
+    half_length: float
+    half_width: float
+    ground: str  # "none" (nothing removed) or "sweep" (the cached whole-sweep mask); else not reusable
+
+    def contains(self, box: Box, scale: float, tolerance: float = 1e-3) -> bool:
+        """Whether ``box`` scaled ``scale`` (BEV) lies inside the rectangle, ``tolerance`` inside its edges."""
+        c, s = np.cos(box.heading), np.sin(box.heading)
+        hl, hw = 0.5 * box.length * scale, 0.5 * box.width * scale
+        corners = np.array([[hl, hw], [hl, -hw], [-hl, hw], [-hl, -hw]]) @ np.array([[c, s], [-s, c]])
+        d = corners + (box.center[:2] - self.box.center[:2])
+        cc, ss = np.cos(self.box.heading), np.sin(self.box.heading)
+        u = np.abs(d @ np.array([cc, ss]))
+        v = np.abs(d @ np.array([-ss, cc]))
+        return bool(np.all(u <= self.half_length - tolerance) and np.all(v <= self.half_width - tolerance))
 
 
 @dataclass
@@ -204,6 +230,7 @@ class Tracker:
         c = self.config
         self.ground_params = c.ground_params()
         self._started = False
+        self.last_crop: LocalCrop | None = None  # the points the last start/step searched (see LocalCrop)
 
     # ------------------------------------------------------------------ points
     def _local_points(self, frame: LidarFrame, box: Box, scale: float) -> tuple[np.ndarray, list[str]]:
@@ -270,7 +297,10 @@ class Tracker:
         u = np.abs(d @ np.array([ca, sa]))
         v = np.abs(d @ np.array([-sa, ca]))
         slack = 1.0
-        world = world[(u <= 0.5 * box.length * scale + slack) & (v <= 0.5 * box.width * scale + slack)]
+        half_length, half_width = 0.5 * box.length * scale + slack, 0.5 * box.width * scale + slack
+        world = world[(u <= half_length) & (v <= half_width)]
+        ground = "none" if not c.ground_removal else "sweep" if sweep_ground else "local"
+        self.last_crop = LocalCrop(frame.index, world, box, half_length, half_width, ground)
         return world, flags
 
     # ------------------------------------------------------------------ API
@@ -462,9 +492,14 @@ class Tracker:
                 break
             use_priors = not icp_only
 
+            # point-to-point pairs as sums, so each LM trial costs O(1) in the pairs (PairMoments)
+            moments = [(name, PairMoments.of(s, t, pivot), w, norm) for name, s, t, n, w, norm in fixed if n is None]
+            planes = [entry for entry in fixed if entry[3] is not None]
+
             def blocks_at(xx: np.ndarray) -> list[ResidualBlock]:
-                blocks = [point_pair_block(name, xx, s, t, pivot, w, n, c.plane_point_weight, norm)
-                          for name, s, t, n, w, norm in fixed]
+                blocks = [m.block(name, xx, w, norm) for name, m, w, norm in moments]
+                blocks += [point_pair_block(name, xx, s, t, pivot, w, n, c.plane_point_weight, norm)
+                           for name, s, t, n, w, norm in planes]
                 if use_priors and c.weight_mc > 0:
                     blocks.append(motion_consistency_block(xx, prev.heading, c.weight_mc, c.symmetric_mc))
                 if use_priors and c.weight_mp > 0 and reference is not None:

@@ -14,7 +14,7 @@ from tracker.frames import LidarFrame
 from tracker.geometry import Box, make_transform, points_in_box, rotation_z, transform_points
 from tracker.ground import ground_mask
 from tracker.offline import _BANDS, OfflineParams, _normals, _prior_band, _Solver, frame_region_points
-from tracker.sotracker import deskew_points
+from tracker.sotracker import Tracker, deskew_points
 from tracker.sweep_ground import sweep_ground_mask
 
 from tracker_synthetic import make_sequence
@@ -138,3 +138,49 @@ def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deske
         got = frame_region_points(frame, seq.boxes[k], config, params, previous if deskew else None)
         assert len(expected) > 100
         np.testing.assert_array_equal(got, expected)
+
+
+def test_lazy_normals_are_the_whole_shapes_normals():
+    seq = make_sequence(n_frames=8, seed=2)
+    params = OfflineParams()
+    points = [frame_region_points(seq.lidar_frame(k), b, get_preset("full"), params) for k, b in enumerate(seq.boxes)]
+    truth = np.array([[b.x, b.y, b.z, b.heading] for b in seq.boxes])
+    states = truth + np.random.default_rng(1).normal(0.0, [0.05, 0.05, 0.02, 0.02], truth.shape)
+    solver = _Solver(points, truth, np.array(seq.boxes[0].size), params, np.random.default_rng(0))
+    assert solver.set_shapes(states)
+    solver.select(states)
+    solver._data(states, True)
+    solver._data(states + 0.01, False)   # a second match adds the newly matched points' normals
+    for shape, normals, has in zip(solver.shapes, solver.normals, solver.has_normal):
+        assert 0 < has.sum() < len(shape)   # only the matched points'
+        np.testing.assert_array_equal(normals[has], _normals(shape, params.normal_neighbours)[has])
+
+
+def test_the_online_steps_crop_gives_the_regions_points():
+    """The fixed-lag window takes a frame's region from the points the online step searched when the region
+    fits inside them (LocalCrop): the same points in the same order as from the sweep; else the sweep."""
+    seq = make_sequence(n_frames=6, seed=4)
+    config, params = get_preset("full"), OfflineParams()
+    tracker = Tracker(config)
+    tracker.start(seq.lidar_frame(0), seq.boxes[0])
+    used = 0
+    for k in range(1, 6):
+        frame = seq.lidar_frame(k)
+        est = tracker.step(frame)
+        crop = tracker.last_crop
+        assert crop.frame == k and crop.ground == "sweep"
+        expected = frame_region_points(frame, est.box, config, params)
+        np.testing.assert_array_equal(frame_region_points(frame, est.box, config, params, crop=crop), expected)
+        used += crop.contains(est.box, params.region_scale)
+        far = Box(est.box.x + 3.0, est.box.y, est.box.z, est.box.heading, *est.box.size)  # outside: the sweep
+        assert not crop.contains(far, params.region_scale)
+        np.testing.assert_array_equal(frame_region_points(frame, far, config, params, crop=crop),
+                                      frame_region_points(frame, far, config, params))
+    assert used >= 3   # the region usually fits in the searched crop
+    other = get_preset("full_v2")   # local ground planes in the step: never reused
+    tracker = Tracker(other)
+    tracker.start(seq.lidar_frame(0), seq.boxes[0])
+    est = tracker.step(seq.lidar_frame(1))
+    assert tracker.last_crop.ground == "local"
+    np.testing.assert_array_equal(frame_region_points(seq.lidar_frame(1), est.box, other, params, crop=tracker.last_crop),
+                                  frame_region_points(seq.lidar_frame(1), est.box, other, params))
