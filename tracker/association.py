@@ -66,22 +66,6 @@ class RansacResult:
         return int(self.inliers.sum())
 
 
-def _distinct_samples(rng: np.random.Generator, count: int, population: int, size: int) -> np.ndarray:
-    """``count`` uniform random ``size``-subsets of range(population) as rows (count, size) of distinct indices.
-
-    Sizes up to 3 (the rigid 2D fit's minimal sample and one more) by drawing index j from population - j and
-    skipping the ones already drawn (exactly uniform); larger sizes by ranking uniform keys."""
-    if size > 3:
-        return np.argpartition(rng.random((count, population)), size - 1, axis=1)[:, :size]
-    draws = [rng.integers(0, population - j, count) for j in range(size)]
-    out = [draws[0]]
-    for d in draws[1:]:
-        for taken in np.sort(np.stack(out, axis=1), axis=1).T:  # skip the drawn ones, smallest first
-            d = d + (d >= taken)
-        out.append(d)
-    return np.stack(out, axis=1)
-
-
 def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, *, max_iterations: int = 200,
                     confidence: float = 0.99, sample_size: int = 3, threshold: float = 0.2,
                     batch_size: int = 50, max_score_pairs: int = 150, identity_first: bool = False) -> RansacResult:
@@ -116,7 +100,7 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
     thr2 = threshold * threshold
     while done < min(needed, max_iterations):
         b = min(batch_size, max_iterations - done)
-        samples = _distinct_samples(rng, b, m, sample_size)
+        samples = np.argpartition(rng.random((b, m)), sample_size - 1, axis=1)[:, :sample_size]
         ps, pd = score_src[samples], score_dst[samples]                     # (b, s, 2)
         cs, cd = ps.mean(axis=1), pd.mean(axis=1)
         a, c_ = ps - cs[:, None], pd - cd[:, None]

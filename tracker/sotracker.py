@@ -40,8 +40,8 @@ from .motion_filter import AverageMotion, CTRVMotion, CTRVParams, HeightFilter
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .solver import solve
 from .sweep_ground import cached_sweep_ground_mask
-from .terms import (PairMoments, ResidualBlock, apply_motion, detection_block, motion_consistency_block, motion_prior_block,
-                    point_pair_block)
+from .terms import (PairMoments, ResidualBlock, apply_motion, detection_block, motion_consistency_block,
+                    motion_prior_block, point_pair_block)
 
 __all__ = ["FrameEstimate", "LocalCrop", "TrackResult", "Tracker", "track", "deskew_points"]
 

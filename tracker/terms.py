@@ -12,8 +12,8 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["ResidualBlock", "PairMoments", "apply_motion", "point_pair_block", "motion_consistency_block", "motion_prior_block",
-           "detection_block"]
+__all__ = ["ResidualBlock", "PairMoments", "apply_motion", "point_pair_block", "motion_consistency_block",
+           "motion_prior_block", "detection_block"]
 
 
 @dataclass(frozen=True)

@@ -182,5 +182,6 @@ def test_the_online_steps_crop_gives_the_regions_points():
     tracker.start(seq.lidar_frame(0), seq.boxes[0])
     est = tracker.step(seq.lidar_frame(1))
     assert tracker.last_crop.ground == "local"
-    np.testing.assert_array_equal(frame_region_points(seq.lidar_frame(1), est.box, other, params, crop=tracker.last_crop),
-                                  frame_region_points(seq.lidar_frame(1), est.box, other, params))
+    frame = seq.lidar_frame(1)
+    np.testing.assert_array_equal(frame_region_points(frame, est.box, other, params, crop=tracker.last_crop),
+                                  frame_region_points(frame, est.box, other, params))

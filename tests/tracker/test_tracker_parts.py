@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker.association import _distinct_samples, fit_rigid_2d, ransac_rigid_2d
+from tracker.association import fit_rigid_2d, ransac_rigid_2d
 from tracker.config import PRESETS, TrackerConfig, get_preset
 from tracker.geometry import make_transform, rotation_z, transform_points
 from tracker.ground import GroundParams, ground_mask
@@ -149,22 +149,6 @@ def test_ransac_far_from_the_origin_returns_the_motion_in_the_given_coordinates(
     assert result.angle == pytest.approx(angle, abs=1e-3)
     c, s = np.cos(result.angle), np.sin(result.angle)   # the motion about the origin, not the points' centre
     np.testing.assert_allclose(src @ np.array([[c, s], [-s, c]]) + result.translation, dst, atol=0.05)
-
-
-@pytest.mark.parametrize("population, size", [(5, 3), (7, 2), (4, 1), (9, 4)])
-def test_ransac_samples_are_distinct_and_uniform(population, size):
-    from itertools import combinations
-
-    samples = _distinct_samples(np.random.default_rng(0), 60000, population, size)
-    assert samples.shape == (60000, size) and samples.min() >= 0 and samples.max() < population
-    ordered = np.sort(samples, axis=1)
-    assert np.all(np.diff(ordered, axis=1) > 0)   # no index twice in a sample
-    subsets = {c: 0 for c in combinations(range(population), size)}
-    for row in map(tuple, ordered):
-        subsets[row] += 1
-    counts = np.array(list(subsets.values()))
-    expected = 60000 / len(counts)
-    assert np.all(np.abs(counts - expected) < 5 * np.sqrt(expected))   # every subset equally likely
 
 
 def test_deskew_recovers_static_points_seen_during_ego_motion():
