@@ -100,6 +100,8 @@ class TrackerConfig:
     travel_heading_sigma: float = 0.0    # > 0 (ctrv): the direction of travel of the object's points is a heading
                                          # measurement with this noise floor (rad) (+ position noise / distance)
     travel_min_distance: float = 0.2     # m: shorter displacements give no travel heading
+    first_motion_along_heading: bool = False  # "average": frame 1's motion seeds the prior with only its part along
+                                         # the start box's heading (its sideways part would be predicted on)
     first_hypotheses: int = 0            # > 0: frame-1 search from this many motions along the heading (scored by
                                          # the points they explain) in the normal search box; 0 = one wide search
     first_max_speed: float = 30.0        # m/s: the frame-1 hypotheses reach this far forward (a third backwards)
@@ -221,10 +223,13 @@ _FULL_V2 = _FULL_V1.replace(first_hypotheses=9, first_max_yaw=0.1, z_mode="filte
 # full_v3 = full_v2 with one ground plane per sweep, whose ground near the box is the height's road (chosen on the
 # generated benchmark and the synthetic worlds, docs/tracker.md "Choosing full on the generated benchmark")
 _FULL_V3 = _FULL_V2.replace(ground_scope="sweep", height_road="removal", preset="full_v3")
-# full = full_v3 with the turn-rate prior: the world-frame average motion turned by the averaged turn rate, so
+# full_v4 = full_v3 with the turn-rate prior: the world-frame average motion turned by the averaged turn rate, so
 # the box's heading error never steers the prediction (chosen on the generated benchmark and the synthetic
-# worlds with 3 seeds, docs/tracker.md "The motion prior's frame, again")
-_FULL = _FULL_V3.replace(prior_frame="turn", preset="full")
+# worlds with 3 seeds, docs/tracker.md "The motion prior's frame, again"; `full` of 2026-11-26)
+_FULL_V4 = _FULL_V3.replace(prior_frame="turn", preset="full_v4")
+# full = full_v4 with frame 1's motion seeding the prior only along the start box's heading (chosen on the generated
+# benchmark and the synthetic worlds with 3 seeds, docs/tracker.md "A rear view")
+_FULL = _FULL_V4.replace(first_motion_along_heading=True, preset="full")
 _FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
                           convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
                           ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
@@ -237,6 +242,7 @@ PRESETS: dict[str, TrackerConfig] = {
     "full_v1": _FULL_V1,
     "full_v2": _FULL_V2,
     "full_v3": _FULL_V3,
+    "full_v4": _FULL_V4,
     "faithful": _FAITHFUL,
     "icp_mp": _FULL.replace(use_shape=False, weight_mc=0.0, preset="icp_mp"),
     "icp_mp_s1": _FULL.replace(shape_update=False, weight_mc=0.0, preset="icp_mp_s1"),

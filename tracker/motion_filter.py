@@ -232,10 +232,12 @@ class AverageMotion:
     elapsed time, so a gap of several frames is predicted correctly; else per frame (the paper; dt ignored).
     """
 
-    def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False) -> None:
+    def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
+                 first_along_heading: bool = False) -> None:
         self.prior = MotionPrior(alpha, frame)
         self.coast_yaw_decay = coast_yaw_decay
         self.per_second = per_second
+        self.first_along_heading = first_along_heading
 
     def predict(self, box: Box, dt: float, coasting: int = 0) -> np.ndarray:
         interval = dt if self.per_second else 1.0
@@ -248,5 +250,13 @@ class AverageMotion:
 
     def update(self, box: Box, x: np.ndarray, previous_centroid: np.ndarray | None,
                current_centroid: np.ndarray | None, dt: float = 0.1) -> np.ndarray:
-        self.prior.update(np.asarray(x) / dt if self.per_second else x, box.heading, dt if self.per_second else 1.0)
+        motion = np.asarray(x, dtype=np.float64)
+        if self.first_along_heading and not self.prior.initialised:
+            # the first motion seeds the prior with only its part along the start box's heading: the start box is
+            # given, a vehicle moves along its heading, and a sideways part (what a face seen alone cannot pin)
+            # would be predicted on as a sideways velocity
+            c, s = np.cos(box.heading), np.sin(box.heading)
+            along = c * motion[0] + s * motion[1]
+            motion = np.array([c * along, s * along, motion[2], motion[3]])
+        self.prior.update(motion / dt if self.per_second else motion, box.heading, dt if self.per_second else 1.0)
         return x

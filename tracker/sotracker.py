@@ -540,7 +540,8 @@ class Tracker:
             params = CTRVParams(accel_sigma=c.ctrv_accel_sigma, yaw_accel_sigma=c.ctrv_yaw_accel_sigma)
             return CTRVMotion(box, params, c.ctrv_position_sigma, c.ctrv_heading_sigma, c.travel_heading_sigma,
                               c.travel_min_distance)
-        return AverageMotion(c.alpha, c.prior_frame, c.coast_yaw_decay, c.prior_per_second)
+        return AverageMotion(c.alpha, c.prior_frame, c.coast_yaw_decay, c.prior_per_second,
+                             c.first_motion_along_heading)
 
     def _elapsed(self, frame: LidarFrame) -> float:
         """Seconds since the previous frame (0.1 s when the timestamps do not advance)."""

@@ -9,7 +9,7 @@ from tracker.config import get_preset
 from tracker.first_frame import explained_points, motion_hypotheses
 from tracker.frames import LidarFrame
 from tracker.geometry import Box, invert_transform, make_transform, rotation_z, transform_points, wrap_angle
-from tracker.motion_filter import CTRVFilter, HeightFilter, ctrv_predict_state, travel_heading
+from tracker.motion_filter import AverageMotion, CTRVFilter, HeightFilter, ctrv_predict_state, travel_heading
 from tracker.sotracker import Tracker
 
 from tracker_synthetic import ground_points
@@ -62,6 +62,23 @@ def test_constant_turn_drive_keeps_its_turn_rate_within_5_percent():
     assert abs(wrap_angle(f.heading - poses[-1, 2])) < np.radians(1.0)
 
 
+@pytest.mark.parametrize("along", [False, True])
+def test_the_first_motion_seeds_the_prior_along_the_start_heading(along):
+    start = Box(10.0, 5.0, 0.0, 0.4, 4.5, 1.8, 1.5)
+    motion = AverageMotion(0.6, "turn", 0.5, per_second=True, first_along_heading=along)
+    forward, sideways = np.array([np.cos(0.4), np.sin(0.4)]), np.array([-np.sin(0.4), np.cos(0.4)])
+    first = np.r_[1.0 * forward + 0.05 * sideways, 0.02, 0.0]   # 1 m ahead, 5 cm sideways in 0.1 s
+    assert np.array_equal(motion.update(start, first, None, None, 0.1), first)   # the state keeps its motion
+    predicted = motion.predict(start, 0.1)
+    assert predicted[:2] @ forward == pytest.approx(1.0)
+    assert predicted[:2] @ sideways == pytest.approx(0.0 if along else 0.05, abs=1e-12)
+    assert predicted[2] == pytest.approx(0.02)
+    second = np.r_[1.1 * forward + 0.05 * sideways, 0.0, 0.0]   # later motions are averaged as they are
+    motion.update(start, second, None, None, 0.1)
+    expected_sideways = 0.4 * 0.05 + (0.6 * 0.05 if not along else 0.0)
+    assert motion.predict(start, 0.1)[:2] @ sideways == pytest.approx(expected_sideways, abs=1e-12)
+
+
 def test_travel_heading_is_folded_for_a_reversing_vehicle_and_skipped_when_standing():
     f = CTRVFilter(0.0, 0.0, 0.2)
     theta, sigma = travel_heading(np.array([-np.cos(0.25), -np.sin(0.25)]), 0.05, 0.02, 0.2)
@@ -112,18 +129,17 @@ def _rear_view_sequence(n: int, speed: float = 10.0, heading: float = 0.4, seed:
 
 
 @pytest.mark.parametrize("scene", [0, 1, 2, 3])
-def test_straight_drive_seen_only_from_behind_keeps_its_heading(scene):
-    """The issue asks for 2 degrees throughout. Measured on 12 such scenes x 3 seeds (docs/tracker.md, "A rear
-    view"): the error exceeds 2 degrees in 7 to 12 of the 36 runs (with this code and the code before it, whose
-    results differ only by rounding), mostly in frames 6-14, at most 2.6; its mean is 0.5. The box slides
-    sideways along the face, which only the face's edges pin, and the heading follows the slide. So this checks
-    3 degrees throughout and a mean below 1 degree: the issue's bound is not met (the issue stays open on it)."""
+def test_straight_drive_seen_only_from_behind_keeps_its_heading_within_2_degrees(scene):
+    """The issue's bound, on 4 scenes. Measured on 12 such scenes x 3 seeds (docs/tracker.md, "A rear view"):
+    `full` stays within 1.80 degrees (mean 0.30) since frame 1's motion seeds the prior only along the start
+    heading; before that (`full_v4`) 12 of the 36 runs went above 2 degrees (at most 2.58), the box sliding
+    sideways along the face, and this test, on one scene, had passed by luck."""
     frames, boxes = _rear_view_sequence(40, seed=scene)
     tracker = Tracker(get_preset("full"))
     tracker.start(frames[0], boxes[0])
     errors = np.array([abs(np.degrees(wrap_angle(tracker.step(f).box.heading - b.heading)))
                        for f, b in zip(frames[1:], boxes[1:])])
-    assert errors.max() < 3.0, np.round(errors, 2)
+    assert errors.max() < 2.0, np.round(errors, 2)
     assert errors.mean() < 1.0, np.round(errors, 2)
 
 
@@ -138,7 +154,7 @@ def test_a_gap_of_four_frames_is_predicted_with_the_elapsed_time(scene):
     heading = boxes[12].heading
     offset = est.box.center[:2] - boxes[12].center[:2]
     along = offset @ [np.cos(heading), np.sin(heading)]
-    # the distance travelled over the gap (measured: |along| <= 0.05 m on 12 scenes x 3 seeds); the sideways
-    # slide of a face seen alone is the rear-view test's subject (up to 0.45 m by this frame, docs/tracker.md)
+    # the distance travelled over the gap (measured on 12 scenes x 3 seeds: |along| <= 0.04 m, in all <= 0.13 m;
+    # with full_v4, whose box slid sideways along the face, up to 0.41 m in all: docs/tracker.md "A rear view")
     assert abs(along) < 0.1, offset
-    assert np.hypot(*offset) < 0.6, offset
+    assert np.hypot(*offset) < 0.3, offset
