@@ -100,8 +100,9 @@ class TrackerConfig:
     travel_heading_sigma: float = 0.0    # > 0 (ctrv): the direction of travel of the object's points is a heading
                                          # measurement with this noise floor (rad) (+ position noise / distance)
     travel_min_distance: float = 0.2     # m: shorter displacements give no travel heading
-    first_motion_along_heading: bool = False  # "average": frame 1's motion seeds the prior with only its part along
-                                         # the start box's heading (its sideways part would be predicted on)
+    first_motion_along_heading: bool = False  # "average": the first motion (frame 1's, or start()'s initial_motion)
+                                         # seeds the prior with only its part along the start box's heading (its
+                                         # sideways part would be predicted on as a sideways velocity)
     first_hypotheses: int = 0            # > 0: frame-1 search from this many motions along the heading (scored by
                                          # the points they explain) in the normal search box; 0 = one wide search
     first_max_speed: float = 30.0        # m/s: the frame-1 hypotheses reach this far forward (a third backwards)
