@@ -61,15 +61,22 @@ def test_closed_form_normals_are_the_pca_normals():
     np.testing.assert_allclose(np.abs(np.sum(normals * vectors[:, :, 0], axis=1))[separated], 1.0, atol=1e-9)
 
 
-def test_gauss_newton_blocks_match_finite_differences_of_the_residuals():
-    seq = make_sequence(n_frames=6, seed=2)
+def _solver_on_a_synthetic_track(n_frames: int, fixed: int = 0) -> tuple[_Solver, np.ndarray, OfflineParams]:
+    """A refinement solver over a synthetic track's region points, its shapes built and data selected at the true
+    states perturbed by a few cm / 1 degree (returned)."""
+    seq = make_sequence(n_frames=n_frames, seed=2)
     params = OfflineParams()
     points = [frame_region_points(seq.lidar_frame(k), b, get_preset("full"), params) for k, b in enumerate(seq.boxes)]
     truth = np.array([[b.x, b.y, b.z, b.heading] for b in seq.boxes])
     states = truth + np.random.default_rng(1).normal(0.0, [0.05, 0.05, 0.02, 0.02], truth.shape)
-    solver = _Solver(points, truth, np.array(seq.boxes[0].size), params, np.random.default_rng(0), fixed=1)
+    solver = _Solver(points, truth, np.array(seq.boxes[0].size), params, np.random.default_rng(0), fixed=fixed)
     assert solver.set_shapes(states)
     solver.select(states)
+    return solver, states, params
+
+
+def test_gauss_newton_blocks_match_finite_differences_of_the_residuals():
+    solver, states, params = _solver_on_a_synthetic_track(6, fixed=1)
     assert np.all(solver.frame_idx >= 1) and len(solver.pts) > 100   # the held frame's points are left out
     _, blocks, grads = solver._data(states, True)
 
@@ -141,14 +148,7 @@ def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deske
 
 
 def test_lazy_normals_are_the_whole_shapes_normals():
-    seq = make_sequence(n_frames=8, seed=2)
-    params = OfflineParams()
-    points = [frame_region_points(seq.lidar_frame(k), b, get_preset("full"), params) for k, b in enumerate(seq.boxes)]
-    truth = np.array([[b.x, b.y, b.z, b.heading] for b in seq.boxes])
-    states = truth + np.random.default_rng(1).normal(0.0, [0.05, 0.05, 0.02, 0.02], truth.shape)
-    solver = _Solver(points, truth, np.array(seq.boxes[0].size), params, np.random.default_rng(0))
-    assert solver.set_shapes(states)
-    solver.select(states)
+    solver, states, params = _solver_on_a_synthetic_track(8)
     solver._data(states, True)
     solver._data(states + 0.01, False)   # a second match adds the newly matched points' normals
     for shape, normals, has in zip(solver.shapes, solver.normals, solver.has_normal):
