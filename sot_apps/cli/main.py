@@ -20,17 +20,33 @@ def _interrupted_while_starting(signum, frame) -> None:
     os._exit(130)
 
 
+_INTERRUPT_PENDING = False
+_OTHER_UNRAISABLE_HOOK = sys.unraisablehook   # the hook main() replaced, for every other unraisable exception
+_CAN_REDELIVER = hasattr(signal, "setitimer") and hasattr(signal, "SIGALRM")   # not on Windows
+
+
 def _raise_interrupt(signum, frame) -> None:
-    """Ctrl-C -> KeyboardInterrupt, except inside the import system: raised in importlib's module-lock
-    callbacks, Python prints it as "Exception ignored ..." and the command goes on. There the interrupt is
-    delivered again 10 ms later (SIGALRM, this same handler), once the import has moved on."""
-    while frame is not None:
-        if frame.f_code.co_filename.startswith("<frozen importlib") and hasattr(signal, "setitimer"):
-            signal.signal(signal.SIGALRM, _raise_interrupt)
-            signal.setitimer(signal.ITIMER_REAL, 0.01)
-            return
-        frame = frame.f_back
+    """Ctrl-C (SIGINT), or its re-delivery (SIGALRM, below) -> KeyboardInterrupt, handled in main()."""
+    global _INTERRUPT_PENDING
+    _INTERRUPT_PENDING = False
+    if _CAN_REDELIVER:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)   # one KeyboardInterrupt per Ctrl-C, never a second one later
     raise KeyboardInterrupt
+
+
+def _redeliver_swallowed_interrupt(unraisable) -> None:
+    """``sys.unraisablehook`` while a command runs. A Ctrl-C whose handler runs inside code where Python cannot
+    raise (a finalizer such as ``ZipFile.__del__``, a weakref callback such as importlib's module locks, a gc
+    callback) is printed as "Exception ignored ..." and lost: the command would go on and exit 0. Here it is
+    printed as nothing and delivered again 10 ms later (SIGALRM -> ``_raise_interrupt``), in ordinary code; if it
+    lands in such a place again, it comes back here. Any other unraisable exception goes to the hook it replaced."""
+    global _INTERRUPT_PENDING
+    if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+        _INTERRUPT_PENDING = True
+        if _CAN_REDELIVER:
+            signal.setitimer(signal.ITIMER_REAL, 0.01)
+        return
+    _OTHER_UNRAISABLE_HOOK(unraisable)
 
 
 # As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles
@@ -115,7 +131,11 @@ def _join_negative_values(argv: list[str]) -> list[str]:
 
 
 def main(argv: Seq[str] | None = None) -> int:
+    global _INTERRUPT_PENDING, _OTHER_UNRAISABLE_HOOK
     signal.signal(signal.SIGINT, _raise_interrupt)   # Ctrl-C -> KeyboardInterrupt, handled below
+    previous_alarm = signal.signal(signal.SIGALRM, _raise_interrupt) if _CAN_REDELIVER else None
+    _OTHER_UNRAISABLE_HOOK, sys.unraisablehook = sys.unraisablehook, _redeliver_swallowed_interrupt
+    _INTERRUPT_PENDING = False
     argv = _join_negative_values(list(sys.argv[1:] if argv is None else argv))
     debug = "--debug" in argv or os.environ.get("SOT_APPS_DEBUG") == "1"
     try:
@@ -128,6 +148,8 @@ def main(argv: Seq[str] | None = None) -> int:
 
         check_outputs(args)
         result = args.func(args)
+        if _INTERRUPT_PENDING:   # swallowed, and the command ended before the re-delivery
+            raise KeyboardInterrupt
         return int(result or 0)
     except InputError as exc:
         if debug:
@@ -155,6 +177,11 @@ def main(argv: Seq[str] | None = None) -> int:
     finally:
         if _AS_PROGRAM:   # the command is over: a Ctrl-C during interpreter shutdown (atexit, pools) changes nothing
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if _CAN_REDELIVER:   # no re-delivery once the command is over
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            signal.signal(signal.SIGALRM, previous_alarm)
+        sys.unraisablehook = _OTHER_UNRAISABLE_HOOK
+        _INTERRUPT_PENDING = False
 
 
 def _caused_by_interrupt(exc: BaseException | None) -> bool:
