@@ -16,6 +16,7 @@ tracker's local region (:mod:`tracker.ground`).
 
 from __future__ import annotations
 
+import math
 import weakref
 
 import numpy as np
@@ -35,48 +36,101 @@ def sweep_ground_mask(points: np.ndarray, lpr_count: int = 20, seed_threshold: f
     ``distance_threshold`` above it as the next ground. The plane's moments (sum and scatter about the
     seeds' centroid) are updated with only the points that changed side, and the rounds stop early once
     no point changes (later rounds would repeat the same plane): the mask is the plain refit's, at the cost
-    of one matrix-vector product over the sweep per round (test_faithful checks the two agree).
+    of one matrix-vector product over the sweep per round (test_faithful checks the two agree). That product
+    runs in single precision; the few points whose single-precision height is within its error bound of the
+    threshold are decided in double precision, so every point is classified as in double precision.
     """
-    given = np.asarray(points).reshape(-1, 3)  # tests on the sweep as given (float32: half the memory traffic)
+    given = np.asarray(points).reshape(-1, 3)
     all_finite = bool(np.isfinite(given).all())
     finite = None if all_finite else np.isfinite(given).all(axis=1)
-    pts = np.ascontiguousarray(given, dtype=np.float64)
-    valid = pts if all_finite else pts[finite]
+    valid = given if all_finite else given[finite]
     if len(valid) < 3:
-        return np.ones(len(pts), dtype=bool)
-    z = given[:, 2] if all_finite else given[finite, 2]  # exact in float64: the same heights
+        return np.ones(len(given), dtype=bool)
+    z = valid[:, 2]  # exact in float64: the same heights
     skip = int(ignore_lowest * len(z))
     count = max(1, min(lpr_count, len(z) - skip))
     lowest = np.sort(np.partition(z, skip + count - 1)[:skip + count])[skip:].astype(np.float64)
     ground = z < np.float64(lowest.mean() + seed_threshold)  # compared in float64
-    seeds = valid[ground]
+    seeds = valid[ground].astype(np.float64)
     if iterations > 0 and len(seeds) >= 3:
         origin = seeds.mean(axis=0)
         centred = seeds - origin
         first, second, n_ground = centred.sum(axis=0), centred.T @ centred, len(seeds)
-        heights = np.empty(len(valid))
+        heights = _SinglePrecisionHeights(valid)
         for _ in range(iterations):
             if n_ground < 3:
                 break
             mean = first / n_ground
-            _, vectors = np.linalg.eigh(second / n_ground - np.outer(mean, mean))
-            normal = vectors[:, 0] if vectors[2, 0] >= 0 else -vectors[:, 0]
-            np.matmul(valid, normal, out=heights)
-            below = np.less(heights, distance_threshold + float(normal @ (mean + origin)))
+            normal = _upward_smallest_eigenvector(second / n_ground - np.outer(mean, mean))
+            below = heights.below(normal, distance_threshold + float(normal @ (mean + origin)))
             changed = np.flatnonzero(below != ground)
             if changed.size == 0:
                 break
             sign = np.where(below[changed], 1.0, -1.0)
-            moved = valid[changed] - origin
+            moved = valid[changed].astype(np.float64) - origin
             first = first + sign @ moved
             second = second + (moved * sign[:, None]).T @ moved
             n_ground += int(sign.sum())
             ground = below
     if all_finite:
         return ground
-    mask = np.ones(len(pts), dtype=bool)
+    mask = np.ones(len(given), dtype=bool)
     mask[finite] = ground
     return mask
+
+
+class _SinglePrecisionHeights:
+    """``points @ normal < threshold`` for many planes over the same finite (N, 3) points, decided as in double
+    precision: the heights are computed in single precision, and the points whose single-precision height
+    lies within a bound of its error from the threshold (rarely any) are computed again in double precision."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        self.points = points
+        self.single = points if points.dtype == np.float32 else points.astype(np.float32)
+        self.heights = np.empty(len(points), dtype=np.float32)
+        # the rounding of p (when given in double), of the unit normal and of the three-term product is each a
+        # few units of 2^-24 of |p|_1 <= 3 max|p_i|: 1e-6 of 3 max|p_i| is ample
+        flat = self.single.reshape(-1)
+        self.tolerance = 3e-6 * (max(float(flat.max()), -float(flat.min())) + 1.0)
+
+    def below(self, normal: np.ndarray, threshold: float) -> np.ndarray:
+        np.matmul(self.single, normal.astype(np.float32), out=self.heights)
+        margin = self.tolerance + 1e-6 * abs(threshold)
+        surely = self.heights < np.float32(threshold - margin)
+        maybe = self.heights < np.float32(threshold + margin)
+        if np.count_nonzero(maybe) != np.count_nonzero(surely):
+            near = np.flatnonzero(maybe != surely)
+            surely[near] = self.points[near].astype(np.float64) @ normal < threshold
+        return surely
+
+
+def _upward_smallest_eigenvector(a: np.ndarray) -> np.ndarray:
+    """The unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a``, with z >= 0 (a plane's
+    upward normal). Closed form on Python floats (``numpy.linalg.eigh`` costs ~60 us a call, ten calls a
+    sweep): the eigenvalue from the characteristic cubic's trigonometric solution, the vector as the longest
+    cross product of two rows of a - lambda I; ``eigh`` where that is ill-conditioned (repeated eigenvalues)."""
+    xx, yy, zz = float(a[0, 0]), float(a[1, 1]), float(a[2, 2])
+    xy, xz, yz = float(a[0, 1]), float(a[0, 2]), float(a[1, 2])
+    q = (xx + yy + zz) / 3.0
+    p = math.sqrt(((xx - q) ** 2 + (yy - q) ** 2 + (zz - q) ** 2 + 2.0 * (xy * xy + xz * xz + yz * yz)) / 6.0)
+    vector = None
+    if p > 0.0 and math.isfinite(p):
+        bx, by, bz, cxy, cxz, cyz = (xx - q) / p, (yy - q) / p, (zz - q) / p, xy / p, xz / p, yz / p
+        det = bx * (by * bz - cyz * cyz) - cxy * (cxy * bz - cyz * cxz) + cxz * (cxy * cyz - by * cxz)
+        phi = math.acos(min(1.0, max(-1.0, det / 2.0))) / 3.0
+        lam = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+        r0, r1, r2 = (xx - lam, xy, xz), (xy, yy - lam, yz), (xz, yz, zz - lam)
+        best, length = None, 0.0
+        for u, v in ((r0, r1), (r0, r2), (r1, r2)):
+            c = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+            n = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+            if n > length:
+                best, length = c, n
+        if best is not None and length > 1e-6 * p * p:
+            vector = np.array(best) / length
+    if vector is None:
+        vector = np.linalg.eigh(a)[1][:, 0]
+    return vector if vector[2] >= 0 else -vector
 
 
 def cached_sweep_ground_mask(points: np.ndarray, *params: float) -> np.ndarray:

@@ -82,6 +82,42 @@ def test_sweep_ground_with_updated_moments_is_the_plain_refit(pandaset, frame_in
                               _plain_refit_ground(points, iterations))
 
 
+def test_sweep_ground_heights_in_single_precision_decide_as_double_precision():
+    from tracker.sweep_ground import _SinglePrecisionHeights
+
+    rng = np.random.default_rng(3)
+    points = np.column_stack([rng.uniform(-80, 80, (20_000, 2)), rng.uniform(-3, 3, 20_000)]).astype(np.float32)
+    normal = np.array([0.013, -0.021, 1.0]) / np.linalg.norm([0.013, -0.021, 1.0])
+    exact = points.astype(np.float64) @ normal
+    threshold = float(np.median(exact))
+    shift = (threshold - exact[:50]) / normal[2]  # 50 points moved onto the threshold (to float32 rounding)
+    points[:50, 2] = (points[:50, 2].astype(np.float64) + shift).astype(np.float32)
+    exact = points.astype(np.float64) @ normal
+    assert np.abs(exact[:50] - threshold).max() < 1e-5   # within the float32 product's error of the threshold
+    naive = points @ normal.astype(np.float32) < np.float32(threshold)
+    assert (naive != (exact < threshold)).sum() > 5      # where single precision alone decides wrongly
+    for given in (points, points.astype(np.float64)):
+        heights = _SinglePrecisionHeights(given)
+        assert np.array_equal(heights.below(normal, threshold), given.astype(np.float64) @ normal < threshold)
+
+
+def test_sweep_ground_plane_normal_in_closed_form_is_eighs():
+    from tracker.sweep_ground import _upward_smallest_eigenvector
+
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        spread = rng.uniform(0.01, 30.0, 3) ** 2 * np.array([1.0, 1.0, 1e-4])   # a plane's scatter: thin in z
+        rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        a = rotation @ np.diag(spread) @ rotation.T
+        expected = np.linalg.eigh(a)[1][:, 0]
+        expected = expected if expected[2] >= 0 else -expected
+        np.testing.assert_allclose(_upward_smallest_eigenvector(a), expected, atol=1e-9)
+    for degenerate in (np.eye(3), np.zeros((3, 3)), np.diag([2.0, 1.0, 1.0])):   # eigh decides; unit, upward
+        v = _upward_smallest_eigenvector(degenerate)
+        assert abs(np.linalg.norm(v) - 1.0) < 1e-12 and v[2] >= 0
+        assert np.allclose(degenerate @ v, np.linalg.eigvalsh(degenerate)[0] * v)
+
+
 def test_finder_registers_the_start_points_in_a_fixed_wide_crop():
     rng = np.random.default_rng(2)
     box = Box(10.0, 5.0, 0.0, 0.4, 4.5, 1.8, 1.5)
