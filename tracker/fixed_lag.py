@@ -39,9 +39,12 @@ __all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_la
 # on the dev tracks, a context of 3 final frames instead of 5 lost 0.3-0.6 (docs/tracker.md). The window's points
 # lose the tracker's ground (OfflineParams.ground; with ground_scope="sweep" the online step's cached whole-sweep
 # mask, no plane fit per frame): against local planes, 3 seeds, lag 5 / 10 Acc +1.3 / +1.2 on the benchmark's
-# first 64, +1.6 / +1.1 on the dev tracks, -0.2 to +0.5 on synthetic worlds W1-W3 (docs/tracker.md).
+# first 64, +1.6 / +1.1 on the dev tracks, -0.2 to +0.5 on synthetic worlds W1-W3 (docs/tracker.md). A step's
+# cost check keeps the pairs the step was linearised on (trial_pairs="fixed": one correspondence search per step,
+# not two or more): ~13 % of a window solve; against re-matching, 3 seeds, lag 5 / 10 Acc -0.2 / -0.1 on the
+# benchmark's first 64, 0.0 / +0.1 on the dev tracks, 0.0 to +0.1 on W1-W3 (docs/tracker.md).
 LAG_PARAMS = OfflineParams(outer_iterations=1, gn_iterations=2, voxel=0.1, shape_points_per_frame=300,
-                           max_points=150)
+                           max_points=150, trial_pairs="fixed")
 
 
 class FixedLagSmoother:

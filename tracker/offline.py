@@ -83,10 +83,15 @@ class OfflineParams:
     folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
     first_frame_weight: float = 1.0     # data weight of frame 0 (its registration sets the gauge)
     gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
+    trial_pairs: str = "rematch"        # a Gauss-Newton step's cost check: "rematch" the trial's points to the
+                                        # shape; "fixed": keep the pairs the step was linearised on (one
+                                        # correspondence search per step instead of two or more)
 
     def __post_init__(self) -> None:
         if self.ground not in ("local", "tracker"):
             raise ValueError(f"OfflineParams.ground must be 'local' or 'tracker', not {self.ground!r}")
+        if self.trial_pairs not in ("rematch", "fixed"):
+            raise ValueError(f"OfflineParams.trial_pairs must be 'rematch' or 'fixed', not {self.trial_pairs!r}")
 
 
 @dataclass
@@ -429,11 +434,13 @@ class _Solver:
         self.slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()  # (frame, block entry) of _data
         self._matched = None
 
-    def _data(self, states: np.ndarray, with_jacobian: bool):
+    def _data(self, states: np.ndarray, with_jacobian: bool,
+              pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
         """Data cost and, optionally, per-frame 4x4 Gauss-Newton blocks J'WJ and gradients J'Wr.
 
         Residual r = A e with e = local - m and A = (1 - beta) n n' + beta I, i.e.
-        r = (1 - beta) n (n.e) + beta e.
+        r = (1 - beta) n (n.e) + beta e. ``pairs``: (distance, shape point, normal) of each data point to
+        use instead of matching the points at ``states`` to the shape.
         """
         p = self.params
         beta = p.tangent_weight
@@ -442,7 +449,9 @@ class _Solver:
         lx = c * d[:, 0] + si * d[:, 1]
         ly = -si * d[:, 0] + c * d[:, 1]
         local = np.stack([lx, ly, d[:, 2]], axis=1)
-        if self._matched is not None and np.array_equal(self._matched[0], states):
+        if pairs is not None:
+            dist, m, n = pairs
+        elif self._matched is not None and np.array_equal(self._matched[0], states):
             dist, m, n = self._matched[1]  # the accepted trial of the previous step: same states, same pairs
         else:
             dist, m, n = self._match(local)
@@ -487,11 +496,12 @@ class _Solver:
         grad = _second_difference_transpose(diff2 / self.sig**2, self.k) + dev / self.anchor**2
         return cost, grad
 
-    def cost(self, states: np.ndarray) -> float:
-        return self._data(states, False)[0] + self._prior(states)[0]
+    def cost(self, states: np.ndarray, pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> float:
+        return self._data(states, False, pairs)[0] + self._prior(states)[0]
 
     def step(self, states: np.ndarray) -> np.ndarray:
         cost_d, blocks, grads = self._data(states, True)
+        pairs = self._matched[1] if self.params.trial_pairs == "fixed" else None  # the pairs at ``states``
         cost_p, grad_p = self._prior(states)
         h = self.h_prior.copy()  # + the data's 4x4 block of each frame (upper band storage)
         for a in range(4):
@@ -511,7 +521,7 @@ class _Solver:
         step = delta.reshape(self.k, 4)
         for _ in range(4):
             trial = states + step
-            if self.cost(trial) <= before:
+            if self.cost(trial, pairs) <= before:
                 return trial
             step = step / 2.0
         return states

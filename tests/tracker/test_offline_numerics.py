@@ -61,11 +61,11 @@ def test_closed_form_normals_are_the_pca_normals():
     np.testing.assert_allclose(np.abs(np.sum(normals * vectors[:, :, 0], axis=1))[separated], 1.0, atol=1e-9)
 
 
-def _solver_on_a_synthetic_track(n_frames: int, fixed: int = 0) -> tuple[_Solver, np.ndarray, OfflineParams]:
+def _solver_on_a_synthetic_track(n_frames: int, fixed: int = 0, params: OfflineParams = OfflineParams()
+                                 ) -> tuple[_Solver, np.ndarray, OfflineParams]:
     """A refinement solver over a synthetic track's region points, its shapes built and data selected at the true
     states perturbed by a few cm / 1 degree (returned)."""
     seq = make_sequence(n_frames=n_frames, seed=2)
-    params = OfflineParams()
     points = [frame_region_points(seq.lidar_frame(k), b, get_preset("full"), params) for k, b in enumerate(seq.boxes)]
     truth = np.array([[b.x, b.y, b.z, b.heading] for b in seq.boxes])
     states = truth + np.random.default_rng(1).normal(0.0, [0.05, 0.05, 0.02, 0.02], truth.shape)
@@ -154,6 +154,30 @@ def test_lazy_normals_are_the_whole_shapes_normals():
     for shape, normals, has in zip(solver.shapes, solver.normals, solver.has_normal):
         assert 0 < has.sum() < len(shape)   # only the matched points'
         np.testing.assert_array_equal(normals[has], _normals(shape, params.normal_neighbours)[has])
+
+
+def test_fixed_trial_pairs_search_correspondences_once_per_step():
+    """``trial_pairs="fixed"`` (the fixed-lag window's): a Gauss-Newton step's cost check keeps the pairs it was
+    linearised on, so each step searches correspondences once (with "rematch", twice or more), and an accepted
+    step lowers the cost on those pairs."""
+    for trial_pairs in ("fixed", "rematch"):
+        solver, states, _ = _solver_on_a_synthetic_track(8, params=OfflineParams(trial_pairs=trial_pairs))
+        searches = []
+        match = solver._match
+        solver._match = lambda local: searches.append(len(local)) or match(local)
+        for step in range(3):
+            before = len(searches)
+            new = solver.step(states)
+            assert not np.array_equal(new, states)   # accepted
+            if trial_pairs == "fixed":
+                assert len(searches) == before + 1
+                pairs = solver._matched[1]
+                assert solver.cost(new, pairs) < solver.cost(states, pairs)
+            else:
+                assert len(searches) >= before + (2 if step == 0 else 1)
+            states = new
+        if trial_pairs == "rematch":
+            assert len(searches) >= 4
 
 
 def test_the_online_steps_crop_gives_the_regions_points():
