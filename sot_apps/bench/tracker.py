@@ -8,7 +8,10 @@ dev tracks on pandaset_002) with the streaming API; frames are read and cached b
 main figures are the CPU time of the tracking thread per ``Tracker.step`` (``time.thread_time``), which
 other processes on a shared machine do not inflate; the step's wall-clock time is shown
 too. Frame 1 (with the wide ICP search) is included in median/mean/p90 and also reported alone.
-``--lag N``: rows for the streaming fixed-lag tracker (a step's time includes its window solve).
+``--lag N``: rows for the streaming fixed-lag tracker (a step's time includes its window solve). The modes
+are timed interleaved, track by track (online, lag N, ... on one track, then the next), so that a drift of a
+shared machine's speed while the bench runs falls on every row alike; "x online" is the ratio of a fixed-lag
+row's median to the online row's, per object step and per lone-object frame (the sweep's ground added to both).
 ``--offline``: a row with the offline refinement's CPU time divided by the tracked frames (the ms per
 frame it adds to the online pass). The load average is printed with the table.
 """
@@ -118,7 +121,7 @@ def _time_offline(source, spec, config) -> tuple[np.ndarray, float]:
 
 def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | None,
                   lags: list[int] | None = None, offline: bool = False) -> dict[str, Any]:
-    from tracker import get_preset, pool_metrics, score_tracklet
+    from tracker import get_preset
 
     from ..evaluation.tracker import CachedSource, prepare_tracks, resolve_presets, select_moving_vehicle_tracks
     from ..io import open_sequence
@@ -133,30 +136,49 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
             source.lidar_frame(k)
     frames = sorted({k for spec in specs for k in spec.frames})
     rows = []
-    for preset, lag in [(p, n) for p in resolve_presets(presets) for n in [0, *(lags or [])]]:
+    modes = [0, *(lags or [])]
+    for preset in resolve_presets(presets):
         config = get_preset(preset)
         ground_ms = _time_sweep_ground(source, frames, config)
-        scores, wall, cpu, first = [], [], [], []
-        for spec in specs:
-            boxes, w, c = _time_track(source, spec, config, lag)
-            scores.append(score_tracklet(spec.track_id, boxes, np.array([b.to_array() for b in spec.boxes])))
-            wall.append(w)
-            cpu.append(c)
-            first.append(c[0])
-        pooled = pool_metrics(scores)
-        w_all, c_all = np.concatenate(wall), np.concatenate(cpu)
-        c_later = np.concatenate([c[1:] for c in cpu])
-        rows.append({"row": f"{preset}+lag{lag}" if lag else preset, "acc": pooled.acc, "rob": pooled.rob, "frames": int(c_all.size),
-                     "cpu_median_ms": float(np.median(c_all)), "cpu_mean_ms": float(c_all.mean()),
-                     "cpu_p90_ms": float(np.percentile(c_all, 90)), "cpu_frame1_mean_ms": float(np.mean(first)),
-                     "cpu_median_ms_k2": float(np.median(c_later)) if c_later.size else float("nan"),
-                     "wall_median_ms": float(np.median(w_all)), "wall_mean_ms": float(w_all.mean()),
-                     **({"sweep_ground_ms": float(np.median(ground_ms))} if ground_ms.size else {})})
-        if offline and lag == [0, *(lags or [])][-1]:  # after the preset's online and fixed-lag rows
+        timed: dict[int, list] = {lag: [] for lag in modes}
+        for spec in specs:  # the modes interleaved, track by track
+            for lag in modes:
+                timed[lag].append(_time_track(source, spec, config, lag))
+        mode_rows = [_timing_row(f"{preset}+lag{lag}" if lag else preset, specs, timed[lag], ground_ms)
+                     for lag in modes]
+        for row in mode_rows[1:]:
+            row.update(_times_online(row, mode_rows[0]))
+        rows += mode_rows
+        if offline:  # after the preset's online and fixed-lag rows
             rows.append(_offline_row(source, specs, config, preset))
     machine = machine_description() | {"pinning": pinned}
     return {"sequence": str(sequence.root), "tracks": [t.track_id for t in specs],
             "frames_per_preset": rows[0]["frames"] if rows else 0, "machine": machine, "rows": rows}
+
+
+def _timing_row(name: str, specs, timed: list, ground_ms: np.ndarray) -> dict[str, Any]:
+    """A row from each track's (boxes, wall ms, CPU ms) of one preset and mode."""
+    from tracker import pool_metrics, score_tracklet
+
+    pooled = pool_metrics([score_tracklet(spec.track_id, boxes, np.array([b.to_array() for b in spec.boxes]))
+                           for spec, (boxes, _, _) in zip(specs, timed)])
+    w_all, c_all = np.concatenate([w for _, w, _ in timed]), np.concatenate([c for _, _, c in timed])
+    c_later = np.concatenate([c[1:] for _, _, c in timed])
+    return {"row": name, "acc": pooled.acc, "rob": pooled.rob, "frames": int(c_all.size),
+            "cpu_median_ms": float(np.median(c_all)), "cpu_mean_ms": float(c_all.mean()),
+            "cpu_p90_ms": float(np.percentile(c_all, 90)), "cpu_frame1_mean_ms": float(np.mean([c[0] for _, _, c in timed])),
+            "cpu_median_ms_k2": float(np.median(c_later)) if c_later.size else float("nan"),
+            "wall_median_ms": float(np.median(w_all)), "wall_mean_ms": float(w_all.mean()),
+            **({"sweep_ground_ms": float(np.median(ground_ms))} if ground_ms.size else {})}
+
+
+def _times_online(row: dict[str, Any], online: dict[str, Any]) -> dict[str, float]:
+    """A fixed-lag row's median against the online row's (timed interleaved with it): per object step, and per
+    lone-object frame (the sweep's ground, when shared, added to both)."""
+    ground = row.get("sweep_ground_ms", 0.0)
+    step, base = row["cpu_median_ms"], online["cpu_median_ms"]
+    return {"times_online": step / base if base > 0 else float("nan"),
+            "times_online_lone_object": (step + ground) / (base + ground) if base + ground > 0 else float("nan")}
 
 
 def _time_sweep_ground(source, frames: list[int], config) -> np.ndarray:
@@ -198,10 +220,12 @@ def _offline_row(source, specs, config, preset: str) -> dict[str, Any]:
 
 def format_table(result: dict[str, Any]) -> str:
     header = ["preset", "median ms", "mean ms", "p90 ms", "frame-1 ms", "median k>=2", "wall median", "wall mean",
-              "added ms", "sweep ground ms", "Acc", "Rob"]
+              "added ms", "sweep ground ms", "x online", "x online (lone)", "Acc", "Rob"]
     timing = ("cpu_median_ms", "cpu_mean_ms", "cpu_p90_ms", "cpu_frame1_mean_ms", "cpu_median_ms_k2", "wall_median_ms",
               "wall_mean_ms", "offline_added_ms", "sweep_ground_ms")
+    ratios = ("times_online", "times_online_lone_object")
     body = [[r["row"], *(f"{r[key]:.1f}" if key in r else "-" for key in timing),
+             *(f"{r[key]:.2f}" if key in r else "-" for key in ratios),
              f"{100 * r['acc']:.1f}", f"{100 * r['rob']:.1f}"] for r in result["rows"]]
     widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(header)]
     fmt = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))  # noqa: E731
@@ -217,6 +241,8 @@ def format_table(result: dict[str, Any]) -> str:
               "'sweep ground ms' (ground_scope 'sweep': full, faithful) = median CPU time of the whole-sweep ground mask",
               "per sweep, timed once per sweep before the steps and shared by every object of the sweep (the step",
               "times exclude it); a lone tracked object pays median ms + sweep ground ms per frame.",
+              "'x online' (PRESET+lagN rows) = median ms / the online row's median ms (the modes are timed",
+              "interleaved, track by track); 'x online (lone)' = the same with the sweep's ground added to both.",
               "Acc/Rob in % (pooled, frames 1..n-1).",
               "", "machine:", format_machine(result["machine"])]
     return "\n".join(lines)

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from sot_apps.bench.tracker import _offline_row, _time_track, format_table
+from sot_apps.bench.tracker import _offline_row, _time_track, _times_online, format_table
 from tracker import get_preset, pool_metrics, score_tracklet
 
 from tracker_synthetic import make_sequence
@@ -63,3 +63,20 @@ def test_sweep_ground_is_timed_once_per_sweep_and_shown_apart():
     table = format_table({"sequence": "synthetic", "tracks": ["synthetic"], "frames_per_preset": 3,
                           "machine": {"cpu": "test", "load_average": "0"}, "rows": [row]})
     assert next(ln for ln in table.splitlines() if ln.startswith("full ")).split()[9] == f"{np.median(ms):.1f}"
+
+
+def test_fixed_lag_rows_give_their_ratio_to_the_online_row():
+    """'x online': a fixed-lag row's median over the online row's (timed interleaved), per object step and per
+    lone-object frame (the sweep's ground added to both); the table prints both."""
+    online = {"cpu_median_ms": 7.5, "sweep_ground_ms": 5.0}
+    lag = {"row": "full+lag10", "acc": 0.9, "rob": 0.9, "frames": 3, "cpu_median_ms": 15.0, "cpu_mean_ms": 15.0,
+           "cpu_p90_ms": 16.0, "cpu_frame1_mean_ms": 50.0, "cpu_median_ms_k2": 15.0, "wall_median_ms": 15.0,
+           "wall_mean_ms": 15.0, "sweep_ground_ms": 5.0}
+    lag.update(_times_online(lag, online))
+    assert lag["times_online"] == 2.0 and lag["times_online_lone_object"] == 20.0 / 12.5
+    assert _times_online({"cpu_median_ms": 3.0}, {"cpu_median_ms": 2.0}) == {"times_online": 1.5,
+                                                                              "times_online_lone_object": 1.5}
+    table = format_table({"sequence": "synthetic", "tracks": ["synthetic"], "frames_per_preset": 3,
+                          "machine": {"cpu": "test", "load_average": "0"}, "rows": [lag]})
+    cells = next(ln for ln in table.splitlines() if ln.startswith("full+lag10")).split()
+    assert cells[9:12] == ["5.0", "2.00", "1.60"] and "x online (lone)" in table
