@@ -4,7 +4,7 @@ numpy and scipy only; this package never imports ``sot_apps``.
 """
 
 from .association import NearestNeighbors, RansacResult, fit_rigid_2d, ransac_rigid_2d
-from .config import DETECTION_PRESETS, PRESETS, TrackerConfig, get_preset, preset_names
+from .config import DETECTION_PRESETS, PRESETS, TrackerConfig, get_preset, parse_overrides, preset_names
 from .det_baseline import ConstantVelocityFilter
 from .detection import Detections, FrameDetections, align_heading
 from .fixed_lag import FixedLagTracker, refine_fixed_lag, track_fixed_lag
@@ -25,7 +25,7 @@ from .sweep_ground import cached_sweep_ground_mask, sweep_ground_mask
 __all__ = [
     "Box", "State", "LidarFrame", "FrameSource", "points_in_box", "transform_points", "wrap_angle",
     "invert_transform", "make_transform", "rotation_z",
-    "TrackerConfig", "PRESETS", "get_preset", "preset_names",
+    "TrackerConfig", "PRESETS", "get_preset", "parse_overrides", "preset_names",
     "Tracker", "FrameEstimate", "TrackResult", "track", "deskew_points",
     "GroundParams", "ground_mask", "remove_ground", "fit_plane", "sweep_ground_mask", "cached_sweep_ground_mask",
     "NearestNeighbors", "RansacResult", "fit_rigid_2d", "ransac_rigid_2d",

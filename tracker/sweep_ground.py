@@ -9,9 +9,9 @@ ignores the lowest ``ignore_lowest`` share of the heights (PandaSet sweeps hold 
 metres below the road). The plane's normal points up (upstream takes the SVD's sign; on the PandaSet sweeps
 that is up: 16–20k of ~106k points are removed).
 
-Used by ``full``, ``full_v3`` and ``faithful`` (``TrackerConfig.ground_scope="sweep"``): by their online
-steps, their fixed-lag window and their offline refinement; ``full_v1`` and ``full_v2`` fit planes on the
-tracker's local region (:mod:`tracker.ground`).
+Used by ``full`` and ``faithful`` (``ground.remover="sweep"``): by their online steps, their fixed-lag window
+and their offline refinement; ``ground.remover="local"`` fits planes on the tracker's local region
+(:mod:`tracker.ground`).
 """
 
 from __future__ import annotations
