@@ -352,7 +352,7 @@ class TrackerConfig:
         text = path.read_text()
         if path.suffix.lower() in (".yaml", ".yml"):
             try:
-                import yaml
+                import yaml  # type: ignore[import-untyped]
             except ImportError as exc:  # an optional dependency
                 raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml)") from exc
             data = yaml.safe_load(text)
@@ -386,13 +386,13 @@ class TrackerConfig:
         return dataclasses.replace(self, **changes)
 
 
-def _field_type(cls: type, name: str) -> Any:
+def _field_type(cls: Any, name: str) -> Any:
     return typing.get_type_hints(cls)[name]
 
 
-def _resolve(path: str) -> tuple[type, str, Any]:
+def _resolve(path: str) -> tuple[Any, str, Any]:
     """(dataclass holding the field, field name, its type) of a dotted path; unknown: ValueError with a hint."""
-    cls: type = TrackerConfig
+    cls: Any = TrackerConfig
     parts = path.split(".")
     for i, part in enumerate(parts):
         names = [f.name for f in dataclasses.fields(cls)]
@@ -410,9 +410,8 @@ def _resolve(path: str) -> tuple[type, str, Any]:
     return cls, parts[-1], _field_type(cls, parts[-1])
 
 
-def _all_paths(cls: type = None, prefix: str = "") -> list[str]:  # type: ignore[assignment]
-    cls = cls or TrackerConfig
-    out = []
+def _all_paths(cls: Any = TrackerConfig, prefix: str = "") -> list[str]:
+    out: list[str] = []
     for f in dataclasses.fields(cls):
         kind = _field_type(cls, f.name)
         path = prefix + f.name
@@ -423,7 +422,7 @@ def _all_paths(cls: type = None, prefix: str = "") -> list[str]:  # type: ignore
 def _coerce(path: str, kind: Any, value: Any) -> Any:
     """``value`` as a ``kind`` field (bool, int, float, str); strings are parsed (true/false/1/0 for bools)."""
     if dataclasses.is_dataclass(kind):
-        if isinstance(value, kind):
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
             return dataclasses.asdict(value)
         if not isinstance(value, Mapping):
             raise ValueError(f"{path}: expected a section (mapping), got {value!r}")
@@ -463,7 +462,7 @@ def _coerce(path: str, kind: Any, value: Any) -> Any:
     return value.strip()
 
 
-def _build(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
+def _build(cls: Any, data: Mapping[str, Any], prefix: str) -> Any:
     if not isinstance(data, Mapping):
         raise ValueError(f"{prefix.rstrip('.') or 'config'}: expected a mapping, got {data!r}")
     names = {f.name for f in dataclasses.fields(cls)}

@@ -161,7 +161,7 @@ class Tracker:
         if self._waiting:
             return self._reacquire(frame, t0)
         self.steps += 1
-        first, flags = self.steps == 1, []
+        first, flags = self.steps == 1, list[str]()
         prior = self.motion.predict(self.box, self._last_dt, self._coasting)
         prediction = box_moved(self.box, prior)  # the motion model's prediction S^_k
         det_target = self._detection_for(prediction, detections, flags)

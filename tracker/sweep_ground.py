@@ -17,6 +17,7 @@ and their offline refinement; ``ground.remover="local"`` fits planes on the trac
 from __future__ import annotations
 
 import math
+from functools import partial
 import weakref
 
 import numpy as np
@@ -133,16 +134,22 @@ def _upward_smallest_eigenvector(a: np.ndarray) -> np.ndarray:
     return vector if vector[2] >= 0 else -vector
 
 
-def cached_sweep_ground_mask(points: np.ndarray, *params: float) -> np.ndarray:
+def _forget(key: int, _ref: object) -> None:
+    _CACHE.pop(key, None)
+
+
+def cached_sweep_ground_mask(points: np.ndarray, lpr_count: int, seed_threshold: float, distance_threshold: float,
+                             iterations: int) -> np.ndarray:
     """:func:`sweep_ground_mask` of ``points`` remembered while the array lives (several trackers on the
     same sweep — an evaluation, a multi-object run — compute it once). Treat the array as read-only."""
+    params = (lpr_count, seed_threshold, distance_threshold, iterations)
     key = id(points)
     entry = _CACHE.get(key)
     if entry is not None and entry[0]() is points and entry[1] == params:
         return entry[2]
     mask = sweep_ground_mask(points, *params)
     try:
-        ref = weakref.ref(points, lambda _, k=key: _CACHE.pop(k, None))
+        ref = weakref.ref(points, partial(_forget, key))
     except TypeError:  # not weak-referenceable (a view of a foreign buffer): no caching
         return mask
     _CACHE[key] = (ref, params, mask)

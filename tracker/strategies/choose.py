@@ -3,17 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 from ..config import TrackerConfig
 from ..registration import Registration
-from .association import CropAssociation, GlobalAssociation
+from .association import Association, CropAssociation, GlobalAssociation
 from .first_frame import FinderSearch, FirstFrameSearch, HypothesesSearch, MovingSearch
 from .ground import GroundRemover, RoadPoints, choose_ground, choose_road
 from .height import HeightModel, choose_height
-from .inliers import AllPairs, FixedRansac, UpstreamRansac
-from .loss import (IterationReference, KeepPrior, MotionTermsOnly, PriorReference, SymmetricConsistency,
-                   XOnlyConsistency)
-from .metric import PlaneMetric, PointMetric
+from .inliers import AllPairs, FixedRansac, ShapeInliers, UpstreamRansac
+from .loss import (DataFreeFrames, IterationReference, KeepPrior, MotionTermsOnly, PriorReference,
+                   SymmetricConsistency, XOnlyConsistency)
+from .metric import Metric, PlaneMetric, PointMetric
 
 __all__ = ["Strategies", "choose_strategies"]
 
@@ -29,16 +30,25 @@ class Strategies:
 
 def choose_strategies(config: TrackerConfig) -> Strategies:
     c = config
-    association = {"global": GlobalAssociation, "crop": CropAssociation}[c.search.association](c.search.max_points)
+    associations: dict[str, Callable[[int], Association]] = {"global": GlobalAssociation, "crop": CropAssociation}
+    association = associations[c.search.association](c.search.max_points)
     ransac = c.shape.ransac
-    inliers = {"none": AllPairs(), "fixed": FixedRansac(ransac), "upstream": UpstreamRansac(ransac)}[ransac.mode]
-    metric = (PlaneMetric(c.registration.normal_neighbors, c.registration.normal_radius)
+    choices: dict[str, ShapeInliers] = {"none": AllPairs(), "fixed": FixedRansac(ransac),
+                                        "upstream": UpstreamRansac(ransac)}
+    inliers = choices[ransac.mode]
+    metric: Metric = (PlaneMetric(c.registration.normal_neighbors, c.registration.normal_radius)
               if c.registration.metric == "plane" else PointMetric())
-    reference = {"prior": PriorReference, "iteration": IterationReference}[c.motion.prior_reference]()
-    consistency = {"symmetric": SymmetricConsistency,
-                   "x_only": XOnlyConsistency}[c.motion.consistency](c.motion.consistency_weight)
-    data_free = {"prior": KeepPrior, "motion_terms": MotionTermsOnly}[c.registration.data_free_frames]()
-    first = {"moving": MovingSearch, "hypotheses": HypothesesSearch, "finder": FinderSearch}[c.first_frame.search]
+    references: dict[str, type[PriorReference | IterationReference]] = {"prior": PriorReference,
+                                                                         "iteration": IterationReference}
+    consistencies: dict[str, type[SymmetricConsistency | XOnlyConsistency]] = {"symmetric": SymmetricConsistency,
+                                                                                "x_only": XOnlyConsistency}
+    data_frees: dict[str, type[DataFreeFrames]] = {"prior": KeepPrior, "motion_terms": MotionTermsOnly}
+    firsts: dict[str, Callable[[TrackerConfig], FirstFrameSearch]] = {"moving": MovingSearch, "hypotheses": HypothesesSearch,
+                                                 "finder": FinderSearch}
+    reference = references[c.motion.prior_reference]()
+    consistency = consistencies[c.motion.consistency](c.motion.consistency_weight)
+    data_free = data_frees[c.registration.data_free_frames]()
+    first = firsts[c.first_frame.search]
     return Strategies(ground=choose_ground(c), road=choose_road(c),
                       registration=Registration(c, association, inliers, metric, reference, consistency, data_free),
                       first_frame=first(c), height=choose_height(c.height))
