@@ -293,9 +293,18 @@ class OfflineParams:
         _choice("refinement.*.gauge", self.gauge, ("regauge", "fix_first"))
 
 
-# the fixed-lag window's solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times,
-# warm-started); the window's shapes from at most 300 points per frame in 10 cm voxels; at most 150 data points
-# per frame; a step's cost check keeps the pairs it was linearised on (docs/tracker.md, "Fixed-lag refinement")
+# the fixed-lag window's solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started);
+# the window's shapes from at most 300 points per frame in 10 cm voxels (the offline problem's cost is in its
+# shapes); at most 150 data points per frame (offline: 250). Measured with 3 seeds, 150 changes lag 5 / 10 Acc/Rob
+# by +0.2/+0.2 and 0.0/+0.3 on the 9 dev tracks, by -0.5/-0.3 and +0.2/+0.2 on a synthetic world (seed spread
+# there 0.5-0.8), and saves ~20 % of a window solve; one Gauss-Newton step per window instead of two lost 0.5-0.6
+# Acc on the dev tracks, a context of 3 final frames instead of 5 lost 0.3-0.6. The window's points lose the
+# tracker's ground (``ground="tracker"``; with ground.remover "sweep" the online step's cached whole-sweep mask, no
+# plane fit per frame): against local planes, 3 seeds, lag 5 / 10 Acc +1.3 / +1.2 on the benchmark's first 64,
+# +1.6 / +1.1 on the dev tracks, -0.2 to +0.5 on synthetic worlds W1-W3. A step's cost check keeps the pairs the
+# step was linearised on (trial_pairs="fixed": one correspondence search per step, not two or more): ~13 % of a
+# window solve; against re-matching, 3 seeds, lag 5 / 10 Acc -0.2 / -0.1 on the benchmark's first 64, 0.0 / +0.1
+# on the dev tracks, 0.0 to +0.1 on W1-W3.
 LAG_PARAMS = OfflineParams(outer_iterations=1, gn_iterations=2, voxel=0.1, shape_points_per_frame=300,
                            max_points=150, trial_pairs="fixed")
 
@@ -435,28 +444,17 @@ def _coerce(path: str, kind: Any, value: Any) -> Any:
         if isinstance(value, int) and value in (0, 1):
             return bool(value)
         raise ValueError(f"{path}: expected true or false, got {value!r}")
-    if kind is int:
-        if isinstance(value, bool):
-            raise ValueError(f"{path}: expected an integer, got {value!r}")
-        if isinstance(value, int):
-            return value
-        if isinstance(value, float) and value.is_integer():
-            return int(value)
+    if kind in (int, float):
+        name = "an integer" if kind is int else "a number"
+        exact = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if exact and (kind is float or float(value).is_integer()):
+            return kind(value)
         if isinstance(value, str):
             try:
-                return int(value.strip())
+                return kind(value.strip())
             except ValueError:
                 pass
-        raise ValueError(f"{path}: expected an integer, got {value!r}")
-    if kind is float:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-        if isinstance(value, str):
-            try:
-                return float(value.strip())
-            except ValueError:
-                pass
-        raise ValueError(f"{path}: expected a number, got {value!r}")
+        raise ValueError(f"{path}: expected {name}, got {value!r}")
     if not isinstance(value, str):
         raise ValueError(f"{path}: expected a string, got {value!r}")
     return value.strip()
