@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import json
 import typing
 from dataclasses import dataclass, field
@@ -395,8 +396,13 @@ class TrackerConfig:
         return dataclasses.replace(self, **changes)
 
 
+@functools.lru_cache(maxsize=None)
+def _field_types(cls: Any) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
 def _field_type(cls: Any, name: str) -> Any:
-    return typing.get_type_hints(cls)[name]
+    return _field_types(cls)[name]
 
 
 def _resolve(path: str) -> tuple[Any, str, Any]:
