@@ -364,7 +364,7 @@ class TrackerConfig:
             try:
                 import yaml  # type: ignore[import-untyped]
             except ImportError as exc:  # an optional dependency
-                raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml)") from exc
+                raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml, or sot-apps[yaml])") from exc
             data = yaml.safe_load(text)
         else:
             data = json.loads(text)

@@ -6,6 +6,7 @@ import dataclasses
 import json
 
 import pytest
+import yaml
 
 from tracker.config import PRESETS, MotionConfig, TrackerConfig, get_preset, parse_overrides
 from tracker.motion_filter import AverageMotion, CTRVMotion
@@ -34,7 +35,6 @@ def test_at_most_15_top_level_fields_each_section_frozen():
 
 @pytest.mark.parametrize("name", list(PRESETS))
 def test_every_preset_round_trips_through_json_and_yaml(tmp_path, name):
-    yaml = pytest.importorskip("yaml")
     config = get_preset(name, seed=3)
     (tmp_path / "c.json").write_text(json.dumps(config.to_dict()))
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(config.to_dict()))
