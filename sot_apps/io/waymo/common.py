@@ -63,14 +63,15 @@ def transform_4x4(values, path: Path, what: str) -> np.ndarray:
 def box_annotation(track_id: str, type_code: int, center: tuple[float, float, float], length: float, width: float,
                    height: float, heading: float, world_from_ego: np.ndarray, path: Path, where: str,
                    num_points: int | None = None) -> BoxAnnotation:
-    """A Waymo box (vehicle frame of the frame pose; length along the heading) as a WORLD-frame annotation."""
+    """A Waymo box (vehicle frame of the frame pose; length along the heading; level in the vehicle frame) as a
+    WORLD-frame annotation: its roll and pitch in the world are those of the vehicle pose."""
     values = (*center, length, width, height, heading)
     if not all(math.isfinite(v) for v in values):
         raise InputError(path, f"{where}: box {track_id!r} has a non-finite value")
     if min(length, width, height) <= 0:
         raise InputError(path, f"{where}: box {track_id!r} has a non-positive size {length}x{width}x{height}")
     box = Box(float(center[0]), float(center[1]), float(center[2]), float(heading), float(length), float(width),
-              float(height)).transformed(world_from_ego)
+              float(height)).transformed(world_from_ego, keep_tilt=True)
     return BoxAnnotation(track_id=track_id, label=LABEL_TYPES.get(int(type_code), "Unknown"), box=box,
                          num_points=None if num_points is None else int(num_points))
 
