@@ -26,7 +26,9 @@ Conversion to the project's conventions:
   the centre is (x, y - h/2, z); ``velo_from_rect = inv(R0_rect @ Tr_velo_to_cam)``; the heading is the
   yaw, in the velodyne frame, of the length direction (cos ry, 0, -sin ry); length, width, height =
   l, w, h; the track id column is the track id (object layout: ``NNNNNN-i``, no identity over
-  frames); DontCare rows are dropped;
+  frames); DontCare rows are dropped, but the frames they name are frames of the sequence (the
+  devkit's sequence length is the label file's last frame + 1: 447 for 0001, whose frames 426-446 hold
+  only DontCare rows; its seqmap says ``0001 empty 000000 000447``);
 - View-of-Delft (object layout with ``pose/``): its rotation is about the lidar's -z axis, so the
   heading is ``-rotation - pi/2`` and the centre is ``inv(Tr_velo_to_cam) @ (x, y, z) + (0, 0, h/2)``;
   ``world_from_ego = odomToCamera @ Tr_velo_to_cam`` (the odometry frame; despite its name the
@@ -167,6 +169,17 @@ def parse_label_line(line: str, path: Path, n: int, tracking: bool) -> dict | No
             "x": x, "y": y, "z": z, "ry": ry}
 
 
+def _label_frame(line: str, path: Path, n: int) -> int:
+    """The frame number of a tracking label line (any type, DontCare included)."""
+    try:
+        frame = int(line.split()[0])
+    except ValueError as exc:
+        raise InputError(path, f"line {n}: frame number is not an integer ({exc})") from exc
+    if frame < 0:
+        raise InputError(path, f"line {n}: negative frame number {frame}")
+    return frame
+
+
 def label_box_in_velo(label: dict, calib: KittiCalib, vod: bool = False) -> Box:
     """The label's box in the velodyne (= ego) frame (conventions in the module docstring)."""
     velo_from_rect = invert_transform(calib.rect_from_velo) if not vod else invert_transform(
@@ -288,15 +301,17 @@ def read_kitti_tracking(path: str | Path) -> Sequence:
     sweeps = _numbered(root / "velodyne" / name, (".bin",))
     labels_path = root / "label_02" / f"{name}.txt"
     labels = []
+    last_labelled = -1  # the last frame of the label file, DontCare rows included (they are frames too)
     if labels_path.is_file():
         for n, line in enumerate(read_text_lines(labels_path), start=1):
             if line.strip():
                 label = parse_label_line(line, labels_path, n, tracking=True)
                 if label is not None:
                     labels.append(label)
+                last_labelled = max(last_labelled, _label_frame(line, labels_path, n))
     oxts_path = root / "oxts" / f"{name}.txt"
     oxts = _read_oxts(oxts_path) if oxts_path.is_file() else None
-    last = max([*sweeps, *(lab["frame"] for lab in labels), -1 if oxts is None else len(oxts) - 1])
+    last = max([*sweeps, last_labelled, -1 if oxts is None else len(oxts) - 1])
     if last < 0:
         raise InputError(root, f"sequence {name}: no velodyne files, labels or oxts")
     count = last + 1
