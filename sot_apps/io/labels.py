@@ -93,6 +93,8 @@ def kitti_camera(seq: Sequence) -> Camera | None:
             return seq.cameras[name]
     best, best_dot = None, -np.inf
     for cam in seq.cameras.values():
+        if cam.ego_from_camera is None and not cam.frames:
+            continue  # no pose: cannot be used
         axis = _ego_from_camera(seq, cam)[:3, 2]
         if axis[0] > best_dot:
             best, best_dot = cam, axis[0]
