@@ -7,6 +7,7 @@ source is one, else 0000); AV2: ``OUT/annotations.feather`` and, with scores, ``
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -34,12 +35,13 @@ def label_paths(seq: Sequence, fmt: str, out_dir: str | Path, submission: bool =
     return [out_dir / "annotations.feather"] + ([out_dir / "submission.feather"] if submission else [])
 
 
-def _refuse_overwriting_input(seq: Sequence, targets: list[Path]) -> None:
-    root = Path(seq.root).resolve()
-    for target in targets:
-        resolved = target.resolve()
-        if resolved.exists() and (resolved == root or root in resolved.parents):
-            raise InputError(target, f"would overwrite a file of the input sequence ({root}); choose another --out")
+def _refuse_overwriting_input(seq: Sequence, out_dir: Path) -> None:
+    """The label files go where a dataset keeps its own (``LOG/annotations.feather``, ``training/label_02``):
+    writing into the input's own directory would replace them."""
+    root = Path(seq.root)
+    if out_dir.exists() and root.exists() and os.path.samefile(out_dir, root):
+        raise InputError(out_dir, f"is the input sequence's directory ({root}): its label files would be "
+                                  "overwritten; choose another --out")
 
 
 def _report(fmt: str, written: LabelsWritten) -> str:
@@ -64,7 +66,7 @@ def export_labels(seq: Sequence, fmt: str, out_dir: str | Path, tracks: list[Lab
             raise InputError(seq.root, "the sequence has no annotations to write as labels")
         tracks = annotation_tracks(seq)
     targets = label_paths(seq, fmt, out_dir, submission)
-    _refuse_overwriting_input(seq, targets)
+    _refuse_overwriting_input(seq, Path(out_dir))
     if fmt == "kitti":
         if kitti_camera(seq) is None:
             raise InputError(seq.root, "KITTI labels need a camera for their 2D boxes and the sequence has none")

@@ -12,6 +12,7 @@ One writer per format, shared by ``sot-apps convert --labels`` (a sequence's ann
   whose projection misses the image is not written (KITTI labels only what the camera sees). ``truncated``
   (0/1/2, KITTI tracking's integer levels) is 0 when the projection lies inside the image, 2 when more than
   half its area is outside, else 1; ``occluded`` is 0 (unknown to us). With scores, an 18th column.
+  Track ids that are all integers (a KITTI source) are kept; otherwise tracks are numbered 0, 1, ... in order.
 - :func:`write_av2_annotations`: Argoverse 2 sensor ``annotations.feather`` (timestamp_ns int64,
   track_uuid, category, length_m .. tz_m float64, num_interior_pts int64), boxes in the EGO frame of each
   frame with their full rotation, AV2 category names (:mod:`.categories`), ``num_interior_pts`` counted
@@ -164,7 +165,9 @@ def _kitti_rows(seq: Sequence, tracks: list[LabelTrack], cam: Camera, camera_fro
     rows, unmapped, outside = [], {}, 0
     K = np.asarray(cam.K, dtype=np.float64)
     camera_from_world = [camera_from_ego @ invert_transform(f.world_from_ego) for f in seq.frames]
-    for number, track in enumerate(tracks):
+    numeric = all(t.track_id.isdigit() for t in tracks)   # KITTI's own ids are kept, others are numbered
+    for n, track in enumerate(tracks):
+        number = int(track.track_id) if numeric else n
         kind = kitti_type(track.label)
         if kind is None:
             unmapped[track.label] = unmapped.get(track.label, 0) + len(track.boxes)
