@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from fractions import Fraction
 import os
 from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
@@ -36,8 +37,9 @@ def micros_to_ns(micros: int) -> int:
 
 
 def seconds_to_ns(seconds: float) -> int:
-    """Seconds since the epoch (double) to integer ns, rounded to the microsecond a double resolves."""
-    return int(round(float(seconds) * 1e6)) * 1000
+    """Seconds since the epoch (a double, as Waymo stores image times) to the nearest integer ns of its exact
+    value (``seconds * 1e9`` in floating point would be off by up to ~128 ns at today's epoch times)."""
+    return round(Fraction(float(seconds)) * 1_000_000_000)
 
 
 def transform_4x4(values, path: Path, what: str) -> np.ndarray:
