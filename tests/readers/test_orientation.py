@@ -113,3 +113,27 @@ def test_tilted_points_in_box_is_exact_on_an_analytic_case():
     target_from_source = make_transform(rotation_zyx(-0.5, 0.1, 0.2), [3.0, 1.0, -2.0])
     moved = box.transformed(target_from_source, keep_tilt=True)
     np.testing.assert_allclose(moved.corners(), transform_points(target_from_source, box.corners()), atol=1e-12)
+
+
+def test_trajectories_place_tilted_boxes_as_given(readers_root):
+    """Flow places objects with objects.trajectory: its poses and object-frame points follow the boxes' roll and
+    pitch (AV2 boxes on a tilted ego); a level trajectory is unchanged."""
+    from sot_apps.objects.shapes import ShapeParams, TrackBoxes, object_points_by_frame
+    from sot_apps.objects.trajectory import Trajectory
+
+    seq = open_sequence(AV2_LOG_A)
+    k = next(f.index for f in seq.frames if f.has_sweep)
+    tracks = {a.track_id: TrackBoxes((k,), (a.box,)) for a in seq.annotations[k] if a.num_points > 50}
+    points, trajectories = object_points_by_frame(seq, tracks, ShapeParams(capture_time=False, ground_clearance=None))
+    assert tracks and points
+    for tid, trajectory in trajectories.items():
+        box = tracks[tid].boxes[0]
+        np.testing.assert_allclose(trajectory.world_from_object_at(seq.frames[k].timestamp_ns), box.world_from_object(),
+                                   atol=1e-12)
+        corners = box.corners()
+        local = trajectory.object_from_world_points(corners, np.full(8, seq.frames[k].timestamp_ns))
+        np.testing.assert_allclose(np.abs(local), np.tile(box.size / 2, (8, 1)), atol=1e-9)
+    level = Trajectory.from_samples([0, 10], [[0, 0, 0, 0.1], [1, 0, 0, 0.2]], tilts=[(0, 0), (0, 0)])
+    assert level.tilts is None
+    np.testing.assert_array_equal(level.world_from_object_at(5), Trajectory.from_samples(
+        [0, 10], [[0, 0, 0, 0.1], [1, 0, 0, 0.2]]).world_from_object_at(5))
