@@ -23,8 +23,10 @@ Conversion to the project's conventions:
   Without oxts every ``world_from_ego`` is the identity (the ego motion is unknown);
 - frame times: frame number x 100 ms (the tracking and object releases give no timestamps);
 - labels (rectified camera-0 frame, x right, y down, z forward): (x, y, z) is the bottom centre, so
-  the centre is (x, y - h/2, z); ``velo_from_rect = inv(R0_rect @ Tr_velo_to_cam)``; the heading is the
-  yaw, in the velodyne frame, of the length direction (cos ry, 0, -sin ry); length, width, height =
+  the centre is (x, y - h/2, z); ``velo_from_rect = inv(R0_rect @ Tr_velo_to_cam)``; the box is level in
+  the rectified camera frame (up = -y), so in the velodyne frame it keeps that frame's small tilt: the
+  heading is the yaw of the length direction (cos ry, 0, -sin ry), roll and pitch the rest (boxes go to
+  the world with the full ego pose, as the other readers'); length, width, height =
   l, w, h; the track id column is the track id (object layout: ``NNNNNN-i``, no identity over
   frames); DontCare rows are dropped, but the frames they name are frames of the sequence (the
   devkit's sequence length is the label file's last frame + 1: 447 for 0001, whose frames 426-446 hold
@@ -46,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle
+from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle, zyx_angles
 
 from ..errors import InputError
 from .convert_util import read_float32_records, read_text_lines, split_selector
@@ -188,11 +190,14 @@ def label_box_in_velo(label: dict, calib: KittiCalib, vod: bool = False) -> Box:
     if vod:
         centre = transform_points(velo_from_rect, np.array([[label["x"], label["y"], label["z"]]]))[0] + [0.0, 0.0, h / 2]
         heading = -label["ry"] - math.pi / 2
-    else:
-        centre = transform_points(velo_from_rect, np.array([[label["x"], label["y"] - h / 2, label["z"]]]))[0]
-        direction = velo_from_rect[:3, :3] @ np.array([math.cos(label["ry"]), 0.0, -math.sin(label["ry"])])
-        heading = math.atan2(direction[1], direction[0])
-    return Box(float(centre[0]), float(centre[1]), float(centre[2]), float(wrap_angle(heading)), l, w, h)
+        return Box(float(centre[0]), float(centre[1]), float(centre[2]), float(wrap_angle(heading)), l, w, h)
+    centre = transform_points(velo_from_rect, np.array([[label["x"], label["y"] - h / 2, label["z"]]]))[0]
+    # object axes in the rectified camera frame: length (cos ry, 0, -sin ry), left (sin ry, 0, cos ry), up -y
+    c, s = math.cos(label["ry"]), math.sin(label["ry"])
+    rect_from_object = np.array([[c, s, 0.0], [0.0, 0.0, -1.0], [-s, c, 0.0]])
+    u, _, vt = np.linalg.svd(velo_from_rect[:3, :3] @ rect_from_object)   # R0_rect @ Tr is rigid only to ~1e-6
+    heading, pitch, roll = zyx_angles(u @ vt)
+    return Box(float(centre[0]), float(centre[1]), float(centre[2]), heading, l, w, h, roll=roll, pitch=pitch)
 
 
 def oxts_to_world_from_imu(oxts: np.ndarray) -> np.ndarray:
@@ -331,7 +336,7 @@ def read_kitti_tracking(path: str | Path) -> Sequence:
     if labels_path.is_file():
         annotations = [[] for _ in range(count)]
         for lab in labels:
-            box = label_box_in_velo(lab, calib).transformed(world_from_ego[lab["frame"]])
+            box = label_box_in_velo(lab, calib).transformed(world_from_ego[lab["frame"]], keep_tilt=True)
             annotations[lab["frame"]].append(BoxAnnotation(track_id=str(lab["track_id"]), label=lab["type"], box=box))
     images = _numbered(root / "image_02" / name, (".png", ".jpg"))
     cameras = {"image_02": _camera(calib, "image_02", images, list(range(count)), times, world_from_ego)}
@@ -396,7 +401,7 @@ def read_kitti_object(path: str | Path) -> Sequence:
             for n, line in enumerate(lines, start=1):
                 label = parse_label_line(line, label_path, n, tracking=False) if line.strip() else None
                 if label is not None:
-                    box = label_box_in_velo(label, calibs[k], vod=vod).transformed(world_from_ego[k])
+                    box = label_box_in_velo(label, calibs[k], vod=vod).transformed(world_from_ego[k], keep_tilt=True)
                     boxes.append(BoxAnnotation(track_id=f"{sweeps[f].stem}-{len(boxes)}", label=label["type"], box=box))
             annotations.append(boxes)
     images = _numbered(root / "image_2", (".png", ".jpg"))

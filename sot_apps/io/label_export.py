@@ -22,9 +22,10 @@ LABEL_FORMATS = ("kitti", "av2")
 
 
 def kitti_sequence_number(seq: Sequence) -> int:
-    """A KITTI tracking source keeps its number (``kitti_tracking_0001`` -> 1); any other sequence is 0."""
+    """A KITTI tracking sequence keeps its number (id ``kitti_tracking_0001`` -> 1, also after conversion to the
+    canonical format); any other sequence is 0."""
     match = re.fullmatch(r"kitti_tracking_(\d+)", seq.id)
-    return int(match.group(1)) if seq.format == "kitti_tracking" and match else 0
+    return int(match.group(1)) if match else 0
 
 
 def label_paths(seq: Sequence, fmt: str, out_dir: str | Path, submission: bool = False) -> list[Path]:

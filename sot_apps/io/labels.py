@@ -8,7 +8,7 @@ One writer per format, shared by ``sot-apps convert --labels`` (a sequence's ann
   ego +x): ``P0..P3`` = [K | 0], ``R0_rect`` = identity, ``Tr_velo_to_cam`` = camera_from_lidar,
   ``Tr_imu_to_velo`` = lidar_from_ego. Each box becomes KITTI's (bottom centre, h w l, rotation_y about the
   camera's y); its 2D box is the 8 corners of that 3D box projected with P2 (the part in front of the
-  camera, z >= 0.1 m), bounded and clipped to the image [0, width] x [0, height] as KITTI's are; a box
+  camera, z >= 0.1 m), bounded and clipped to the image [0, width - 1] x [0, height - 1] as KITTI's are; a box
   whose projection misses the image is not written (KITTI labels only what the camera sees). ``truncated``
   (0/1/2, KITTI tracking's integer levels) is 0 when the projection lies inside the image, 2 when more than
   half its area is outside, else 1; ``occluded`` is 0 (unknown to us). With scores, an 18th column.
@@ -145,8 +145,9 @@ def image_box(corners_camera: np.ndarray, K: np.ndarray, width: int, height: int
     uvw = points @ np.asarray(K, dtype=np.float64).T
     uv = uvw[:, :2] / uvw[:, 2:3]
     raw = np.array([uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
-    clipped = np.array([np.clip(raw[0], 0, width), np.clip(raw[1], 0, height),
-                        np.clip(raw[2], 0, width), np.clip(raw[3], 0, height)])
+    right, bottom = width - 1, height - 1   # KITTI's boxes end at the last pixel (1241, 374 in 1242 x 375)
+    clipped = np.array([np.clip(raw[0], 0, right), np.clip(raw[1], 0, bottom),
+                        np.clip(raw[2], 0, right), np.clip(raw[3], 0, bottom)])
     if clipped[2] <= clipped[0] or clipped[3] <= clipped[1]:
         return None
     return clipped, raw

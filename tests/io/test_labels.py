@@ -67,10 +67,12 @@ def test_kitti_labels_round_trip_the_original(kitti_0000):
     assert len(ours) == len(original) == 711
     assert [r[:3] for r in ours] == [r[:3] for r in original]
     box2d = np.array([[float(v) for v in r[6:10]] for r in ours])
-    assert (box2d >= 0).all() and (box2d[:, 2] <= 1242).all() and (box2d[:, 3] <= 375).all()
+    assert (box2d >= 0).all() and (box2d[:, 2] <= 1241).all() and (box2d[:, 3] <= 374).all()
     assert (box2d[:, 2] > box2d[:, 0]).all() and (box2d[:, 3] > box2d[:, 1]).all()
     iou = _iou(box2d, np.array([[float(v) for v in r[6:10]] for r in original]))
     assert np.median(iou) > 0.95 and (iou > 0.5).mean() > 0.99
+    # rotation_y as KITTI's: the reader keeps the box's tilt in the velodyne frame, so it comes back exactly
+    np.testing.assert_allclose([float(r[16]) for r in ours], [float(r[16]) for r in original], atol=2e-6)
     hwl = np.array([[float(v) for v in r[10:13]] for r in ours])
     np.testing.assert_allclose(hwl, np.array([[float(v) for v in r[10:13]] for r in original]), atol=1e-5)
     # locations: camera 2's frame is camera 0's shifted along x by -P2[0, 3] / P2[0, 0] (about 6 cm)
@@ -82,7 +84,7 @@ def test_kitti_labels_round_trip_the_original(kitti_0000):
 
 def test_kitti_2d_boxes_are_the_projected_3d_corners(kitti_0000):
     """Each 2D box = the devkit's 8 corners of the written 3D box projected with the written P2, clipped to the
-    image (1242 x 375)."""
+    image (1242 x 375: to [0, 1241] x [0, 374], as KITTI's own boxes)."""
     p2 = _calib(kitti_0000 / "calib" / "0000.txt")["P2"].reshape(3, 4)
     near = 0
     for row in _label_rows(kitti_0000 / "label_02" / "0000.txt"):
@@ -94,9 +96,9 @@ def test_kitti_2d_boxes_are_the_projected_3d_corners(kitti_0000):
             continue
         uvw = p2 @ np.vstack([corners, np.ones(8)])
         u, v = uvw[0] / uvw[2], uvw[1] / uvw[2]
-        expected = [np.clip(u.min(), 0, 1242), np.clip(v.min(), 0, 375), np.clip(u.max(), 0, 1242), np.clip(v.max(), 0, 375)]
+        expected = [np.clip(u.min(), 0, 1241), np.clip(v.min(), 0, 374), np.clip(u.max(), 0, 1241), np.clip(v.max(), 0, 374)]
         np.testing.assert_allclose([float(c) for c in row[6:10]], expected, atol=1e-3)  # label values have 6 decimals
-        truncated = u.min() < 0 or v.min() < 0 or u.max() > 1242 or v.max() > 375
+        truncated = u.min() < 0 or v.min() < 0 or u.max() > 1241 or v.max() > 374
         assert (row[3] != "0") == truncated
     assert near <= 10   # 8 of the 711 boxes of 0000 reach the camera plane
 
@@ -111,7 +113,7 @@ def test_image_box_cuts_at_the_near_plane_and_drops_unseen_boxes():
     straddling = _devkit_corners(2.0, 2.0, 2.0, 0.0, 1.0, 0.0, 0.0).T
     clipped, raw = image_box(straddling, K, 100, 80)
     np.testing.assert_allclose(raw, [50 - 100 / 0.1, 40 - 100 / 0.1, 50 + 100 / 0.1, 40 + 100 / 0.1])
-    np.testing.assert_allclose(clipped, [0, 0, 100, 80])
+    np.testing.assert_allclose(clipped, [0, 0, 99, 79])
     behind = _devkit_corners(2.0, 2.0, 4.0, 0.0, 1.0, -10.0, 0.0).T
     assert image_box(behind, K, 100, 80) is None
     beside = _devkit_corners(2.0, 2.0, 4.0, 40.0, 1.0, 10.0, 0.0).T
