@@ -9,7 +9,8 @@ from .det_baseline import ConstantVelocityFilter
 from .detection import Detections, FrameDetections, align_heading
 from .fixed_lag import FixedLagTracker, refine_fixed_lag, track_fixed_lag
 from .frames import FrameSource, LidarFrame
-from .geometry import Box, State, invert_transform, make_transform, points_in_box, rotation_z, transform_points, wrap_angle
+from .geometry import (Box, State, invert_transform, make_transform, points_in_box, rotation_z, rotation_zyx, transform_points,
+                       wrap_angle)
 from .ground import GroundParams, fit_plane, ground_mask, remove_ground
 from .metrics import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
                       PooledMetrics, TrackletScores, accuracy, centre_errors_batch, iou_bev_batch, chamfer_distance, difficulty, iou_3d_batch,
@@ -24,7 +25,7 @@ from .sweep_ground import cached_sweep_ground_mask, sweep_ground_mask
 
 __all__ = [
     "Box", "State", "LidarFrame", "FrameSource", "points_in_box", "transform_points", "wrap_angle",
-    "invert_transform", "make_transform", "rotation_z",
+    "invert_transform", "make_transform", "rotation_z", "rotation_zyx",
     "TrackerConfig", "PRESETS", "get_preset", "preset_names",
     "Tracker", "FrameEstimate", "TrackResult", "track", "deskew_points",
     "GroundParams", "ground_mask", "remove_ground", "fit_plane", "sweep_ground_mask", "cached_sweep_ground_mask",

@@ -24,8 +24,7 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from tracker import make_transform
-from tracker.geometry import rotation_zyx
+from tracker import make_transform, rotation_zyx
 
 __all__ = ["Trajectory", "EndMode", "CAMERA_EXTRAPOLATION_NS", "interpolate_pose", "world_from_object", "wrap_heading"]
 
