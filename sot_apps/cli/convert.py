@@ -16,7 +16,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "docs/data-formats.md). Files are written atomically and sequence.json last; rerunning after an "
                     "interruption resumes (point files that already hold the right points are kept). With --labels, "
                     "write only the sequence's annotations: KITTI tracking label_02 (+ calib; 2D boxes projected "
-                    "into KITTI's camera 2, else the front camera) or an AV2 annotations.feather (AV2 categories, "
+                    "into KITTI's camera 2, else the dataset's front camera) or an AV2 annotations.feather (AV2 categories, "
                     "num_interior_pts counted from the sweeps).",
         examples=["sot-apps convert ../shared/data/pandaset_002 --out out/pandaset_002",
                   "sot-apps convert ../shared/data/readers/kitti_tracking_labels/training/label_02/0012.txt --out out/kitti_0012",

@@ -4,8 +4,8 @@ One writer per format, shared by ``sot-apps convert --labels`` (a sequence's ann
 ``sot-apps autolabel`` (auto-labels, with scores):
 
 - :func:`write_kitti_tracking`: KITTI tracking ``label_02/NNNN.txt`` + ``calib/NNNN.txt``. The label frame
-  is the chosen camera's frame (:func:`kitti_camera`: KITTI's camera 2, else the camera looking most along
-  ego +x): ``P0..P3`` = [K | 0], ``R0_rect`` = identity, ``Tr_velo_to_cam`` = camera_from_lidar,
+  is the chosen camera's frame (:func:`kitti_camera`: KITTI's camera 2, else the dataset's front camera by
+  name, else the camera looking most along ego +x): ``P0..P3`` = [K | 0], ``R0_rect`` = identity, ``Tr_velo_to_cam`` = camera_from_lidar,
   ``Tr_imu_to_velo`` = lidar_from_ego. Each box becomes KITTI's (bottom centre, h w l, rotation_y about the
   camera's y); its 2D box is the 8 corners of that 3D box projected with P2 (the part in front of the
   camera, z >= 0.1 m), bounded and clipped to the image [0, width - 1] x [0, height - 1] as KITTI's are; a box
@@ -40,7 +40,7 @@ from .categories import av2_category, kitti_type
 from .sequence import Camera, Sequence
 
 __all__ = ["LabelTrack", "LabelsWritten", "annotation_tracks", "kitti_camera", "kitti_label_box",
-           "kitti_box_corners", "image_box", "write_kitti_tracking", "write_av2_annotations", "write_av2_submission",
+           "kitti_box_corners", "image_box", "KITTI_CAMERA_NAMES", "write_kitti_tracking", "write_av2_annotations", "write_av2_submission",
            "AV2_ANNOTATION_COLUMNS", "AV2_SUBMISSION_COLUMNS"]
 
 AV2_ANNOTATION_COLUMNS = ("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "height_m", "qw", "qx",
@@ -86,10 +86,15 @@ def annotation_tracks(seq: Sequence) -> list[LabelTrack]:
 
 # ------------------------------------------------------------------------------------------ KITTI
 
+# KITTI's camera 2, then the datasets' front cameras (PandaSet / synth, AV2, Waymo, nuScenes): PandaSet's ego
+# frame looks along +y, so the direction alone does not find the front camera
+KITTI_CAMERA_NAMES = ("image_02", "image_2", "front_camera", "ring_front_center", "FRONT", "CAM_FRONT")
+
+
 def kitti_camera(seq: Sequence) -> Camera | None:
-    """KITTI's camera 2 (``image_02`` / ``image_2``) if the sequence has it, else the camera whose optical
-    axis points most along ego +x; None without cameras."""
-    for name in ("image_02", "image_2"):
+    """The camera KITTI labels are written for: the first of :data:`KITTI_CAMERA_NAMES` the sequence has, else
+    the camera whose optical axis points most along ego +x; None without a camera with a pose."""
+    for name in KITTI_CAMERA_NAMES:
         if name in seq.cameras:
             return seq.cameras[name]
     best, best_dot = None, -np.inf

@@ -206,3 +206,12 @@ def test_kitti_labels_need_a_camera(tiny_dir, tmp_path, capsys):
     assert main(["convert", str(tmp_path / "seq"), "--labels", "kitti", "--out", str(tmp_path / "k")]) == 2
     assert "need a camera" in capsys.readouterr().err
     assert not (tmp_path / "k" / "label_02").exists()
+
+
+def test_kitti_labels_use_the_front_camera_of_pandaset():
+    """PandaSet's ego frame looks along +y: its front camera is found by name, not by the ego +x direction
+    (which would pick the back camera)."""
+    from sot_apps.io.labels import kitti_camera
+
+    seq = open_sequence(Path(__file__).resolve().parents[2].parent / "shared" / "data" / "pandaset_002")
+    assert kitti_camera(seq).name == "front_camera"
