@@ -9,8 +9,7 @@ from .det_baseline import ConstantVelocityFilter
 from .detection import Detections, FrameDetections, align_heading
 from .fixed_lag import FixedLagTracker, refine_fixed_lag, track_fixed_lag
 from .frames import FrameSource, LidarFrame
-from .geometry import (Box, State, invert_transform, make_transform, points_in_box, rotation_z, rotation_zyx, transform_points,
-                       wrap_angle)
+from .geometry import Box, State, invert_transform, make_transform, points_in_box, rotation_z, transform_points, wrap_angle
 from .ground import GroundParams, fit_plane, ground_mask, remove_ground
 from .metrics import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
                       PooledMetrics, TrackletScores, accuracy, centre_errors_batch, iou_bev_batch, chamfer_distance, difficulty, iou_3d_batch,
@@ -22,10 +21,11 @@ from .shape import ShapeModel, SubShape, voxel_downsample
 from .solver import SolverResult, solve
 from .sotracker import FrameEstimate, Tracker, TrackResult, deskew_points, track
 from .sweep_ground import cached_sweep_ground_mask, sweep_ground_mask
+from .geometry import rotation_zyx  # rotations of boxes with roll/pitch; on its own line to merge with the config refactor
 
 __all__ = [
     "Box", "State", "LidarFrame", "FrameSource", "points_in_box", "transform_points", "wrap_angle",
-    "invert_transform", "make_transform", "rotation_z", "rotation_zyx",
+    "invert_transform", "make_transform", "rotation_z",
     "TrackerConfig", "PRESETS", "get_preset", "preset_names",
     "Tracker", "FrameEstimate", "TrackResult", "track", "deskew_points",
     "GroundParams", "ground_mask", "remove_ground", "fit_plane", "sweep_ground_mask", "cached_sweep_ground_mask",
@@ -37,4 +37,5 @@ __all__ = [
     "score_tracklet", "tracklet_metrics", "accuracy", "robustness",
     "DETECTION_PRESETS", "Detections", "FrameDetections", "align_heading", "ConstantVelocityFilter", "iou_bev_batch",
     "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag",
+    "rotation_zyx",
 ]
