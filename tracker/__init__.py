@@ -21,6 +21,7 @@ from .shape import ShapeModel, SubShape, voxel_downsample
 from .solver import SolverResult, solve
 from .sotracker import FrameEstimate, Tracker, TrackResult, deskew_points, track
 from .sweep_ground import cached_sweep_ground_mask, sweep_ground_mask
+from .geometry import rotation_zyx  # rotations of boxes with roll/pitch; on its own line to merge with the config refactor
 
 __all__ = [
     "Box", "State", "LidarFrame", "FrameSource", "points_in_box", "transform_points", "wrap_angle",
@@ -36,4 +37,5 @@ __all__ = [
     "score_tracklet", "tracklet_metrics", "accuracy", "robustness",
     "DETECTION_PRESETS", "Detections", "FrameDetections", "align_heading", "ConstantVelocityFilter", "iou_bev_batch",
     "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag",
+    "rotation_zyx",
 ]
