@@ -98,16 +98,16 @@ def test_interrupted_run_resumes_without_redoing_finished_objects(reference_run,
     _, reference_sums = reference_run
     out = tmp_path / "out"
     config = PipelineConfig.from_json(pipeline_doc(tiny_worlds, out))
-    original = stage_module.track_object
+    original = stage_module.write_object
     calls: list[str] = []
 
-    def interrupt_after_three(out, plan, stage, digest):
+    def interrupt_after_three(out, plan, track, digest):
         if len(calls) == 3:
-            raise KeyboardInterrupt   # Ctrl-C while the fourth object is being tracked
+            raise KeyboardInterrupt   # Ctrl-C while the fourth object is being written
         calls.append(plan.key)
-        return original(out, plan, stage, digest)
+        return original(out, plan, track, digest)
 
-    monkeypatch.setattr(stage_module, "track_object", interrupt_after_three)
+    monkeypatch.setattr(stage_module, "write_object", interrupt_after_three)
     with pytest.raises(KeyboardInterrupt):
         run_pipeline(config, ExecutorSpec("inline"), progress=False)
     assert calls == ["synth_s4/veh_000", "synth_s4/veh_001", "synth_s4/veh_002"]
@@ -120,11 +120,11 @@ def test_interrupted_run_resumes_without_redoing_finished_objects(reference_run,
 
     rerun: list[str] = []
 
-    def counting(out, plan, stage, digest):
+    def counting(out, plan, track, digest):
         rerun.append(plan.key)
-        return original(out, plan, stage, digest)
+        return original(out, plan, track, digest)
 
-    monkeypatch.setattr(stage_module, "track_object", counting)
+    monkeypatch.setattr(stage_module, "write_object", counting)
     result = run_pipeline(config, ExecutorSpec("inline"), progress=False)
     assert rerun == ["synth_s5/veh_000", "synth_s5/veh_001", "synth_s5/veh_002"]
     assert [u.status for u in result.by_stage("track")] == ["cached"] * 3 + ["done"] * 3
