@@ -45,8 +45,9 @@ def safe_name(text: str) -> str:
 def open_cached(path: str, format: str | None = None) -> Sequence:
     """The worker-local sequence cache: a sequence is opened once per process and kept between tasks (every
     stage function opens its sequence through this). The runner fills it in every Dask worker before the
-    first batch (:func:`open_sequences`), so no task pays for opening a sequence."""
-    return open_sequence(path, format=format)
+    first batch (:func:`open_sequences`), so no task pays for opening a sequence. Sweeps are read through the
+    one-time conversion cache (:mod:`sot_apps.io.sweep_cache`)."""
+    return open_sequence(path, format=format, cache=True)
 
 
 def open_sequences(sources: list[tuple[str, str | None]]) -> int:
