@@ -415,11 +415,10 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
         times.read += t1 - t0
         times.ground += t2 - t1
         times.sweeps += 1
-        world: list[np.ndarray] = []   # the sweep in the world frame, computed once when a refinement needs it
         for o in starting:
             _start(o, seq, frame, config, refine, lag, shape_growth, times)
             if o.tracker is not None:
-                _refine_frame(o, seq, frame, world, config, refine, times, first=True)
+                _refine_frame(o, seq, frame, config, refine, times)
         for o in stepping:
             try:
                 t = time.process_time()
@@ -431,7 +430,7 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
                 times.step += dt
                 times.object_frames += 1
                 o.out.seconds += dt
-                _refine_frame(o, seq, frame, world, config, refine, times)
+                _refine_frame(o, seq, frame, config, refine, times)
             except Exception as exc:  # noqa: BLE001 - one object's failure does not stop the others
                 _fail(o, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
         for o in starting + stepping:
@@ -494,8 +493,8 @@ def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, re
             o.smoother._previous = _pose(seq, k - 1)
 
 
-def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, world: list[np.ndarray], config: TrackerConfig,
-                  refine: str, times: PassTimes, first: bool = False) -> None:
+def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str,
+                  times: PassTimes) -> None:
     """Feed the object's newest estimate to its refinement with the sweep in hand."""
     import time
 
@@ -504,14 +503,15 @@ def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, world: list[np.nda
     if refine == "online":
         return
     t = time.process_time()
-    if not config.deskew and not world:
-        world.append(seq.points_world(frame.index))
-    points_world = None if config.deskew else world[0]
+    # the region comes from the step's own crop when it holds the region, else from the part of the sweep that
+    # can reach it: the same points in the same order as from the whole sweep in the world frame, which the
+    # per-object refinements use (transform_points is element-wise: a row's result does not depend on the others)
+    crop = o.tracker.last_crop
     estimate = o.estimates[-1]
     if refine == "lag":
-        o.final += o.smoother.add(frame, estimate, points_world)
+        o.final += o.smoother.add(frame, estimate, crop=crop)
     else:
-        o.regions.append(frame_region_points(frame, estimate.box, config, OfflineParams(), o.previous, points_world))
+        o.regions.append(frame_region_points(frame, estimate.box, config, OfflineParams(), o.previous, crop=crop))
         o.previous = _pose(seq, frame.index)
     dt = time.process_time() - t
     times.refine += dt
