@@ -406,12 +406,12 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
         stepping = [o for o in live if o.tracker is not None and o.out.start < k <= o.end]
         if not starting and not stepping:
             continue
-        t0 = time.process_time()
+        t0 = time.thread_time()
         frame = seq.lidar_frame(k)
-        t1 = time.process_time()
+        t1 = time.thread_time()
         if sweep_ground and frame.has_sweep and len(frame.points_ego):
             cached_sweep_ground_mask(frame.points_ego, *ground_args)  # once; every tracker on the sweep reuses it
-        t2 = time.process_time()
+        t2 = time.thread_time()
         times.read += t1 - t0
         times.ground += t2 - t1
         times.sweeps += 1
@@ -421,12 +421,12 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
                 _refine_frame(o, seq, frame, config, refine, times)
         for o in stepping:
             try:
-                t = time.process_time()
+                t = time.thread_time()
                 estimate = o.tracker.step(frame, None if detections is None else detections.get(k))
                 o.estimates.append(estimate)
                 if o.recorder is not None:
                     o.recorder(o.tracker, estimate)
-                dt = time.process_time() - t
+                dt = time.thread_time() - t
                 times.step += dt
                 times.object_frames += 1
                 o.out.seconds += dt
@@ -455,7 +455,7 @@ def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, re
     from tracker.fixed_lag import FixedLagSmoother
 
     k = frame.index
-    t = time.process_time()
+    t = time.thread_time()
     try:
         started = None
         if o.search is not None:
@@ -477,7 +477,7 @@ def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, re
     except Exception as exc:  # noqa: BLE001
         _fail(o, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
         return
-    dt = time.process_time() - t
+    dt = time.thread_time() - t
     times.step += dt
     o.out.seconds += dt
     o.tracker, o.out.start, o.out.init_box = tracker, k, box
@@ -502,7 +502,7 @@ def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerCon
 
     if refine == "online":
         return
-    t = time.process_time()
+    t = time.thread_time()
     # the region comes from the step's own crop when it holds the region, else from the part of the sweep that
     # can reach it: the same points in the same order as from the whole sweep in the world frame, which the
     # per-object refinements use (transform_points is element-wise: a row's result does not depend on the others)
@@ -513,7 +513,7 @@ def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerCon
     else:
         o.regions.append(frame_region_points(frame, estimate.box, config, OfflineParams(), o.previous, crop=crop))
         o.previous = _pose(seq, frame.index)
-    dt = time.process_time() - t
+    dt = time.thread_time() - t
     times.refine += dt
     o.out.seconds += dt
 
@@ -534,7 +534,7 @@ def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: in
     elif later and all("no_points" in e.flags for e in later):
         _fail(o, "lost after the start frame (no points in any later frame)", lacks_points=True)
     else:
-        t = time.process_time()
+        t = time.thread_time()
         if refine == "lag":
             o.final += o.smoother.finish()
             result = TrackResult(o.final, np.asarray(online.size), o.smoother.shape, config, mode="lag", lag=lag)
@@ -542,7 +542,7 @@ def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: in
             result = refine_offline(None, online, config, points=o.regions)
         else:
             result = online
-        dt = time.process_time() - t
+        dt = time.thread_time() - t
         times.refine += dt
         o.out.seconds += dt
         o.out.result = result
@@ -562,7 +562,7 @@ def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerCo
     outs = []
     for r in requests:
         out = ObjectTrack(r.object_id)
-        t = time.process_time()
+        t = time.thread_time()
         try:
             start, box = first_box_with_points(seq, r.annotated, config, min_points) if r.annotated else (r.start, r.init_box)
             end = r.end if r.max_frames is None else min(r.end, start + r.max_frames)
@@ -576,7 +576,7 @@ def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerCo
             out.error, out.lacks_points = str(exc), True
         except Exception as exc:  # noqa: BLE001
             out.error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
-        out.seconds = time.process_time() - t
+        out.seconds = time.thread_time() - t
         times.step += out.seconds
         outs.append(out)
         if on_done is not None:

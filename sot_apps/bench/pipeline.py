@@ -10,8 +10,10 @@ after each object's start frame. "local processes" with 1 worker runs the tasks 
 worker of the same executor.
 
 Columns: object-frames/s (wall) and per worker; "task s" sums the tasks' wall durations, concurrency = task s /
-wall s; "CPU ms/obj-frame" is the tasks' CPU time per object-frame (less sensitive to other processes on the
-machine than wall time: compare it between 1 and 2 workers to tell oversubscription from a busy machine);
+wall s; "CPU ms/obj-frame" is the tasks' CPU time (of the thread running each task) per object-frame (less
+sensitive to other processes on the machine than wall time: compare it between 1 and 2 workers to tell
+oversubscription from a busy machine); "CPU-bound speed-up" = the tasks' CPU seconds over the largest task's
+(or over CPU / workers): what the chunks allow on otherwise idle cores;
 the breakdown splits the tasks' CPU seconds into reading sweeps, whole-sweep ground (once per sweep), the
 tracker's steps, refinement (fixed-lag / offline), writing the outputs and the rest (overhead).
 The sweeps are read through the sweep cache (:mod:`sot_apps.io.sweep_cache`), converted once before the
@@ -104,6 +106,9 @@ def measure(config, configs: list[tuple[str, int, str | None]], progress: bool =
                          "object_frames_per_s": round(rate, 2), "per_worker": round(rate / count, 2),
                          "cpu_s": round(cpu, 2), "cpu_ms_per_object_frame": round(1e3 * cpu / frames, 2) if frames else 0.0,
                          "sweeps_read": int(times.get("sweeps", 0)),
+                         # the speed-up the tasks' CPU times allow with this many workers on otherwise idle cores
+                         "cpu_bound_speedup": round(cpu / max(float(times.get("max_task_cpu_s", 0.0)), cpu / count), 2)
+                         if cpu else None,
                          "cpu_breakdown_s": {p: round(float(times.get(f"{p}_s", 0.0)), 2) for p in PARTS}})
     base = {r["executor"]: r["object_frames_per_s"] for r in rows if r["workers"] == 1}
     for r in rows:
@@ -114,14 +119,15 @@ def measure(config, configs: list[tuple[str, int, str | None]], progress: bool =
 
 def format_table(rows: list[dict]) -> str:
     lines = ["| executor | workers | objects | object-frames | start-up s | tracking s (wall) | task s (sum) "
-             "| concurrency | object-frames/s | per worker | speed-up | CPU ms/obj-frame | sweeps read |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| concurrency | object-frames/s | per worker | speed-up | CPU ms/obj-frame | CPU-bound speed-up "
+             "| sweeps read |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         speedup = "–" if r["speedup"] is None else f"{r['speedup']:.2f}x"
         lines.append(f"| {r['executor']} | {r['workers']} | {r['objects']} | {r['object_frames']} | "
                      f"{r['startup_s']:.1f} | {r['tracking_s']:.1f} | {r['task_s']:.1f} | {r['concurrency']:.2f} | "
                      f"{r['object_frames_per_s']:.1f} | {r['per_worker']:.1f} | {speedup} | "
-                     f"{r['cpu_ms_per_object_frame']:.1f} | {r['sweeps_read']} |")
+                     f"{r['cpu_ms_per_object_frame']:.1f} | {r['cpu_bound_speedup'] or 0:.2f}x | {r['sweeps_read']} |")
     lines += ["", "Where the tasks' CPU time goes (seconds; ms per object-frame in brackets):", "",
               "| executor | workers | " + " | ".join(PARTS) + " |", "|---|---:|" + "---:|" * len(PARTS)]
     for r in rows:

@@ -60,7 +60,8 @@ class PipelineResult:
     failures: Path
     stage_seconds: dict[str, float] = field(default_factory=dict)
     track_health: list[dict] = field(default_factory=list)   # per finished track: pipeline.health
-    # the tracking stage's CPU seconds summed over its tasks: read, ground, step, refine, write, overhead, cpu, wall
+    # the tracking stage's CPU seconds (of the tasks' threads) summed over its tasks: read, ground, step, refine, write,
+    # overhead, cpu, wall; and the largest task's CPU seconds (max_task_cpu_s)
     track_times: dict[str, float] = field(default_factory=dict)
 
     def by_stage(self, stage: str) -> list[UnitRecord]:
@@ -169,6 +170,8 @@ def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
         entries = {e["object"]: e for e in (outcome.result or {}).get("objects", [])} if outcome.ok else {}
         for name, value in ((outcome.result or {}).get("times", {}) if outcome.ok else {}).items():
             breakdown[name] = breakdown.get(name, 0.0) + value
+        if outcome.ok:
+            breakdown["max_task_cpu_s"] = max(breakdown.get("max_task_cpu_s", 0.0), outcome.result["times"]["cpu_s"])
         cpu = sum(e["cpu_s"] for e in entries.values()) or 1.0
         for o in chunk:
             u, e = units[o.key], entries.get(o.object_id)

@@ -43,7 +43,7 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     LiDAR points to start or follow) and where the chunk's time went (CPU seconds)."""
     from tracker import get_preset
 
-    t0, cpu0 = time.perf_counter(), time.process_time()
+    t0, cpu0 = time.perf_counter(), time.thread_time()
     first = plans[0]
     seq = open_cached(first.sequence_path, first.format)
     config = get_preset(stage.preset, **dict(stage.overrides or {}))
@@ -61,9 +61,9 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
 
     def write(track: ObjectTrack) -> None:
         if track.error is None:
-            cpu = time.process_time()
+            cpu = time.thread_time()
             written[track.object_id] = write_object(out, by_id[track.object_id], track, digests[track.object_id])
-            write_seconds[0] += time.process_time() - cpu
+            write_seconds[0] += time.thread_time() - cpu
 
     tracks, times = track_objects_pass(seq, requests, config, stage.mode, stage.lag, detections, stage.min_init_points,
                                        shape_growth=True, on_done=write)
@@ -76,7 +76,7 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
         else:
             error = f"TrackingFailed: {plan.key}: {t.error}" if t.lacks_points else t.error
             objects.append({"object": t.object_id, "ok": False, "cpu_s": round(t.seconds, 4), "error": error})
-    cpu = time.process_time() - cpu0
+    cpu = time.thread_time() - cpu0
     breakdown = times.to_json() | {"write_s": round(write_seconds[0], 4), "cpu_s": round(cpu, 4),
                                    "wall_s": round(time.perf_counter() - t0, 4)}
     breakdown["overhead_s"] = round(cpu - times.read - times.ground - times.step - times.refine - write_seconds[0], 4)
