@@ -6,6 +6,7 @@ The one writer of track files: ``sot-apps track`` and the pipeline's tracking st
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -26,7 +27,7 @@ __all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read
            "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence",
            "refine_track_fixed_lag", "refine_track_offline", "track_result_to_trackfile",
            "write_track_result", "first_box_with_points", "TrackingFailed", "MIN_INIT_POINTS", "StartSearch",
-           "ShapeRecorder", "ObjectRequest", "ObjectTrack", "PassTimes", "track_objects"]
+           "ShapeRecorder", "ObjectRequest", "ObjectTrack", "PassTimes", "track_objects", "sweep_ground_once"]
 
 MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box
 
@@ -410,7 +411,7 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
         frame = seq.lidar_frame(k)
         t1 = time.thread_time()
         if sweep_ground and frame.has_sweep and len(frame.points_ego):
-            cached_sweep_ground_mask(frame.points_ego, *ground_args)  # once; every tracker on the sweep reuses it
+            sweep_ground_once(seq, frame, ground_args)   # every tracker on the sweep reuses it
         t2 = time.thread_time()
         times.read += t1 - t0
         times.ground += t2 - t1
@@ -440,6 +441,27 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
         if o.waiting and o.search is not None:   # no candidate frame held enough points
             o.out.error, o.out.lacks_points = str(o.search.failure()), True
     return results, times
+
+
+def sweep_ground_once(seq: Sequence, frame: LidarFrame, ground_args: tuple) -> np.ndarray:
+    """The whole-sweep ground mask of ``frame`` (:func:`tracker.cached_sweep_ground_mask` with ``ground_args``),
+    made the tracker's cached mask for the sweep: taken from the sweep cache when ``seq`` reads through one and
+    it holds the mask, else computed once and stored there (every process and later run reuses it)."""
+    from tracker.sweep_ground import remember_sweep_ground_mask, sweep_ground_mask
+
+    from .io.sweep_cache import SweepCache, code_digest
+
+    cache = SweepCache.of(seq)
+    if cache is None:
+        return cached_sweep_ground_mask(frame.points_ego, *ground_args)
+    # the mask's name: its parameters and the ground code (a changed algorithm never reads an old mask)
+    name = "ground-" + hashlib.sha256(repr(tuple(ground_args)).encode() + code_digest(sweep_ground_mask)).hexdigest()[:16]
+    mask = cache.load_mask(frame.index, name)
+    if mask is not None and len(mask) == len(frame.points_ego):
+        return remember_sweep_ground_mask(frame.points_ego, mask, *ground_args)
+    mask = cached_sweep_ground_mask(frame.points_ego, *ground_args)
+    cache.store_mask(frame.index, name, mask)
+    return mask
 
 
 def _fail(o: _Live, error: str, lacks_points: bool = False) -> None:

@@ -16,8 +16,8 @@ oversubscription from a busy machine); "CPU-bound speed-up" = the tasks' CPU sec
 (or over CPU / workers): what the chunks allow on otherwise idle cores;
 the breakdown splits the tasks' CPU seconds into reading sweeps, whole-sweep ground (once per sweep), the
 tracker's steps, refinement (fixed-lag / offline), writing the outputs and the rest (overhead).
-The sweeps are read through the sweep cache (:mod:`sot_apps.io.sweep_cache`), converted once before the
-first configuration, as after a first run.
+The sweeps are read through the sweep cache (:mod:`sot_apps.io.sweep_cache`), converted (with their ground
+masks) once before the first configuration, as after a first run.
 """
 
 from __future__ import annotations
@@ -47,14 +47,21 @@ def _warm(sequences: list[str]) -> int:
 
 
 def _convert_sweeps(config) -> None:
-    """Fill the sweep cache for the planned frames (the one-time conversion a first run does)."""
-    from ..io import open_sequence
+    """Fill the sweep cache for the planned frames, sweeps and ground masks (what a first run leaves)."""
+    from tracker import get_preset
 
+    from ..io import open_sequence
+    from ..tracking import sweep_ground_once
+
+    tracker_config = get_preset(config.stages.track.preset, **dict(config.stages.track.overrides or {}))
+    ground = tracker_config.ground_removal and tracker_config.ground_scope == "sweep"
     for s in config.sequences:
         seq = open_sequence(s.path, s.format, cache=True)
         first, last = s.frames if s.frames is not None else (0, len(seq) - 1)
         for k in range(first, last + 1):
-            seq.sweep(k)
+            frame = seq.lidar_frame(k)
+            if ground and frame.has_sweep and len(frame.points_ego):
+                sweep_ground_once(seq, frame, tracker_config.sweep_ground_args())
 
 
 def tracking_only(config, out: str):

@@ -4,7 +4,9 @@ Reading a sweep from its dataset costs tens of milliseconds (PandaSet: zip decom
 transform, per-point times; Waymo: range-image decoding). :func:`with_sweep_cache` wraps a
 :class:`~sot_apps.io.sequence.Sequence` so that each frame is converted once and every later read, by any
 process, loads its float32 ``xyz``, float32 ``intensity`` and int64 ``time_offset_ns`` columns as they were
-decoded (bit for bit) from uncompressed ``.npy`` files (< 1 ms for 100k points).
+decoded (bit for bit) from uncompressed ``.npy`` files (< 1 ms for 100k points). Per-point masks derived
+from a sweep (the tracker's whole-sweep ground, keyed by its parameters) can be stored with it
+(:meth:`SweepCache.store_mask`), so every process and later run reuses them.
 
 Where: ``$SOT_APPS_CACHE_DIR`` (``off`` disables the cache), else ``$XDG_CACHE_HOME/sot-apps/sweeps``, else
 ``~/.cache/sot-apps/sweeps``; never inside an input directory. Layout:
@@ -32,7 +34,7 @@ import numpy as np
 
 from .sequence import Sequence, Sweep
 
-__all__ = ["cache_root", "with_sweep_cache", "SweepCache", "CACHE_ENV"]
+__all__ = ["cache_root", "with_sweep_cache", "SweepCache", "CACHE_ENV", "code_digest"]
 
 CACHE_ENV = "SOT_APPS_CACHE_DIR"
 MAX_GB_ENV = "SOT_APPS_CACHE_MAX_GB"
@@ -60,8 +62,9 @@ def _digest(*parts: bytes) -> str:
 _code_digests: dict[str, bytes] = {}
 
 
-def _code_digest(loader) -> bytes:
-    """The source of the module whose function decodes the sweeps (a changed reader invalidates its entries)."""
+def code_digest(loader) -> bytes:
+    """Digest of the source of the module defining the function ``loader`` (e.g. the one that decodes the sweeps:
+    a changed reader invalidates its entries)."""
     filename = getattr(getattr(loader, "__code__", None), "co_filename", None)
     if filename is None:
         return repr(loader).encode()
@@ -79,7 +82,7 @@ class SweepCache:
     def __init__(self, seq: Sequence, root: Path, loader) -> None:
         self.seq, self.loader = seq, loader
         self.directory = root / _digest(str(Path(seq.root).resolve()).encode(), seq.format.encode())[:24]
-        self.code = _code_digest(loader)
+        self.code = code_digest(loader)
         self.hits = self.misses = 0
 
     def frame_key(self, index: int) -> str:
@@ -116,6 +119,33 @@ class SweepCache:
         except OSError:   # a full or read-only cache never stops a read
             pass
         return sweep
+
+    @staticmethod
+    def of(seq: Sequence) -> "SweepCache | None":
+        """The cache ``seq`` reads its sweeps through, or None."""
+        cache = getattr(seq.load_sweep, "__self__", None)
+        return cache if isinstance(cache, SweepCache) else None
+
+    def load_mask(self, index: int, name: str) -> np.ndarray | None:
+        """A boolean per-point array stored with frame ``index``'s entry (e.g. its ground mask), or None."""
+        try:
+            with np.load(self.entry(index) / f"{name}.npz", allow_pickle=False) as data:
+                return np.unpackbits(data["bits"], count=int(data["count"])).astype(bool)
+        except (OSError, ValueError, KeyError):
+            return None
+
+    def store_mask(self, index: int, name: str, mask: np.ndarray) -> None:
+        """Store a boolean per-point array with frame ``index``'s entry (when the entry exists; atomically)."""
+        entry = self.entry(index)
+        if not entry.is_dir():
+            return
+        try:
+            handle, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".npz", dir=entry)
+            with os.fdopen(handle, "wb") as out:
+                np.savez(out, bits=np.packbits(np.asarray(mask, dtype=bool)), count=np.int64(len(mask)))
+            os.replace(tmp, entry / f"{name}.npz")
+        except OSError:
+            pass
 
     def _store(self, index: int, entry: Path, sweep: Sweep) -> None:
         fresh = not self.directory.is_dir()

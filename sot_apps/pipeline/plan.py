@@ -213,21 +213,26 @@ def plan_json(plan: Plan) -> str:
 
 # a tracking task holds at most this many live objects (each keeps its track and, offline, its region points)
 MAX_OBJECTS_PER_TASK = 32
+# fewer sequences than workers: chunks per worker (dynamic scheduling evens out objects of unequal cost)
+SPLIT_PER_WORKER = 4
 
 
 def track_chunks(objects: list[ObjectPlan], workers: int,
                  max_objects: int = MAX_OBJECTS_PER_TASK) -> list[list[ObjectPlan]]:
     """The tracking stage's work units: each a chunk of ONE sequence's objects, tracked in one pass over its
     sweeps. A sequence is one chunk unless it has more than ``max_objects`` objects or there are fewer sequences
-    than ``workers`` (then each sequence is split so that every worker gets a chunk). Objects go to the chunk
-    with the fewest planned frames so far, longest first (chunks of about equal work), keep plan order inside a
-    chunk; chunks come largest first (the executors start them in that order)."""
+    than ``workers``: then each sequence is split into up to ``SPLIT_PER_WORKER`` chunks per worker, so the
+    workers share the work evenly although objects cost very differently (a dense vehicle several times a far
+    one; the extra passes re-read the sweeps from the sweep cache, and their ground masks with them). Objects
+    go to the chunk with the fewest planned frames so far, longest first, keep plan order inside a chunk;
+    chunks come largest first (the executors start them in that order)."""
     by_sequence: dict[str, list[ObjectPlan]] = {}
     for o in objects:
         by_sequence.setdefault(o.sequence, []).append(o)
     if not by_sequence:
         return []
-    per_sequence = max(1, math.ceil(max(1, workers) / len(by_sequence)))
+    workers = max(1, workers)
+    per_sequence = 1 if len(by_sequence) >= workers else math.ceil(SPLIT_PER_WORKER * workers / len(by_sequence))
     chunks: list[tuple[int, list[ObjectPlan]]] = []
     for objs in by_sequence.values():
         n = min(len(objs), max(per_sequence, math.ceil(len(objs) / max_objects)))

@@ -101,3 +101,29 @@ def test_an_object_without_points_fails_alone(tiny_worlds):
     want = track(seq, good.init_box, 0, 5, get_preset("full"))
     assert np.array_equal([e.box.to_array() for e in tracks[1].result.estimates],
                           [e.box.to_array() for e in want.estimates])
+
+
+def test_ground_masks_stored_in_the_sweep_cache_give_the_same_tracks(tiny_worlds, tmp_path):
+    """A pass over a sequence read through the sweep cache stores each sweep's ground mask there; a later pass
+    (another process, another chunk) takes the masks from it, and both give the per-object results."""
+    from sot_apps.io.sweep_cache import SweepCache, with_sweep_cache
+
+    plain = open_sequence(tiny_worlds[0])
+    requests = _requests(plain, ["veh_000", "veh_002"], [0, 1], 5)
+    config = get_preset("full")
+    want = [_alone(plain, r, config, "online", 0) for r in requests]
+    for run in range(2):
+        seq = with_sweep_cache(open_sequence(tiny_worlds[0]), tmp_path / "cache")
+        tracks, _ = track_objects(seq, requests, config)
+        for got, alone in zip(tracks, want):
+            assert np.array_equal([e.box.to_array() for e in got.result.estimates],
+                                  [e.box.to_array() for e in alone.estimates])
+        cache = SweepCache.of(seq)
+        stored = [p for k in range(6) for p in cache.entry(k).glob("ground-*.npz")]
+        assert len(stored) == 6
+    from tracker.sweep_ground import sweep_ground_mask
+
+    name = stored[0].name[:-4]
+    for k in range(6):
+        assert np.array_equal(cache.load_mask(k, name),
+                              sweep_ground_mask(plain.lidar_frame(k).points_ego, *config.sweep_ground_args()))
