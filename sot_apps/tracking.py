@@ -1,7 +1,10 @@
 """Run SOTracker on a :class:`~sot_apps.io.sequence.Sequence` and write ``DIR/track.json`` + ``DIR/shape.ply``.
 
-The one writer of track files: ``sot-apps track`` and the pipeline's tracking stage both call
-:func:`write_track_result`, and both start an annotated object at :func:`first_box_with_points`.
+One object (:func:`track_sequence`, ``sot-apps track``) or many in one pass over the sweeps
+(:func:`track_objects`, the pipeline's tracking stage: each sweep read and grounded once, every live object
+stepped; each object's result is the one tracking it alone gives). The one writer of track files: both call
+:func:`write_track_result`, and both start an annotated object at the first annotated box with enough points
+(:class:`StartSearch`).
 """
 
 from __future__ import annotations
@@ -9,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -313,7 +317,7 @@ class ObjectTrack:
     growth: ShapeGrowth | None = None
     error: str | None = None
     lacks_points: bool = False
-    seconds: float = 0.0          # this object's own tracker time (steps and refinement)
+    seconds: float = 0.0          # this object's own CPU seconds (its steps and refinement; the shared reads not)
 
 
 @dataclass
@@ -327,10 +331,6 @@ class PassTimes:
     refine: float = 0.0
     sweeps: int = 0
     object_frames: int = 0
-
-    def add(self, other: "PassTimes") -> "PassTimes":
-        return PassTimes(*(getattr(self, f) + getattr(other, f) for f in
-                           ("read", "ground", "step", "refine", "sweeps", "object_frames")))
 
     def to_json(self) -> dict:
         return {"read_s": round(self.read, 4), "ground_s": round(self.ground, 4), "step_s": round(self.step, 4),
@@ -384,13 +384,11 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
     callable(ObjectTrack) as each object finishes (then its result is not kept in the returned list, so a long
     pass holds only live objects). ``progress``: callable(iterable) -> iterable over the frames.
     Returns the objects' outcomes in request order and where the time went."""
-    import time
-
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, not {mode!r}")
     times = PassTimes()
     refine = mode if config.method == "sot" else "online"
-    if config.method != "sot" and config.method == "det":
+    if config.method == "det":
         return _track_alone(seq, requests, config, detections, min_points, shape_growth, on_done, times)
     live = [_Live(r, seq, config, min_points) for r in requests]
     for o in live:
@@ -455,7 +453,8 @@ def sweep_ground_once(seq: Sequence, frame: LidarFrame, ground_args: tuple) -> n
     if cache is None:
         return cached_sweep_ground_mask(frame.points_ego, *ground_args)
     # the mask's name: its parameters and the ground code (a changed algorithm never reads an old mask)
-    name = "ground-" + hashlib.sha256(repr(tuple(ground_args)).encode() + code_digest(sweep_ground_mask)).hexdigest()[:16]
+    digest = hashlib.sha256(repr(tuple(ground_args)).encode() + code_digest(sweep_ground_mask))
+    name = "ground-" + digest.hexdigest()[:16]
     mask = cache.load_mask(frame.index, name)
     if mask is not None and len(mask) == len(frame.points_ego):
         return remember_sweep_ground_mask(frame.points_ego, mask, *ground_args)
@@ -472,8 +471,6 @@ def _fail(o: _Live, error: str, lacks_points: bool = False) -> None:
 def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str, lag: int,
            shape_growth: bool, times: PassTimes) -> None:
     """Start ``o`` at ``frame`` (an annotated candidate or its given start) as :func:`tracker.track` would."""
-    import time
-
     from tracker.fixed_lag import FixedLagSmoother
 
     k = frame.index
@@ -518,8 +515,6 @@ def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, re
 def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str,
                   times: PassTimes) -> None:
     """Feed the object's newest estimate to its refinement with the sweep in hand."""
-    import time
-
     from tracker.offline import OfflineParams, frame_region_points
 
     if refine == "online":
@@ -543,44 +538,53 @@ def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerCon
 def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: int, min_points: int,
             times: PassTimes, on_done) -> None:
     """The object's last frame: the pipeline's checks, the offline solve, its result; then release it."""
-    import time
-
     from tracker import refine_offline
 
     online = TrackResult(o.estimates, o.out.init_box.size, o.tracker.shape_points(), config)
-    first = online.estimates[0]
-    later = online.estimates[1:]
-    if first.num_points < min_points:
-        _fail(o, f"{first.num_points} LiDAR points in the initial box at frame {o.out.start} (need at least "
-                 f"{min_points}); nothing to track", lacks_points=True)
-    elif later and all("no_points" in e.flags for e in later):
-        _fail(o, "lost after the start frame (no points in any later frame)", lacks_points=True)
+    why = lacking_points(online, min_points)
+    if why is not None:
+        _fail(o, why, lacks_points=True)
     else:
         t = time.thread_time()
-        if refine == "lag":
-            o.final += o.smoother.finish()
-            result = TrackResult(o.final, np.asarray(online.size), o.smoother.shape, config, mode="lag", lag=lag)
-        elif refine == "offline":
-            result = refine_offline(None, online, config, points=o.regions)
-        else:
-            result = online
+        try:
+            if refine == "lag":
+                o.final += o.smoother.finish()
+                result = TrackResult(o.final, np.asarray(online.size), o.smoother.shape, config, mode="lag", lag=lag)
+            elif refine == "offline":
+                result = refine_offline(None, online, config, points=o.regions)
+            else:
+                result = online
+        except Exception as exc:  # noqa: BLE001 - one object's failure does not stop the others
+            _fail(o, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+            result = None
         dt = time.thread_time() - t
         times.refine += dt
         o.out.seconds += dt
-        o.out.result = result
-        if o.recorder is not None:
-            o.out.growth = o.recorder.growth(o.request.object_id, o.out.start, o.out.init_box)
-        o.tracker, o.estimates, o.smoother, o.regions, o.final, o.recorder = None, [], None, [], [], None
+        if result is not None:
+            o.out.result = result
+            if o.recorder is not None:
+                o.out.growth = o.recorder.growth(o.request.object_id, o.out.start, o.out.init_box)
+            o.tracker, o.estimates, o.smoother, o.regions, o.final, o.recorder = None, [], None, [], [], None
     if on_done is not None:
         on_done(o.out)
         o.out.result = None
 
 
+def lacking_points(result: TrackResult, min_points: int) -> str | None:
+    """Why an online ``result`` is no track (fewer than ``min_points`` points in the start box, or no points in
+    any later frame), or None."""
+    first, later = result.estimates[0], result.estimates[1:]
+    if first.num_points < min_points:
+        return (f"{first.num_points} LiDAR points in the initial box at frame {first.frame} (need at least "
+                f"{min_points}); nothing to track")
+    if later and all("no_points" in e.flags for e in later):
+        return "lost after the start frame (no points in any later frame)"
+    return None
+
+
 def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerConfig, detections, min_points: int,
                  shape_growth: bool, on_done, times: PassTimes) -> tuple[list[ObjectTrack], PassTimes]:
     """Methods other than SOTracker's (the Det baseline): each object tracked alone through :func:`tracker.track`."""
-    import time
-
     outs = []
     for r in requests:
         out = ObjectTrack(r.object_id)
@@ -589,8 +593,11 @@ def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerCo
             start, box = first_box_with_points(seq, r.annotated, config, min_points) if r.annotated else (r.start, r.init_box)
             end = r.end if r.max_frames is None else min(r.end, start + r.max_frames)
             recorder = ShapeRecorder() if shape_growth else None
-            out.result = track(seq, box, start, end, config, detections=detections, on_frame=recorder)
-            out.start, out.init_box = start, box
+            result = track(seq, box, start, end, config, detections=detections, on_frame=recorder)
+            why = lacking_points(result, min_points)
+            if why is not None:
+                raise TrackingFailed(why)
+            out.result, out.start, out.init_box = result, start, box
             if recorder is not None:
                 out.growth = recorder.growth(r.object_id, start, box)
             times.object_frames += end - start
