@@ -522,8 +522,9 @@ def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerCon
     t = time.thread_time()
     # the region comes from the step's own crop when it holds the region, else from the part of the sweep that
     # can reach it: the same points in the same order as from the whole sweep in the world frame, which the
-    # per-object refinements use (transform_points is element-wise: a row's result does not depend on the others)
-    crop = o.tracker.last_crop
+    # per-object refinements use (transform_points is element-wise: a row's result does not depend on the others);
+    # de-skewed sweeps take the per-object refinements' own path (no crop)
+    crop = None if config.deskew else o.tracker.last_crop
     estimate = o.estimates[-1]
     if refine == "lag":
         o.final += o.smoother.add(frame, estimate, crop=crop)

@@ -113,10 +113,14 @@ def _marker(out: Path, key: str) -> DoneMarker:
     return DoneMarker(out, key)
 
 
+def _unit_digest(digest_doc: dict) -> str:
+    # the code is part of the configuration: a unit finished by other code is not reused
+    return config_digest({"unit": digest_doc, "code": code_digest()})
+
+
 def _make_unit(out: Path, stage: str, key: str, sequence: str | None, obj: str | None, digest_doc: dict,
                fn: Callable, kwargs: dict) -> _Unit:
-    # the code is part of the configuration: a unit finished by other code is not reused
-    digest = config_digest({"unit": digest_doc, "code": code_digest()})
+    digest = _unit_digest(digest_doc)
     if _marker(out, key).is_done(digest):
         return _Unit(stage, key, sequence, obj, digest, None)
     return _Unit(stage, key, sequence, obj, digest, Task(key, fn, kwargs={**kwargs, "digest": digest}))
@@ -151,14 +155,13 @@ def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
     (:func:`~sot_apps.pipeline.plan.track_chunks`); one record per object (a chunk's time shared by its objects'
     CPU time) and the stage's time breakdown summed over the chunks (read, ground, step, refine, write, overhead)."""
     track_stage = dataclasses.asdict(stage)
-    units = {o.key: _make_unit(out, "track", f"track/{o.key}", o.sequence, o.object_id,
-                               {"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage},
-                               st.track_objects, {}) for o in plan.objects}
-    todo = [o for o in plan.objects if units[o.key].task is not None]
+    digests = {o.key: _unit_digest({"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage})
+               for o in plan.objects}
+    todo = [o for o in plan.objects if not _marker(out, f"track/{o.key}").is_done(digests[o.key])]
     chunks = track_chunks(todo, session.worker_count()) if todo else []
     tasks = [Task(f"track/{c[0].sequence}/chunk{i}", st.track_objects,
                   kwargs={"out": str(out), "plans": c, "stage": stage,
-                          "digests": {o.object_id: units[o.key].digest for o in c}})
+                          "digests": {o.object_id: digests[o.key] for o in c}})
              for i, c in enumerate(chunks)]
     outcomes = session.run(tasks, "track", progress)
     for o in outcomes:
@@ -174,25 +177,25 @@ def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
             breakdown["max_task_cpu_s"] = max(breakdown.get("max_task_cpu_s", 0.0), outcome.result["times"]["cpu_s"])
         cpu = sum(e["cpu_s"] for e in entries.values()) or 1.0
         for o in chunk:
-            u, e = units[o.key], entries.get(o.object_id)
+            key, e = f"track/{o.key}", entries.get(o.object_id)
             share = outcome.seconds * (e["cpu_s"] / cpu if e else 1.0 / len(chunk))
             if e is not None and e["ok"]:
-                ran[o.key] = UnitRecord("track", u.key, o.sequence, o.object_id, "done", share, result=e["result"],
-                                        outputs=_marker(out, u.key).outputs())
-            elif e is None and _marker(out, u.key).is_done(u.digest):   # written before the chunk failed
-                ran[o.key] = UnitRecord("track", u.key, o.sequence, o.object_id, "done", share,
-                                        outputs=_marker(out, u.key).outputs())
+                ran[o.key] = UnitRecord("track", key, o.sequence, o.object_id, "done", share, result=e["result"],
+                                        outputs=_marker(out, key).outputs())
+            elif e is None and _marker(out, key).is_done(digests[o.key]):   # written before the chunk failed
+                ran[o.key] = UnitRecord("track", key, o.sequence, o.object_id, "done", share,
+                                        outputs=_marker(out, key).outputs())
             else:
-                ran[o.key] = UnitRecord("track", u.key, o.sequence, o.object_id, "failed", share,
+                ran[o.key] = UnitRecord("track", key, o.sequence, o.object_id, "failed", share,
                                         error=e["error"] if e else outcome.error)
     records = []
     for o in plan.objects:
         if o.key in ran:
             records.append(ran[o.key])
             continue
-        marker = _marker(out, units[o.key].key).record()
+        marker = _marker(out, f"track/{o.key}").record()
         extra = {k: v for k, v in marker.items() if k not in ("name", "config", "outputs", "finished_unix")}
-        records.append(UnitRecord("track", units[o.key].key, o.sequence, o.object_id, "cached", result=extra or None,
+        records.append(UnitRecord("track", f"track/{o.key}", o.sequence, o.object_id, "cached", result=extra or None,
                                   outputs=marker.get("outputs", {})))
     return records, breakdown
 

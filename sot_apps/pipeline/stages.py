@@ -21,8 +21,8 @@ from .config import BankStage, FlowStage, MotionStage, TrackStage
 from .manifest import DoneMarker
 from .plan import ObjectPlan, open_cached
 
-__all__ = ["TrackingFailed", "track_objects", "write_object", "bank_sequence", "motion_sequence", "flow_camera", "simulate_scene",
-           "track_dir", "scene_name", "MOTION_EVAL_FILE"]
+__all__ = ["TrackingFailed", "track_objects", "write_object", "bank_sequence", "motion_sequence", "flow_camera",
+           "simulate_scene", "track_dir", "scene_name", "MOTION_EVAL_FILE"]
 
 
 def track_dir(out: str | Path, sequence: str, object_id: str) -> Path:

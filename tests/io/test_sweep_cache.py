@@ -12,8 +12,6 @@ import pytest
 from sot_apps.io import open_sequence
 from sot_apps.io.sweep_cache import SweepCache, with_sweep_cache
 
-PANDASET = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "pandaset_002"
-
 
 def _same(a, b) -> bool:
     def eq(x, y):
@@ -29,13 +27,13 @@ def world(tmp_path) -> Path:
     return write_world(tmp_path / "world", frames=3, vehicles=1, sensor="vlp16", seed=1)
 
 
-@pytest.mark.skipif(not PANDASET.is_dir(), reason="needs ../shared/data/pandaset_002")
-def test_cached_pandaset_sweeps_equal_the_readers_bit_for_bit(tmp_path):
-    plain = open_sequence(PANDASET)
-    first = with_sweep_cache(open_sequence(PANDASET), tmp_path / "cache")
+def test_cached_pandaset_sweeps_equal_the_readers_bit_for_bit(tmp_path, pandaset_root):
+    pandaset = pandaset_root
+    plain = open_sequence(pandaset)
+    first = with_sweep_cache(open_sequence(pandaset), tmp_path / "cache")
     for k in (0, 1, 30):
         assert _same(first.sweep(k), plain.load_sweep(k))          # converted now
-    again = with_sweep_cache(open_sequence(PANDASET), tmp_path / "cache")
+    again = with_sweep_cache(open_sequence(pandaset), tmp_path / "cache")
     cache = again.load_sweep.__self__
     assert isinstance(cache, SweepCache)
     for k in (0, 1, 30):
@@ -44,7 +42,7 @@ def test_cached_pandaset_sweeps_equal_the_readers_bit_for_bit(tmp_path):
     # the tracker sees the same frame (points, per-point times, pose)
     a, b = again.lidar_frame(30), plain.lidar_frame(30)
     assert np.array_equal(a.points_ego, b.points_ego) and np.array_equal(a.point_time_offset_ns, b.point_time_offset_ns)
-    assert not any(PANDASET.rglob("*.npy"))                        # nothing written into the input
+    assert not any(pandaset.rglob("*.npy"))                        # nothing written into the input
 
 
 def test_a_changed_points_file_or_pose_is_converted_again(world, tmp_path):

@@ -7,20 +7,6 @@ from pathlib import Path
 
 import pytest
 
-@pytest.fixture(autouse=True, scope="session")
-def sweep_cache_in_tmp(tmp_path_factory):
-    """The pipeline reads sweeps through the user's sweep cache: in tests, a temporary one (inherited by workers)."""
-    import os
-
-    previous = os.environ.get("SOT_APPS_CACHE_DIR")
-    os.environ["SOT_APPS_CACHE_DIR"] = str(tmp_path_factory.mktemp("sweep_cache"))
-    yield
-    if previous is None:
-        os.environ.pop("SOT_APPS_CACHE_DIR", None)
-    else:
-        os.environ["SOT_APPS_CACHE_DIR"] = previous
-
-
 # Seeds whose three moving vehicles all carry LiDAR points from the first frame on (checked in the fixture).
 SEEDS = (4, 5)
 

@@ -3,7 +3,6 @@ bit for bit, online, with fixed-lag and offline refinement, while reading each s
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,8 +12,6 @@ from tracker import Box, get_preset, track
 from sot_apps.io import open_sequence
 from sot_apps.tracking import (ObjectRequest, TrackingFailed, first_box_with_points, refine_track_fixed_lag,
                                refine_track_offline, track_objects)
-
-PANDASET = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "pandaset_002"
 
 
 def _alone(seq, request: ObjectRequest, config, mode: str, lag: int):
@@ -74,10 +71,9 @@ def test_synthetic_objects_in_one_pass_equal_each_tracked_alone(tiny_worlds, mod
     _assert_identical(seq, requests, mode, lag=2)
 
 
-@pytest.mark.skipif(not PANDASET.is_dir(), reason="needs ../shared/data/pandaset_002")
 @pytest.mark.parametrize("mode", ["online", "lag", "offline"])
-def test_pandaset_dev_objects_in_one_pass_equal_each_tracked_alone(mode):
-    seq = open_sequence(PANDASET)
+def test_pandaset_dev_objects_in_one_pass_equal_each_tracked_alone(mode, pandaset_root):
+    seq = open_sequence(pandaset_root)
     ids = {t[:8]: t for t in seq.tracks()}
     # three dev vehicles starting at frames 0, 2 and 4 (annotated, given boxes); one capped by max_frames
     requests = _requests(seq, [ids["8ac00bad"], ids["91aa5b5c"], ids["71a404f3"]], [0, 2, 4], 9)
