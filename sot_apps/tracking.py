@@ -445,7 +445,7 @@ def sweep_ground_once(seq: Sequence, frame: LidarFrame, ground_args: tuple) -> n
     """The whole-sweep ground mask of ``frame`` (:func:`tracker.cached_sweep_ground_mask` with ``ground_args``),
     made the tracker's cached mask for the sweep: taken from the sweep cache when ``seq`` reads through one and
     it holds the mask, else computed once and stored there (every process and later run reuses it)."""
-    from tracker.sweep_ground import remember_sweep_ground_mask, sweep_ground_mask
+    from tracker import remember_sweep_ground_mask, sweep_ground_mask
 
     from .io.sweep_cache import SweepCache, code_digest
 
@@ -471,7 +471,7 @@ def _fail(o: _Live, error: str, lacks_points: bool = False) -> None:
 def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str, lag: int,
            shape_growth: bool, times: PassTimes) -> None:
     """Start ``o`` at ``frame`` (an annotated candidate or its given start) as :func:`tracker.track` would."""
-    from tracker.fixed_lag import FixedLagSmoother
+    from tracker import FixedLagSmoother
 
     k = frame.index
     t = time.thread_time()
@@ -515,7 +515,7 @@ def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, re
 def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str,
                   times: PassTimes) -> None:
     """Feed the object's newest estimate to its refinement with the sweep in hand."""
-    from tracker.offline import OfflineParams, frame_region_points
+    from tracker import OfflineParams, frame_region_points
 
     if refine == "online":
         return

@@ -123,7 +123,7 @@ class SweepCache:
     @staticmethod
     def of(seq: Sequence) -> "SweepCache | None":
         """The cache ``seq`` reads its sweeps through, or None."""
-        cache = getattr(seq.load_sweep, "__self__", None)
+        cache = getattr(getattr(seq, "load_sweep", None), "__self__", None)
         return cache if isinstance(cache, SweepCache) else None
 
     def load_mask(self, index: int, name: str) -> np.ndarray | None:
