@@ -394,8 +394,8 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
     for o in live:
         if o.first is None:
             o.out.error, o.out.lacks_points = str(o.search.failure()), True
-    sweep_ground = config.ground_removal and config.ground_scope == "sweep"
-    ground_args = config.sweep_ground_args() if sweep_ground else ()
+    sweep_ground = config.ground.remover == "sweep"
+    ground_args = config.ground.sweep_args() if sweep_ground else ()
     last = max([o.request.end for o in live if o.first is not None], default=-1)
     first = min([o.first for o in live if o.first is not None], default=last + 1)
     results: list[ObjectTrack] = [o.out for o in live]
@@ -515,7 +515,7 @@ def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, re
 def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str,
                   times: PassTimes) -> None:
     """Feed the object's newest estimate to its refinement with the sweep in hand."""
-    from tracker import OfflineParams, frame_region_points
+    from tracker import frame_region_points
 
     if refine == "online":
         return
@@ -529,7 +529,8 @@ def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerCon
     if refine == "lag":
         o.final += o.smoother.add(frame, estimate, crop=crop)
     else:
-        o.regions.append(frame_region_points(frame, estimate.box, config, OfflineParams(), o.previous, crop=crop))
+        o.regions.append(frame_region_points(frame, estimate.box, config, config.refinement.offline, o.previous,
+                                             crop=crop))
         o.previous = _pose(seq, frame.index)
     dt = time.thread_time() - t
     times.refine += dt

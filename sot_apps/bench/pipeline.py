@@ -54,14 +54,14 @@ def _convert_sweeps(config) -> None:
     from ..tracking import sweep_ground_once
 
     tracker_config = get_preset(config.stages.track.preset, **dict(config.stages.track.overrides or {}))
-    ground = tracker_config.ground_removal and tracker_config.ground_scope == "sweep"
+    ground = tracker_config.ground.remover == "sweep"
     for s in config.sequences:
         seq = open_sequence(s.path, s.format, cache=True)
         first, last = s.frames if s.frames is not None else (0, len(seq) - 1)
         for k in range(first, last + 1):
             frame = seq.lidar_frame(k)
             if ground and frame.has_sweep and len(frame.points_ego):
-                sweep_ground_once(seq, frame, tracker_config.sweep_ground_args())
+                sweep_ground_once(seq, frame, tracker_config.ground.sweep_args())
 
 
 def tracking_only(config, out: str):

@@ -122,4 +122,4 @@ def test_ground_masks_stored_in_the_sweep_cache_give_the_same_tracks(tiny_worlds
     name = stored[0].name[:-4]
     for k in range(6):
         assert np.array_equal(cache.load_mask(k, name),
-                              sweep_ground_mask(plain.lidar_frame(k).points_ego, *config.sweep_ground_args()))
+                              sweep_ground_mask(plain.lidar_frame(k).points_ego, *config.ground.sweep_args()))
