@@ -543,13 +543,15 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
     return out, _rebuild_shape(points, states, size, params.voxel) if with_shape else None
 
 
-def refine_offline(source: FrameSource, result: TrackResult, config: TrackerConfig | None = None,
-                   params: OfflineParams | None = None) -> TrackResult:
+def refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig | None = None,
+                   params: OfflineParams | None = None, points: list[np.ndarray] | None = None) -> TrackResult:
     """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
-    ``config.refinement.offline``."""
+    ``config.refinement.offline``. ``points``: each frame's region points as :func:`gather_frame_points` gives
+    them, when the caller gathered them while tracking (then ``source`` is not read and may be None)."""
     config = config or result.config
     params = params or config.refinement.offline
-    points = gather_frame_points(source, result, config, params)
+    if points is None:
+        points = gather_frame_points(source, result, config, params)
     online = np.array([e.state.to_array() for e in result.estimates])
     states, shape = refine_states(points, online, np.asarray(result.size), params, seed=config.seed)
     estimates: list[FrameEstimate] = []

@@ -22,7 +22,7 @@ import weakref
 
 import numpy as np
 
-__all__ = ["sweep_ground_mask", "cached_sweep_ground_mask"]
+__all__ = ["sweep_ground_mask", "cached_sweep_ground_mask", "remember_sweep_ground_mask"]
 
 # id(points) -> (weak reference to points, parameters, mask); an entry dies with its array
 _CACHE: dict[int, tuple[weakref.ref, tuple, np.ndarray]] = {}
@@ -147,7 +147,13 @@ def cached_sweep_ground_mask(points: np.ndarray, lpr_count: int, seed_threshold:
     entry = _CACHE.get(key)
     if entry is not None and entry[0]() is points and entry[1] == params:
         return entry[2]
-    mask = sweep_ground_mask(points, *params)
+    return remember_sweep_ground_mask(points, sweep_ground_mask(points, *params), *params)
+
+
+def remember_sweep_ground_mask(points: np.ndarray, mask: np.ndarray, *params: float) -> np.ndarray:
+    """Make ``mask`` — :func:`sweep_ground_mask` ``(points, *params)`` computed before, e.g. stored with the sweep —
+    what :func:`cached_sweep_ground_mask` returns for ``points`` while the array lives; returns ``mask``."""
+    key = id(points)
     try:
         ref = weakref.ref(points, partial(_forget, key))
     except TypeError:  # not weak-referenceable (a view of a foreign buffer): no caching
