@@ -12,8 +12,9 @@ import argparse
 from pathlib import Path
 
 from sot_apps.synth import write_world
-from sot_apps.pipeline.config import (FlowStage, ObjectSource, PipelineConfig, ScanStage, SequenceConfig, Stages,
-                                      TrackStage)
+from sot_apps.apps.flow import FlowConfig
+from sot_apps.apps.scans import ScanConfig
+from sot_apps.pipeline.config import ObjectSource, PipelineConfig, SequenceConfig, Stages, TrackStage
 from sot_apps.pipeline.executors import ExecutorSpec
 from sot_apps.pipeline.runner import run_pipeline
 from sot_apps.report import build_report
@@ -33,8 +34,8 @@ def main() -> None:
         sequences.append(SequenceConfig(str(world), objects=ObjectSource("annotations")))   # moving vehicles
 
     config = PipelineConfig(str(out / "run"), tuple(sequences),
-                            Stages(track=TrackStage(preset="full"), flow=FlowStage(max_pairs=4),
-                                   scans=ScanStage(sensor="pandar64", max_entries=1)))
+                            Stages(track=TrackStage(preset="full"), flow=FlowConfig(max_pairs=4),
+                                   scans=ScanConfig(sensor="pandar64", max_entries=1)))
     result = run_pipeline(config, ExecutorSpec("local", workers=args.workers))
     print(result.summary())
     for unit in result.failed:

@@ -6,8 +6,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .pipeline.config import (BankStage, FlowStage, MotionStage, ObjectSource, PipelineConfig, ScanStage,
-                              SequenceConfig, Stages, TrackStage)
+from .apps.flow import FlowConfig
+from .apps.scans import ScanConfig
+from .pipeline.config import ObjectSource, PipelineConfig, SequenceConfig, Stages, TrackStage
 from .pipeline.executors import ExecutorSpec
 from .pipeline.runner import PipelineResult, run_pipeline
 
@@ -67,9 +68,8 @@ def demo_config(out: Path, sequence: Path, synthetic: bool, scan_sensor: str = "
     if not synthetic:
         flow_pairs = 10 if flow_pairs is None else flow_pairs
         cameras = cameras or ("front_camera",)
-    stages = Stages(track=TrackStage(), bank=BankStage(), motion=MotionStage(),
-                    flow=FlowStage(cameras=cameras, max_pairs=flow_pairs),
-                    scans=ScanStage(sensor=scan_sensor, max_entries=1))
+    stages = Stages(track=TrackStage(), flow=FlowConfig(cameras=cameras, max_pairs=flow_pairs),
+                    scans=ScanConfig(sensor=scan_sensor, max_entries=1))
     return PipelineConfig(str(out), (SequenceConfig(str(sequence), objects=ObjectSource("annotations")),),
                           stages, "sot-apps demo")
 

@@ -70,9 +70,7 @@ def tracking_only(config, out: str):
 
     from ..pipeline.config import Stages
 
-    off = {name: dataclasses.replace(getattr(config.stages, name), enabled=False)
-           for name in ("bank", "motion", "flow", "scans")}
-    stages = Stages(track=dataclasses.replace(config.stages.track, enabled=True), **off)
+    stages = Stages(track=dataclasses.replace(config.stages.track, enabled=True), apps=())
     return dataclasses.replace(config, out=out, stages=stages)
 
 

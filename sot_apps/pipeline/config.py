@@ -1,4 +1,5 @@
-"""The pipeline configuration: sequences, object sources and stages (data_schema/pipeline.schema.json)."""
+"""The pipeline configuration: sequences, object sources, the tracking stage and the apps that run after it
+(data_schema/pipeline.schema.json; the apps are the installed ones, :mod:`sot_apps.apps`)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,7 @@ from typing import Any
 
 from ..errors import InputError
 
-__all__ = ["ObjectSource", "SequenceConfig", "TrackStage", "BankStage", "MotionStage", "FlowStage", "ScanStage",
-           "Stages", "PipelineConfig", "load_config", "STAGE_NAMES"]
-
-STAGE_NAMES = ("track", "bank", "motion", "flow", "scans")
+__all__ = ["ObjectSource", "SequenceConfig", "TrackStage", "Stages", "PipelineConfig", "load_config", "V1_APPS"]
 
 
 @dataclass(frozen=True)
@@ -92,58 +90,71 @@ class TrackStage:
     lag: int = 10
 
 
-@dataclass(frozen=True)
-class BankStage:
-    enabled: bool = True
-    mirror: bool = False
-    min_quality: float = 0.0
-    min_points: int = 30           # shapes with fewer points are not put into the bank
+# Version 1 of the pipeline file: these apps run unless their section says "enabled": false. Any other
+# installed app (sot_apps.apps) runs when the file has a section for it.
+V1_APPS = ("bank", "motion", "flow", "scans")
 
 
-@dataclass(frozen=True)
-class MotionStage:
-    enabled: bool = True
-    parquet: bool = True
-    npz: bool = True
-    with_points: bool = False
-
-
-@dataclass(frozen=True)
-class FlowStage:
-    enabled: bool = True
-    cameras: tuple[str, ...] | None = None   # None = every camera of the sequence
-    mode: str = "dense"
-    max_pairs: int | None = None             # pairs 0..max_pairs (None = all)
-    use_lidar: bool = True
-
-
-@dataclass(frozen=True)
-class ScanStage:
-    enabled: bool = True
-    sensor: str = "pandar64"
-    ranges_m: tuple[float, ...] = (20.0, 40.0)
-    headings_deg: tuple[float, ...] = (0.0, 45.0, 90.0, 135.0)
-    max_entries: int = 3
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Stages:
-    track: TrackStage = field(default_factory=TrackStage)
-    bank: BankStage = field(default_factory=BankStage)
-    motion: MotionStage = field(default_factory=MotionStage)
-    flow: FlowStage = field(default_factory=FlowStage)
-    scans: ScanStage = field(default_factory=ScanStage)
+    """The tracking stage (the core) and the enabled apps in run order, each with its config section.
+
+    ``Stages(track=TrackStage(), flow=FlowConfig(max_pairs=4), scans=None)``: the version-1 apps (bank,
+    motion, flow, scans) take their default config unless given (``None`` disables one); other apps run when
+    given. ``Stages(track, apps=((name, config), ...))`` lists the apps exactly."""
+
+    track: TrackStage
+    apps: tuple[tuple[str, Any], ...]
+
+    def __init__(self, track: TrackStage | None = None, apps: tuple[tuple[str, Any], ...] | None = None,
+                 **sections: Any) -> None:
+        if apps is None:
+            from ..apps import get_app
+
+            chosen: dict[str, Any] = {}
+            for name in V1_APPS:
+                config = sections.pop(name) if name in sections else get_app(name).config_type()
+                if config is not None:
+                    chosen[name] = config
+            chosen.update({name: config for name, config in sections.items() if config is not None})
+            apps = tuple(chosen.items())
+        elif sections:
+            raise TypeError("Stages: give either apps=... or app sections by name, not both")
+        object.__setattr__(self, "track", track if track is not None else TrackStage())
+        object.__setattr__(self, "apps", tuple(apps))
+
+    def app(self, name: str) -> Any:
+        """The config of the enabled app ``name``, or None when it does not run."""
+        return dict(self.apps).get(name)
 
     def enabled(self) -> list[str]:
-        return [name for name in STAGE_NAMES if getattr(self, name).enabled]
+        return (["track"] if self.track.enabled else []) + [name for name, _ in self.apps]
 
+    def to_json(self) -> dict:
+        out: dict[str, Any] = {"track": _plain(dataclasses.asdict(self.track))}
+        out.update({name: {"enabled": False} for name in V1_APPS if self.app(name) is None})
+        out.update({name: _plain(dataclasses.asdict(config)) for name, config in self.apps})
+        return out
 
-def _stage(cls, doc: dict | None):
-    doc = dict(doc or {})
-    for key, value in list(doc.items()):
-        if isinstance(value, list):
-            doc[key] = tuple(value)
-    return cls(**doc)
+    @classmethod
+    def from_json(cls, doc: dict, path: Any = None) -> "Stages":
+        from ..apps import build_config, get_app
+
+        track_doc = dict(doc.get("track") or {})
+        track = dataclasses.replace(build_config(TrackStage, track_doc, "stages.track", path),
+                                    enabled=bool(track_doc.get("enabled", True)))
+        names = list(V1_APPS) + [n for n in doc if n != "track" and n not in V1_APPS]
+        apps = []
+        for name in names:
+            section = doc.get(name) or {}
+            if not section.get("enabled", True):
+                continue
+            try:
+                app = get_app(name)
+            except InputError as exc:
+                raise InputError(path, f"stages.{name}: {exc.problem}") from exc
+            apps.append((name, build_config(app.config_type, section, f"stages.{name}", path)))
+        return cls(track, apps=tuple(apps))
 
 
 @dataclass(frozen=True)
@@ -172,8 +183,7 @@ class PipelineConfig:
                 dets = str((base / dets).resolve())
             sequences.append(SequenceConfig(seq_path, s.get("name"), s.get("format"),
                                             tuple(s["frames"]) if "frames" in s else None, objects, dets))
-        stages_doc = doc.get("stages", {})
-        stages = Stages(**{name: _stage(type(getattr(Stages(), name)), stages_doc.get(name)) for name in STAGE_NAMES})
+        stages = Stages.from_json(doc.get("stages", {}), path)
         out = doc["out"] if Path(doc["out"]).is_absolute() else str((base / doc["out"]).resolve())
         config = cls(out, tuple(sequences), stages, doc.get("description", ""))
         from tracker import DETECTION_PRESETS
@@ -192,16 +202,16 @@ class PipelineConfig:
         return [s.name for s in self.sequences]
 
     def to_json(self) -> dict:
-        stages = {name: _plain(dataclasses.asdict(getattr(self.stages, name))) for name in STAGE_NAMES}
         return {"version": 1, "description": self.description, "out": self.out,
-                "sequences": [s.to_json() for s in self.sequences], "stages": stages}
+                "sequences": [s.to_json() for s in self.sequences], "stages": self.stages.to_json()}
 
     def replace(self, **changes: Any) -> "PipelineConfig":
         return dataclasses.replace(self, **changes)
 
-    def with_stage(self, name: str, **changes: Any) -> "PipelineConfig":
-        stage = dataclasses.replace(getattr(self.stages, name), **changes)
-        return dataclasses.replace(self, stages=dataclasses.replace(self.stages, **{name: stage}))
+    def with_track(self, **changes: Any) -> "PipelineConfig":
+        """This config with its tracking stage changed (e.g. ``with_track(mode="online")``)."""
+        stages = Stages(dataclasses.replace(self.stages.track, **changes), apps=self.stages.apps)
+        return dataclasses.replace(self, stages=stages)
 
 
 def _plain(value: Any) -> Any:

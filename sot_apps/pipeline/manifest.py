@@ -19,16 +19,9 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from ..io.atomic import write_json
+from ..io.checksums import sha256_file
 
 __all__ = ["sha256_file", "config_digest", "code_digest", "DoneMarker", "versions", "write_manifest"]
-
-
-def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(chunk), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def config_digest(config: Any) -> str:

@@ -18,7 +18,6 @@ its first annotated frame with enough points and caps the length (``stages.track
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 import os
@@ -29,7 +28,7 @@ from pathlib import Path
 from tracker import Box
 
 from ..errors import InputError
-from ..io import open_sequence
+from ..io.opened import open_cached
 from ..io.sequence import Sequence
 from .config import ObjectSource, PipelineConfig, SequenceConfig
 
@@ -39,15 +38,6 @@ __all__ = ["ObjectPlan", "SequencePlan", "Plan", "make_plan", "open_cached", "op
 
 def safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(text)).strip("_")[:100] or "unnamed"
-
-
-@functools.lru_cache(maxsize=8)
-def open_cached(path: str, format: str | None = None) -> Sequence:
-    """The worker-local sequence cache: a sequence is opened once per process and kept between tasks (every
-    stage function opens its sequence through this). The runner fills it in every Dask worker before the
-    first batch (:func:`open_sequences`), so no task pays for opening a sequence. Sweeps are read through the
-    one-time conversion cache (:mod:`sot_apps.io.sweep_cache`)."""
-    return open_sequence(path, format=format, cache=True)
 
 
 def open_sequences(sources: list[tuple[str, str | None]]) -> int:

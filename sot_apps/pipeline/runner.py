@@ -1,9 +1,10 @@
-"""``run_pipeline``: plan, then run the stages in three batches through one executor.
+"""``run_pipeline``: plan, then run the tracking stage and the apps in batches through one executor.
 
 1. tracking, one task per (sequence, chunk of its objects): one pass over the sweeps (parallel over workers);
-2. bank entries, motion export and flow, one task per sequence (flow: per sequence and camera);
-   then the bank index is written;
-3. simulated scans, one task per (bank entry, range).
+2. the enabled apps (:mod:`sot_apps.apps`), each planning its units from the finished tracks; an app runs in
+   the batch after the apps it ``needs`` (built-ins: bank, motion, flow, autolabels in the first batch, then
+   scans, which reads the bank). Each app's ``finish`` runs after its units (the bank writes its index).
+   After the motion app, the motion export is scored against the annotations (``motion_eval.json``).
 
 A unit whose completion marker is valid is skipped (resume after a crash or Ctrl-C). A failed unit is
 recorded in ``OUT/failures.json`` with its stage, sequence and object, and the run goes on; the units
@@ -17,9 +18,10 @@ import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
-from ..errors import OutputError
+from ..apps import App, RunContext, SequenceTracks, Skip, get_app
+from ..errors import InputError, OutputError
 from ..io.atomic import remove_stale_temporaries, write_json
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
@@ -89,10 +91,8 @@ class PipelineResult:
 
     def summary(self) -> str:
         lines = [f"{'stage':8s} {'done':>5s} {'cached':>6s} {'failed':>6s} {'skipped':>7s} {'seconds':>8s}"]
-        for stage in ("track", "bank", "motion", "flow", "scans"):
+        for stage in dict.fromkeys(u.stage for u in self.units):
             units = self.by_stage(stage)
-            if not units:
-                continue
             count = {s: sum(u.status == s for u in units) for s in ("done", "cached", "failed", "skipped")}
             lines.append(f"{stage:8s} {count['done']:5d} {count['cached']:6d} {count['failed']:6d} {count['skipped']:7d} "
                          f"{self.stage_seconds.get(stage, 0.0):8.1f}")
@@ -136,8 +136,7 @@ def _run_units(units: list[_Unit], out: Path, session: ExecutorSession, desc: st
     for u in units:
         if u.task is None:
             marker = _marker(out, u.key).record()
-            extra = {k: v for k, v in marker.items() if k not in ("name", "config", "outputs", "finished_unix")}
-            records.append(UnitRecord(u.stage, u.key, u.sequence, u.object, "cached", result=extra or None,
+            records.append(UnitRecord(u.stage, u.key, u.sequence, u.object, "cached", result=marker.get("summary"),
                                       outputs=marker.get("outputs", {})))
             continue
         o = outcomes[u.key]
@@ -204,6 +203,76 @@ def _track_checksums(out: Path, sequence: str, objects: list[str]) -> dict[str, 
     return {o: _marker(out, f"track/{sequence}/{o}").outputs() for o in objects}
 
 
+def _run_context(plan: Plan, out: Path, finished: dict[str, list[str]]) -> RunContext:
+    return RunContext(out, tuple(SequenceTracks(s.name, s.path, s.format, s.frames, s.cameras, tuple(finished[s.name]),
+                                                _track_checksums(out, s.name, finished[s.name]),
+                                                s.objects[0].detections if s.objects else None)
+                                 for s in plan.sequences))
+
+
+def _app_batches(apps: tuple[tuple[str, Any], ...]) -> list[list[tuple[str, App, Any]]]:
+    """The enabled apps grouped into batches run one after the other: an app goes into the batch after the last
+    batch holding an app it ``needs`` (needed apps that are not enabled read what a previous run left)."""
+    level: dict[str, int] = {}
+    batches: list[list[tuple[str, App, Any]]] = []
+    pending = [(name, get_app(name), cfg) for name, cfg in apps]
+    while pending:
+        ready = [(n, a, c) for n, a, c in pending if all(d in level or d not in dict(apps) for d in a.needs)]
+        if not ready:
+            raise InputError(None, f"stages: the apps {', '.join(n for n, _, _ in pending)} need each other")
+        for name, app, cfg in ready:
+            level[name] = 1 + max((level[d] for d in app.needs if d in level), default=-1)
+            while len(batches) <= level[name]:
+                batches.append([])
+            batches[level[name]].append((name, app, cfg))
+        pending = [p for p in pending if p[0] not in level]
+    return batches
+
+
+def _run_apps(batch: list[tuple[str, App, Any]], context: RunContext, out: Path, session: ExecutorSession,
+              progress: bool) -> tuple[list[UnitRecord], dict[str, float]]:
+    """Plan every app of the batch from the finished tracks, run all their units together, then each app's
+    ``finish`` over its finished units' summaries."""
+    units: list[_Unit] = []
+    records: list[UnitRecord] = []
+    for name, app, cfg in batch:
+        try:
+            planned = list(app.plan(cfg, context))
+        except Exception as exc:  # noqa: BLE001 - a failing app is recorded; the others go on
+            records.append(UnitRecord(name, name, None, None, "failed", error=f"{type(exc).__name__}: {exc}"))
+            continue
+        config_doc = dataclasses.asdict(cfg)
+        for item in planned:
+            if isinstance(item, Skip):
+                records.append(UnitRecord(name, item.key, item.sequence, None, "skipped", error=item.reason))
+                continue
+            units.append(_make_unit(out, name, item.key, item.sequence, item.object,
+                                    {"app": name, "config": config_doc, "inputs": item.inputs}, st.run_app_unit,
+                                    {"app": app, "config": cfg, "out": str(out), "key": item.key, "args": item.args}))
+    start = time.perf_counter()
+    ran = _run_units(units, out, session, "/".join(name for name, _, _ in batch), progress)
+    elapsed = time.perf_counter() - start
+    seconds = {name: sum(r.seconds for r in ran if r.stage == name) if len(units) > 1 else elapsed
+               for name, _, _ in batch}
+    for name, app, cfg in batch:
+        summaries = [r.result for r in ran if r.stage == name and r.status in ("done", "cached") and r.result]
+        app.finish(cfg, out, summaries)
+    return ran + records, seconds
+
+
+def _score_motion(context: RunContext, out: Path, app_records: list[UnitRecord], session: ExecutorSession,
+                  progress: bool) -> list[UnitRecord]:
+    """The motion export scored against the annotations (``OUT/<seq>/motion_eval.json``, drawn by the report),
+    for every sequence whose motion unit finished."""
+    exported = {r.sequence for r in app_records if r.stage == "motion" and r.status in ("done", "cached")}
+    units = [_make_unit(out, "motion_eval", f"motion_eval/{s.name}", s.name, None,
+                        {"tracks": s.checksums, "seq": s.path}, st.score_motion,
+                        {"out": str(out), "sequence": s.name, "path": s.path, "format": s.format,
+                         "object_ids": list(s.objects)})
+             for s in context.sequences if s.name in exported]
+    return _run_units(units, out, session, "motion_eval", progress)
+
+
 def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec(), progress: bool = True,
                  plan: Plan | None = None, session: ExecutorSession | None = None) -> PipelineResult:
     """Run every enabled stage of ``config``; returns what ran, was cached or failed (see module doc).
@@ -253,81 +322,16 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
             if (st.track_dir(out, o.sequence, o.object_id) / "track.json").is_file():
                 finished[o.sequence].append(o.object_id)
 
-    # ---- 2. bank entries, motion, flow (per sequence / camera)
-    units, skipped = [], []
-    for s in plan.sequences:
-        objs = finished[s.name]
-        checks = _track_checksums(out, s.name, objs)
-        if not objs:
-            for stage in ("bank", "motion", "flow"):
-                if getattr(stages, stage).enabled:
-                    skipped.append(UnitRecord(stage, f"{stage}/{s.name}", s.name, None, "skipped",
-                                              error="no object of this sequence was tracked"))
-            continue
-        if stages.bank.enabled:
-            stage_doc = dataclasses.asdict(stages.bank)
-            units.append(_make_unit(out, "bank", f"bank/{s.name}", s.name, None, {"tracks": checks, "stage": stage_doc},
-                                    st.bank_sequence, {"out": str(out), "sequence": s.name, "object_ids": objs,
-                                                       "stage": stages.bank}))
-        if stages.motion.enabled:
-            stage_doc = dataclasses.asdict(stages.motion)
-            units.append(_make_unit(out, "motion", f"motion/{s.name}", s.name, None,
-                                    {"tracks": checks, "stage": stage_doc, "seq": s.path},
-                                    st.motion_sequence, {"out": str(out), "sequence": s.name, "path": s.path,
-                                                         "format": s.format, "object_ids": objs, "stage": stages.motion}))
-        if stages.flow.enabled:
-            stage_doc = dataclasses.asdict(stages.flow)
-            wanted = s.cameras if stages.flow.cameras is None else [c for c in stages.flow.cameras if c in s.cameras]
-            if not wanted:
-                skipped.append(UnitRecord("flow", f"flow/{s.name}", s.name, None, "skipped",
-                                          error="the sequence has no (selected) camera"))
-            for camera in wanted:
-                units.append(_make_unit(out, "flow", f"flow/{s.name}/{camera}", s.name, None,
-                                        {"tracks": checks, "stage": stage_doc, "seq": s.path, "camera": camera},
-                                        st.flow_camera, {"out": str(out), "sequence": s.name, "path": s.path,
-                                                         "format": s.format, "camera": camera, "object_ids": objs,
-                                                         "stage": stages.flow}))
-    start = time.perf_counter()
-    batch = _run_units(units, out, session, "bank/motion/flow", progress)
-    elapsed = time.perf_counter() - start
-    for stage in ("bank", "motion", "flow"):
-        stage_seconds[stage] = sum(r.seconds for r in batch if r.stage == stage) if len(units) > 1 else elapsed
-    records += batch + skipped
-
-    # ---- bank index (written here, from every sequence's entries)
-    bank_entries: list[dict] = []
-    if stages.bank.enabled:
-        from ..objects.bank import Bank, BankEntry, write_bank_index
-
-        for r in batch:
-            if r.stage == "bank" and r.status in ("done", "cached") and r.result:
-                bank_entries += r.result.get("entries", [])
-        if bank_entries:
-            bank = Bank(out / "bank", [BankEntry.from_json(e) for e in bank_entries])
-            write_bank_index(bank)
-
-    # ---- 3. simulated scans (per bank entry and range)
-    if stages.scans.enabled:
-        from ..objects.bank import read_bank
-
-        scan_stage = stages.scans
-        bank = read_bank(out / "bank", must_exist=False)
-        entries = sorted(bank.entries, key=lambda e: (-e.quality, e.id))[: scan_stage.max_entries]
-        units = []
-        for e in entries:
-            mesh_sum = _sha_or_none(out / "bank" / e.mesh)
-            for r in scan_stage.ranges_m:
-                name = st.scene_name(e.id, float(r))
-                units.append(_make_unit(out, "scans", f"scans/{name}", None, e.id,
-                                        {"mesh": mesh_sum, "range": r, "stage": dataclasses.asdict(scan_stage)},
-                                        st.simulate_scene, {"out": str(out), "entry_id": e.id, "range_m": float(r),
-                                                            "headings_deg": list(scan_stage.headings_deg),
-                                                            "sensor": scan_stage.sensor}))
-        if not entries:
-            records.append(UnitRecord("scans", "scans", None, None, "skipped", error="the bank has no entries"))
-        start = time.perf_counter()
-        records += _run_units(units, out, session, "scans", progress)
-        stage_seconds["scans"] = time.perf_counter() - start
+    # ---- 2. the apps, in batches: an app runs in the batch after the apps whose outputs it reads (``needs``)
+    context = _run_context(plan, out, finished)
+    for batch in _app_batches(config.stages.apps):
+        batch_records, batch_seconds = _run_apps(batch, context, out, session, progress)
+        records += batch_records
+        stage_seconds.update(batch_seconds)
+        if any(name == "motion" for name, _, _ in batch):
+            start = time.perf_counter()
+            records += _score_motion(context, out, batch_records, session, progress)
+            stage_seconds["motion_eval"] = time.perf_counter() - start
 
     failures = [{"stage": r.stage, "key": r.key, "sequence": r.sequence, "object": r.object, "error": r.error}
                 for r in records if r.status == "failed"]
@@ -340,12 +344,6 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
                               {"track_health": health, "track_times": track_times})
     return PipelineResult(out, plan, records, time.perf_counter() - t0, manifest, failures_path, stage_seconds,
                           health, track_times)
-
-
-def _sha_or_none(path: Path) -> str | None:
-    from .manifest import sha256_file
-
-    return sha256_file(path) if path.is_file() else None
 
 
 def default_name(path: str) -> str:
