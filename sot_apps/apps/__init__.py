@@ -32,7 +32,7 @@ from typing import Any, Iterable, Protocol, runtime_checkable
 from ..errors import InputError
 
 __all__ = ["ENTRY_POINT_GROUP", "App", "AppBase", "SequenceTracks", "RunContext", "Unit", "Skip", "UnitOutput",
-           "installed_apps", "get_app", "build_config", "config_fields", "track_dir"]
+           "installed_apps", "get_app", "build_config", "config_fields", "describe", "track_dir", "V1_APPS"]
 
 ENTRY_POINT_GROUP = "sot_apps.apps"
 
@@ -45,6 +45,11 @@ BUILTIN_APPS = {
     "scans": "sot_apps.apps.scans:ScansApp",
     "autolabels": "sot_apps.apps.autolabels:AutoLabelsApp",
 }
+
+
+# Version 1 of the pipeline file: these apps run unless their section says "enabled": false; any other installed
+# app runs when the file has a section for it.
+V1_APPS = ("bank", "motion", "flow", "scans")
 
 
 def track_dir(out: str | Path, sequence: str, object_id: str) -> Path:
@@ -281,3 +286,15 @@ def build_config(config_type: type, section: dict | None, where: str, path: Any 
         return config_type(**values)
     except (TypeError, ValueError) as exc:
         raise InputError(path, f"{where}: {exc}") from exc
+
+
+def describe(app: App) -> dict:
+    """An app as JSON: name, description, where it comes from, what it needs and writes, its config section."""
+    return {"name": app.name, "description": getattr(app, "description", ""),
+            "module": type(app).__module__, "needs": list(getattr(app, "needs", ())),
+            "runs_by_default": app.name in V1_APPS, "outputs": list(getattr(app, "outputs", ())),
+            "config": [{"field": f, "type": t, "default": _json_default(d)} for f, t, d in config_fields(app.config_type)]}
+
+
+def _json_default(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..apps import V1_APPS
 from ..errors import InputError
 
 __all__ = ["ObjectSource", "SequenceConfig", "TrackStage", "Stages", "PipelineConfig", "load_config", "V1_APPS"]
@@ -90,11 +91,6 @@ class TrackStage:
     lag: int = 10
 
 
-# Version 1 of the pipeline file: these apps run unless their section says "enabled": false. Any other
-# installed app (sot_apps.apps) runs when the file has a section for it.
-V1_APPS = ("bank", "motion", "flow", "scans")
-
-
 @dataclass(frozen=True, init=False)
 class Stages:
     """The tracking stage (the core) and the enabled apps in run order, each with its config section.
@@ -131,9 +127,9 @@ class Stages:
         return (["track"] if self.track.enabled else []) + [name for name, _ in self.apps]
 
     def to_json(self) -> dict:
-        out: dict[str, Any] = {"track": _plain(dataclasses.asdict(self.track))}
+        out: dict[str, Any] = {"track": _section_json(self.track)}
         out.update({name: {"enabled": False} for name in V1_APPS if self.app(name) is None})
-        out.update({name: _plain(dataclasses.asdict(config)) for name, config in self.apps})
+        out.update({name: _section_json(config) for name, config in self.apps})
         return out
 
     @classmethod
@@ -212,6 +208,13 @@ class PipelineConfig:
         """This config with its tracking stage changed (e.g. ``with_track(mode="online")``)."""
         stages = Stages(dataclasses.replace(self.stages.track, **changes), apps=self.stages.apps)
         return dataclasses.replace(self, stages=stages)
+
+
+def _section_json(config: Any) -> dict:
+    """A stage's section as the pipeline file writes it: a field left at its default None is left out (the file
+    has no null)."""
+    defaults = {f.name: f.default for f in dataclasses.fields(config)}
+    return {k: _plain(v) for k, v in dataclasses.asdict(config).items() if not (v is None and defaults[k] is None)}
 
 
 def _plain(value: Any) -> Any:

@@ -90,11 +90,13 @@ class PipelineResult:
         return sum(int((u.result or {}).get("tracked_frames", 0)) for u in self.ran("track"))
 
     def summary(self) -> str:
-        lines = [f"{'stage':8s} {'done':>5s} {'cached':>6s} {'failed':>6s} {'skipped':>7s} {'seconds':>8s}"]
-        for stage in dict.fromkeys(u.stage for u in self.units):
+        stages = list(dict.fromkeys(u.stage for u in self.units))
+        w = max([8] + [len(stage) for stage in stages])
+        lines = [f"{'stage':{w}s} {'done':>5s} {'cached':>6s} {'failed':>6s} {'skipped':>7s} {'seconds':>8s}"]
+        for stage in stages:
             units = self.by_stage(stage)
             count = {s: sum(u.status == s for u in units) for s in ("done", "cached", "failed", "skipped")}
-            lines.append(f"{stage:8s} {count['done']:5d} {count['cached']:6d} {count['failed']:6d} {count['skipped']:7d} "
+            lines.append(f"{stage:{w}s} {count['done']:5d} {count['cached']:6d} {count['failed']:6d} {count['skipped']:7d} "
                          f"{self.stage_seconds.get(stage, 0.0):8.1f}")
         return "\n".join(lines + health_lines(self.track_health))
 
