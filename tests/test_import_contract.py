@@ -61,6 +61,39 @@ APPS = ("sot_apps.flow", "sot_apps.motion_export", "sot_apps.lidar_sim", "sot_ap
 FLOOR = ("sot_apps.objects", "sot_apps.raycast", "sot_apps.sensor", "sot_apps.io")
 
 
+def registered_apps() -> tuple[str, ...]:
+    """The built-in apps of the registry (sot_apps.apps.bank, ...), from pyproject.toml's entry points."""
+    import tomllib
+
+    doc = tomllib.loads((REPO / "pyproject.toml").read_text())
+    return tuple(sorted({v.split(":")[0] for v in doc["project"]["entry-points"]["sot_apps.apps"].values()}))
+
+
+def test_evaluation_runs_no_app():
+    """Evaluation only scores results it is given: it never imports an app (bench and the CLI run them)."""
+    apps = APPS + ("sot_apps.apps", "sot_apps.pipeline")
+    assert [v for a in apps for v in violations("evaluation only scores", "sot_apps.evaluation", a)] == []
+    # the measurements that run apps and score them live in bench (the checker sees them there)
+    assert "sot_apps.flow.annotate" in imports_by_module()["sot_apps.bench.flow_quality"]
+
+
+def test_apps_import_no_evaluation():
+    assert len(registered_apps()) >= 5 and all(_in(a, "sot_apps.apps") for a in registered_apps())
+    apps = APPS + ("sot_apps.apps",)
+    assert [v for a in apps for v in violations("apps import no evaluation", a, "sot_apps.evaluation")] == []
+    # the pipeline scores the motion export (the motion app does not): the checker sees that function-level import
+    assert "sot_apps.evaluation.motion" in imports_by_module()["sot_apps.pipeline.stages"]
+
+
+def test_registered_apps_are_siblings():
+    """A built-in app reaches its library through the floor and its own package, never through another app's
+    registration module, the pipeline, bench or the CLI (a third-party app could not either)."""
+    mine = registered_apps()
+    above = ("sot_apps.pipeline", "sot_apps.bench", "sot_apps.cli", "sot_apps.report")
+    bad = [v for a in mine for b in mine + above if a != b for v in violations("apps are siblings", a, b)]
+    assert bad == []
+
+
 def test_apps_never_import_each_other():
     """(e.g. the benchmark simulates sweeps with the floor's sensor model, never through lidar_sim)"""
     bad = [v for a in APPS for b in APPS if a != b for v in violations("apps are siblings", a, b)]
@@ -75,7 +108,8 @@ def test_realism_evaluation_simulates_with_the_floor():
 
 def test_the_floor_imports_no_app():
     floor = FLOOR
-    apps = APPS + ("sot_apps.pipeline", "sot_apps.evaluation", "sot_apps.bench", "sot_apps.report", "sot_apps.cli")
+    apps = APPS + ("sot_apps.apps", "sot_apps.pipeline", "sot_apps.evaluation", "sot_apps.bench", "sot_apps.report",
+                   "sot_apps.cli")
     assert [v for f in floor for a in apps for v in violations("the floor is below the apps", f, a)] == []
 
 

@@ -169,7 +169,7 @@ def _quality_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_quality(args: argparse.Namespace) -> int:
-    from ..evaluation.flow import photometric_quality, synthetic_quality, tracker_objects
+    from .flow_quality import photometric_quality, synthetic_quality, tracker_objects
     from ..flow.objects import objects_from_annotations
     from ..io import open_sequence
     from ..io.atomic import write_json

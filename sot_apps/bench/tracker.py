@@ -123,7 +123,8 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
                   lags: list[int] | None = None, offline: bool = False) -> dict[str, Any]:
     from tracker import get_preset
 
-    from ..evaluation.tracker import CachedSource, prepare_tracks, resolve_presets, select_moving_vehicle_tracks
+    from ..evaluation.tracker import prepare_tracks, resolve_presets, select_moving_vehicle_tracks
+    from ..io.cached_source import CachedSource
     from ..io import open_sequence
 
     pinned = pin_one_core()

@@ -2,14 +2,12 @@
 
 - the sensor model and scan simulation from the floor (``sot_apps.sensor``: model, noise, scan, occlusion),
   the vehicle bank (``sot_apps.objects.bank``) and the ray-casting engine (``sot_apps.raycast``); the benchmark
-  never imports another app (lidar_sim);
-- the tracker evaluation pieces (sot_apps.evaluation.tracker).
+  never imports another app (lidar_sim) nor the evaluation (``sot-apps eval --benchmark`` runs the tracker over a
+  benchmark in :mod:`sot_apps.bench.benchmark_eval`).
 """
 
 from __future__ import annotations
 
-from ..evaluation.tracker import (CachedSource, EvalConfig, TrackSpec, json_safe, refined_modes, resolve_presets,
-                                  score_result)
 from ..objects.bank import Bank, BankEntry, read_bank
 from ..objects.trajectory import Trajectory, world_from_object
 from ..raycast import RaycastScene
@@ -26,7 +24,6 @@ def eval_ground_params():
     return TrackerConfig().ground.params()
 
 
-__all__ = ["eval_ground_params", "CachedSource", "EvalConfig", "TrackSpec", "json_safe", "resolve_presets",
-           "score_result", "refined_modes", "Bank", "BankEntry", "read_bank", "Realism", "RaycastScene", "Scan", "SimObject",
+__all__ = ["eval_ground_params", "Bank", "BankEntry", "read_bank", "Realism", "RaycastScene", "Scan", "SimObject",
            "Trajectory", "invert_transform_batch", "simulate_scan", "world_from_object", "angular_tolerance",
            "blocked_by_real", "Sensor", "load_sensor"]

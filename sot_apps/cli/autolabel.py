@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker import get_preset
 
     from ..detection.autolabel import autolabel, write_autolabels
-    from ..evaluation.tracker import CachedSource
+    from ..io.cached_source import CachedSource
     from ..objects.selection import DEFAULT_SELECTION
     from ..io.atomic import write_json
 

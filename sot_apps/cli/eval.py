@@ -109,7 +109,7 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
 
     from tqdm import tqdm
 
-    from ..benchmark.evaluate import evaluate_tracklets, format_benchmark
+    from ..bench.benchmark_eval import evaluate_tracklets, format_benchmark
     from ..benchmark.lists import default_resolver, read_lists
     from ..errors import InputError
     from ..io.atomic import write_json

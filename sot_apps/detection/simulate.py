@@ -26,7 +26,7 @@ import numpy as np
 
 from tracker import FrameDetections, wrap_angle
 
-from ..evaluation.detection import count_points_in_boxes
+from ..objects.box_points import count_points_in_boxes
 
 __all__ = ["DetectionNoise", "NOISE_PROFILES", "simulate_frame", "simulate_detections"]
 

@@ -19,7 +19,9 @@ from scipy.spatial import cKDTree
 
 from tracker import FrameDetections, iou_3d_batch, iou_bev_batch
 
-__all__ = ["APConfig", "GroundTruthFrame", "count_points_in_boxes", "ground_truth_frames", "average_precision", "ap_table", "identity_coverage"]
+from ..objects.box_points import count_points_in_boxes
+
+__all__ = ["APConfig", "GroundTruthFrame", "ground_truth_frames", "average_precision", "ap_table", "identity_coverage"]
 
 
 @dataclass(frozen=True)
@@ -38,24 +40,6 @@ class GroundTruthFrame:
     points: np.ndarray
     ego_xy: np.ndarray
     track_ids: tuple[str, ...] = field(default=())
-
-
-def count_points_in_boxes(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """Number of ``points`` (N, 3) inside each upright box of ``boxes`` (M, 7)."""
-    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
-    counts = np.zeros(len(boxes), dtype=np.int64)
-    if len(points) == 0 or len(boxes) == 0:
-        return counts
-    tree = cKDTree(points[:, :2])
-    radii = 0.5 * np.hypot(boxes[:, 4], boxes[:, 5])
-    for i, (box, near) in enumerate(zip(boxes, tree.query_ball_point(boxes[:, :2], radii))):
-        p = points[near]
-        d = p - box[:3]
-        c, s = np.cos(box[3]), np.sin(box[3])
-        inside = ((np.abs(c * d[:, 0] + s * d[:, 1]) <= box[4] / 2) & (np.abs(-s * d[:, 0] + c * d[:, 1]) <= box[5] / 2)
-                  & (np.abs(d[:, 2]) <= box[6] / 2))
-        counts[i] = int(inside.sum())
-    return counts
 
 
 def ground_truth_frames(sequence, labels: Sequence[str] | None = None, frames: Sequence[int] | None = None

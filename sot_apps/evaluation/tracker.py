@@ -26,18 +26,19 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from tracker import (DETECTION_PRESETS, DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
-                     Box, Detections, LidarFrame, PooledMetrics, TrackResult, TrackerConfig, TrackletScores, chamfer_distance,
+                     Box, Detections, PooledMetrics, TrackResult, TrackerConfig, TrackletScores, chamfer_distance,
                      difficulty, get_preset, refine_fixed_lag, mean_points_in_boxes, pool_metrics, preset_names, pseudo_gt_shape,
                      score_tracklet, track, tracklet_metrics)
 
 from ..errors import InputError
+from ..io.cached_source import CachedSource
+from ..io.jsonable import json_safe
 from ..objects.selection import DEFAULT_SELECTION, Selection, annotated_span
 from ..io.sequence import Sequence as LidarSequence
 
 __all__ = [
     "EvalConfig",
     "score_result",
-    "CachedSource",
     "TrackSpec",
     "RunRecord",
     "ResultRow",
@@ -71,33 +72,6 @@ class EvalConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
-
-
-class CachedSource:
-    """A FrameSource that keeps every frame it has read (evaluation reads each sweep many times)."""
-
-    def __init__(self, sequence: LidarSequence) -> None:
-        self.sequence = sequence
-        self._frames: dict[int, LidarFrame] = {}
-        self._world: dict[int, np.ndarray] = {}
-
-    def __len__(self) -> int:
-        return len(self.sequence)
-
-    def lidar_frame(self, index: int) -> LidarFrame:
-        frame = self._frames.get(index)
-        if frame is None:
-            frame = self.sequence.lidar_frame(index)
-            self._frames[index] = frame
-        return frame
-
-    def points_world(self, index: int) -> np.ndarray:
-        """(N, 3) float64 world points of a frame (no de-skew), cached."""
-        pts = self._world.get(index)
-        if pts is None:
-            pts = self.lidar_frame(index).points_world()
-            self._world[index] = pts
-        return pts
 
 
 @dataclass(frozen=True)
@@ -211,20 +185,6 @@ class EvalReport:
             "tracker_configs": self.tracker_configs,
             "rows": [r.to_dict() for r in self.rows],
         })
-
-
-def json_safe(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return json_safe(value.tolist())
-    if isinstance(value, (float, np.floating)):
-        return float(value) if np.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
 
 
 _METRIC_KEYS = ("acc", "rob", "shape", "success", "precision", "centre_error")

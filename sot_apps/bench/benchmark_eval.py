@@ -1,4 +1,4 @@
-"""Tracker presets on a tracklet list (``sot-apps eval --benchmark LIST``): paper-style tables per difficulty
+"""Tracker presets on a benchmark's tracklet list (run here, scored by :mod:`sot_apps.evaluation.tracker`) (``sot-apps eval --benchmark LIST``): paper-style tables per difficulty
 and per motion profile.
 
 Each tracklet is tracked from its first frame's ground-truth box to its last frame (LiDAR-SOT's protocol) with
@@ -20,9 +20,12 @@ from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty, get_preset
                      pseudo_gt_shape, track)
 
 from ..errors import InputError
+from ..benchmark.deps import eval_ground_params
+from ..benchmark.lists import SequenceResolver, Tracklet
+from ..evaluation.tracker import EvalConfig, TrackSpec, refined_modes, score_result
 from ..io import open_sequence
-from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params, json_safe, refined_modes, score_result
-from .lists import SequenceResolver, Tracklet
+from ..io.cached_source import CachedSource
+from ..io.jsonable import json_safe
 
 __all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
 
