@@ -12,20 +12,16 @@ from __future__ import annotations
 import dataclasses
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 import numpy as np
 
-from tracker import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty, get_preset, mean_points_in_boxes, pool_metrics,
-                     pseudo_gt_shape, track)
-
 from ..errors import InputError
-from ..benchmark.deps import eval_ground_params
-from ..benchmark.lists import SequenceResolver, Tracklet
-from ..evaluation.tracker import EvalConfig, TrackSpec, refined_modes, score_result
-from ..io import open_sequence
-from ..io.cached_source import CachedSource
-from ..io.jsonable import json_safe
+
+if TYPE_CHECKING:   # imported by `sot-apps bench --help` (module discovery): the libraries load when a run starts
+    from ..benchmark.lists import SequenceResolver, Tracklet
+    from ..evaluation.tracker import EvalConfig, TrackSpec
+    from ..io.cached_source import CachedSource
 
 __all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
 
@@ -41,6 +37,8 @@ class BenchmarkRun:
     profile: dict[str, str | None]
 
     def groups(self) -> list[tuple[str, list[str]]]:
+        from tracker import DIFFICULTIES
+
         keys = list(self.difficulty)
         out = [("all", keys)]
         out += [(d, [k for k in keys if self.difficulty[k] == d]) for d in DIFFICULTIES]
@@ -49,6 +47,8 @@ class BenchmarkRun:
         return [(name, ks) for name, ks in out if ks]
 
     def summary(self, preset: str, keys: list[str]) -> dict[str, float]:
+        from tracker import pool_metrics
+
         per_seed = []
         for seed in self.seeds:
             scores = [self.records[(preset, seed, k)][0] for k in keys]
@@ -63,6 +63,8 @@ class BenchmarkRun:
 
     def to_dict(self) -> dict:
         """JSON-ready dict (non-finite numbers, e.g. the Det row's Shape, become null)."""
+        from ..io.jsonable import json_safe
+
         return json_safe({
             "presets": list(self.presets), "seeds": list(self.seeds),
             "tables": {p: {name: self.summary(p, keys) for name, keys in self.groups()} for p in self.presets},
@@ -76,6 +78,11 @@ def _nan_mean(values: list[float]) -> float:
 
 
 def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSpec:
+    from tracker import DIFFICULTY_THRESHOLDS, difficulty, mean_points_in_boxes, pseudo_gt_shape
+
+    from ..benchmark.deps import eval_ground_params
+    from ..evaluation.tracker import TrackSpec
+
     tracks = seq.tracks()
     if t.id not in tracks:
         raise InputError(seq.root, f"tracklet {t.id}: no annotated object with this id")
@@ -95,7 +102,7 @@ def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSp
 
 
 def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, presets: Iterable[str],
-                       seeds: Iterable[int] = (0,), config: EvalConfig = EvalConfig(),
+                       seeds: Iterable[int] = (0,), config: EvalConfig | None = None,
                        progress: Callable[[int], Callable[[], None]] | None = None,
                        detections: Callable[[Any, int], Any] | None = None,
                        overrides: Mapping[str, Any] | None = None, lags: Iterable[int] = (),
@@ -107,7 +114,15 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
     ground truth with that seed). ``overrides``: TrackerConfig fields replaced in every preset. ``lags``: a
     row ``PRESET+lagN`` per N, the fixed-lag states of each online run (ms/frame: the online step plus the
     window solve); ``offline``: a row ``PRESET+offline``, each online run refined offline (ms/frame: the
-    online step plus the refinement per frame), as ``sot-apps eval SEQUENCE`` does."""
+    online step plus the refinement per frame), as ``sot-apps eval SEQUENCE`` does. ``config``: the evaluation's
+    parameters (default ``EvalConfig()``)."""
+    from tracker import get_preset, track
+
+    from ..evaluation.tracker import EvalConfig, refined_modes, score_result
+    from ..io import open_sequence
+    from ..io.cached_source import CachedSource
+
+    config = config if config is not None else EvalConfig()
     overrides = dict(overrides or {})
     presets, seeds, lags = tuple(presets), tuple(int(s) for s in seeds), tuple(int(n) for n in lags)
     rows = tuple(r for p in presets for r in (p, *(f"{p}+lag{n}" for n in lags), *((f"{p}+offline",) if offline else ())))
@@ -139,7 +154,6 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
                             dataclasses.replace(score_result(spec, refined, config), track_id=t.key), refined_ms)
                     tick()
     return BenchmarkRun(rows, seeds, records, levels, profiles)
-
 
 
 def _fmt(v: float, spec: str) -> str:

@@ -16,26 +16,23 @@ baselines and score the results with :mod:`sot_apps.evaluation.flow`.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
-from tqdm import tqdm
 
-from ..evaluation.flow import flow_errors, warp_abs_difference
-from ..flow.annotate import FlowOptions, build_pair, compute_pair
-from ..flow.dense import RayCache
-from ..flow.objects import TrackedObject, mesh_for, objects_from_annotations
-from ..io import open_sequence
-from ..io.sequence import Sequence
-from ..objects.meshes import Mesh
-from ..objects.shapes import box_capture_time
-from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
+if TYPE_CHECKING:   # the module is imported by `sot-apps bench --help`: the libraries load when a measurement runs
+    from ..flow.annotate import FlowOptions
+    from ..flow.objects import TrackedObject
+    from ..io.sequence import Sequence
+    from ..objects.trajectory import Trajectory
 
 __all__ = ["classical_flow", "synthetic_quality", "photometric_quality", "tracker_objects"]
 
 
 def classical_flow(image_k: np.ndarray, image_k1: np.ndarray, method: str) -> np.ndarray:
     """(H, W, 2) float32 flow k -> k+1 by OpenCV's DIS (medium preset) or Farneback."""
+    import cv2
+
     g0 = cv2.cvtColor(image_k, cv2.COLOR_BGR2GRAY) if image_k.ndim == 3 else image_k
     g1 = cv2.cvtColor(image_k1, cv2.COLOR_BGR2GRAY) if image_k1.ndim == 3 else image_k1
     if method == "dis":
@@ -46,12 +43,18 @@ def classical_flow(image_k: np.ndarray, image_k1: np.ndarray, method: str) -> np
 
 
 def _static(times: np.ndarray, state: np.ndarray) -> Trajectory:
+    from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
+
     return Trajectory.from_samples([int(times.min()) - 10**9, int(times.max()) + 10**9], [state, state], "extrapolate",
                                    CAMERA_EXTRAPOLATION_NS)
 
 
 def _gt_objects(world) -> tuple[list[TrackedObject], int]:
     """Exact vehicles (1 ms trajectories, GT meshes) followed by the static world as occluders."""
+    from ..flow.objects import TrackedObject
+    from ..objects.meshes import Mesh
+    from ..objects.trajectory import Trajectory
+
     times = world.ego.times_ns
     out = []
     for o in world.objects:
@@ -77,8 +80,11 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
     passed it, as PandaSet's boxes do). The first estimate is the ground-truth start box: it keeps
     the boxes' own time convention ``box_time`` ("frame" for ``sot-apps synth``, "points" for PandaSet).
     """
-    from tracker import points_in_box, transform_points
-    from tracker import track
+    from tracker import points_in_box, track, transform_points
+
+    from ..flow.objects import TrackedObject, mesh_for
+    from ..objects.shapes import box_capture_time
+    from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 
     out = []
     tracks = seq.tracks()
@@ -108,6 +114,14 @@ def synthetic_quality(world_dir: str | Path, frames: int = 8, vehicles: int = 4,
                       camera_size: tuple[int, int] = (960, 540), sensor: str = "pandar64", with_tracker: bool = True,
                       progress: bool = True) -> dict:
     """Build (or reuse) a synthetic world with camera images and score every method (see module doc)."""
+    import cv2
+    from tqdm import tqdm
+
+    from ..evaluation.flow import flow_errors
+    from ..flow.annotate import FlowOptions, build_pair, compute_pair
+    from ..flow.dense import RayCache
+    from ..flow.objects import objects_from_annotations
+    from ..io import open_sequence
     from ..synth import make_world, write_world
 
     world_dir = Path(world_dir)
@@ -187,6 +201,12 @@ def synthetic_quality(world_dir: str | Path, frames: int = 8, vehicles: int = 4,
 def photometric_quality(seq: Sequence, camera_name: str, objects: list[TrackedObject], pairs: range,
                         options: FlowOptions | None = None) -> dict:
     """Mean |I_k - warp(I_k+1)| (grey levels) over annotated non-occluded object pixels, per flow."""
+    import cv2
+
+    from ..evaluation.flow import warp_abs_difference
+    from ..flow.annotate import FlowOptions, build_pair, compute_pair
+    from ..flow.dense import RayCache
+
     options = options or FlowOptions(write_vis=False)
     camera = seq.cameras[camera_name]
     cache = RayCache()
