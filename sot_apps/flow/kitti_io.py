@@ -54,12 +54,19 @@ def kitti_flow_png(flow: np.ndarray, valid: np.ndarray) -> bytes:
     """The KITTI flow PNG's bytes (decoded: exactly :func:`encode_kitti_flow`). Only the rows that hold valid
     pixels are encoded (:mod:`.png`), so the cost follows the object pixels, not the image size."""
     flow = np.asarray(flow)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(flow).all(axis=-1)
+    valid = np.asarray(valid, dtype=bool)
     rows = np.flatnonzero(valid.any(axis=1))
-    row_valid = valid[rows]
-    pixels = np.empty(row_valid.shape + (3,), dtype=np.uint16)
-    pixels[..., :2] = _kitti_values(np.where(row_valid[..., None], flow[rows], 0.0))   # 0 px -> 2**15
-    pixels[..., 2] = row_valid
+    candidates = np.flatnonzero(valid[rows])           # flat indices into the (len(rows), W) block
+    values = flow[rows].reshape(-1, 2)[candidates]
+    finite = np.isfinite(values).all(axis=1)
+    candidates, values = candidates[finite], values[finite]
+    pixels = np.empty((len(rows), flow.shape[1], 3), dtype=np.uint16)
+    pixels[:] = _INVALID_RGB                            # invalid pixels: u = v = 0 px, valid = 0
+    flat = pixels.reshape(-1, 3)
+    flat[candidates, :2] = _kitti_values(values)
+    flat[candidates, 2] = 1
+    row_valid = np.zeros(pixels.shape[:2], dtype=bool)
+    row_valid.reshape(-1)[candidates] = True
     return encode_rows_png(pixels, rows, flow.shape[0], _INVALID_RGB, row_valid)
 
 
