@@ -18,8 +18,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
 from ..evaluation import DEV_TRACKS
 
@@ -36,6 +34,8 @@ def _pin_one_core() -> str:
 
 def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int = 3) -> dict:
     """Per object and pair: best-of-``repeats`` dense-flow time (ms) and its pixel count."""
+    import numpy as np
+
     from ..flow.annotate import FlowOptions, write_pair_outputs, build_pair, compute_pair
     from ..flow.dense import RayCache
 
@@ -75,6 +75,8 @@ def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int =
 
 
 def format_speed_table(result: dict) -> str:
+    import numpy as np
+
     rows = result["rows"]
     lines = [f"Dense flow, {result['camera']} {result['width']}x{result['height']}, one core; "
              f"CPU time per pair per object (best of repeats; wall-clock in the last column)", "",

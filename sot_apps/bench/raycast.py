@@ -20,8 +20,6 @@ import argparse
 import os
 import time
 
-import numpy as np
-
 __all__ = ["register", "run_benchmark"]
 
 
@@ -35,6 +33,8 @@ def _pin_one_core() -> str:
 
 def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[float], list[int]]:
     """(meshes, meshing seconds per vehicle, points per vehicle)."""
+    import numpy as np
+
     from ..objects.meshes import surfel_mesh
 
     meshes, seconds, npoints = [], [], []
@@ -70,6 +70,8 @@ def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.nda
 
 
 def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int = 20, sensor_name: str = "waymo_top") -> dict:
+    import numpy as np
+
     from ..sensor.noise import Realism
     from ..raycast import RaycastScene
     from ..sensor.scan import SimObject, simulate_scan
@@ -156,6 +158,8 @@ def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int 
 
 
 def _open3d_time(scene, origins, dirs, repeats: int) -> float:
+    import numpy as np
+
     import open3d as o3d
 
     rs = o3d.t.geometry.RaycastingScene()

@@ -7,9 +7,13 @@ import json
 import sys
 
 from ..errors import InputError
-from ..io import FORMATS, open_sequence
+from typing import TYPE_CHECKING
+
+from ..io import FORMATS
 from ..objects.selection import DEFAULT_SELECTION
-from ..summary import SequenceSummary, summarize_sequence
+
+if TYPE_CHECKING:
+    from ..summary import SequenceSummary
 from .common import add_subcommand
 
 
@@ -35,6 +39,9 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..io import open_sequence
+    from ..summary import summarize_sequence
+
     if args.tiny == bool(args.sequence):
         raise InputError(None, "info: give either a SEQUENCE directory or --tiny")
     if args.tiny:
