@@ -150,14 +150,16 @@ def write_json(path: str | Path, data: Any, indent: int | None = 1) -> None:
     write_text(path, text + "\n")
 
 
-def write_npz(path: str | Path, compressed: bool = True, **arrays: np.ndarray) -> None:
+def write_npz(path: str | Path, compressed: bool = True, level: int | None = None, **arrays: np.ndarray) -> None:
     """Write an .npz atomically; the same arrays give the same bytes (the zip entries carry a fixed date,
-    where ``numpy.savez`` stamps the current time; deflate at zlib's default level, as ``savez_compressed``)."""
+    where ``numpy.savez`` stamps the current time; deflate at zlib's default level, as ``savez_compressed``,
+    unless ``level`` (1 = fastest) says otherwise)."""
     import zipfile
 
     buffer = io.BytesIO()
     method = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
-    with zipfile.ZipFile(buffer, "w", compression=method, allowZip64=True) as archive:
+    with zipfile.ZipFile(buffer, "w", compression=method, allowZip64=True,
+                         compresslevel=level if compressed else None) as archive:
         for name, value in arrays.items():
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
             info.compress_type = method

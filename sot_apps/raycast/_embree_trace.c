@@ -23,6 +23,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
 #if defined(__GNUC__)
 #define SOT_EXPORT __attribute__((visibility("default")))
 #define SOT_ALIGN(n) __attribute__((aligned(n)))
@@ -290,4 +294,73 @@ SOT_EXPORT int sot_rt_cast(void *handle, const float *origins, int origin_step, 
         }
     }
     return s->error;
+}
+
+/*
+ * The per-return models of a simulated sweep (sot_apps/sensor/scan.py; formulas in sot_apps/sensor/noise.py), in
+ * one pass over the n rays after casting. The random numbers come from numpy's seeded generator (the same draws
+ * as the numpy path, so a seed gives the same scan): `noise` (range noise in metres, or NULL), `u_random`,
+ * `u_grazing`, `u_range` (uniforms in [0, 1), or NULL when that drop is off). A ray is a candidate when its
+ * distance is finite and in [min_range, max_range]; it is dropped when u_random < drop_random, when
+ * u_grazing < ((theta - start) / (90 - start))^2 (incidence theta beyond `grazing_start_deg`), or when
+ * u_range < clip(range_a + range_b * distance, 0, 1). Each kept ray writes, compacted in ray order: its index
+ * (`keep`), its measured range, its intensity (rho * cos(theta) * exp(-2 * attenuation * range), clipped to
+ * [0, 1], or 0 when `with_intensity` is 0; rho = reflectivity[object], 0 for object -1) and its point
+ * `target_from_world` (3x4, row-major) applied to origin + direction * range, as float32. Returns the count.
+ * Directions are float64 (n, 3); normals float32 (n, 3); origins float64 (n, 3) or one when origin_step == 0.
+ */
+SOT_EXPORT long sot_rt_returns(long n, const double *distance, const float *normal, const double *dirs,
+                               const double *origins, int origin_step, const int *object_index,
+                               const double *reflectivity, long num_objects, double min_range, double max_range,
+                               const double *noise, const double *u_random, double drop_random,
+                               const double *u_grazing, double grazing_start_deg, const double *u_range,
+                               double range_a, double range_b, int with_intensity, double attenuation,
+                               const double *target_from_world, long *keep, double *measured, float *intensity,
+                               float *xyz) {
+    const double *T = target_from_world;
+    const double cos_start = cos(grazing_start_deg * (M_PI / 180.0));
+    const double span = 90.0 - grazing_start_deg > 1e-6 ? 90.0 - grazing_start_deg : 1e-6;
+    long count = 0;
+    for (long i = 0; i < n; i++) {
+        const double d = distance[i];
+        if (!isfinite(d) || d < min_range || d > max_range) continue;
+        const double *dir = dirs + 3 * i;
+        const float *nrm = normal + 3 * i;
+        double c = -(dir[0] * (double)nrm[0] + dir[1] * (double)nrm[1] + dir[2] * (double)nrm[2]);
+        c = c < 0.0 ? 0.0 : (c > 1.0 ? 1.0 : c);
+        if (u_random && u_random[i] < drop_random) continue;
+        if (u_grazing && c < cos_start) {
+            double p = (acos(c) * (180.0 / M_PI) - grazing_start_deg) / span;
+            p = p < 0.0 ? 0.0 : (p > 1.0 ? 1.0 : p);
+            if (u_grazing[i] < p * p) continue;
+        }
+        if (u_range) {
+            double p = range_a + range_b * d;
+            p = p < 0.0 ? 0.0 : (p > 1.0 ? 1.0 : p);
+            if (u_range[i] < p) continue;
+        }
+        const double m = noise ? d + noise[i] : d;
+        double value = 0.0;
+        if (with_intensity) {
+            const int obj = object_index[i];
+            const double rho = obj >= 0 && obj < num_objects ? reflectivity[obj] : 0.0;
+            value = rho * c * exp(-2.0 * attenuation * m);
+            value = value < 0.0 ? 0.0 : (value > 1.0 ? 1.0 : value);
+        }
+        const double *o = origins + (origin_step ? 3 * i : 0);
+        const double px = o[0] + dir[0] * m, py = o[1] + dir[1] * m, pz = o[2] + dir[2] * m;
+        float *out = xyz + 3 * count;
+        for (int r = 0; r < 3; r++) {
+            const double *row = T + 4 * r;
+            double v = px * row[0];
+            v += py * row[1];
+            v += pz * row[2];
+            out[r] = (float)(v + row[3]);
+        }
+        keep[count] = i;
+        measured[count] = m;
+        intensity[count] = (float)value;
+        count++;
+    }
+    return count;
 }
