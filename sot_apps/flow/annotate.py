@@ -194,7 +194,7 @@ def write_pair_outputs(root: Path, k: int, result: PairFlow, image_path: Path, w
 class PairWriter:
     """Writes pairs' files on ``workers`` threads while the caller computes the next pair.
 
-    PNG deflate, the .flo copy and the file writes release the GIL. At most ``max_pending`` pairs wait (each holds
+    zlib, numpy's copies and the file writes release the GIL (the PNG encoder's row loop does not). At most ``max_pending`` pairs wait (each holds
     its flow arrays, ~25 MB at 1080p). A pair's ``on_done`` (its ``pairs/`` record) runs in the caller's thread,
     in submission order, once all its files are in place. On an error or Ctrl-C, files not started are dropped
     and no record is written for an unfinished pair (each file is atomic, so nothing half-written remains).

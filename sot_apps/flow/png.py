@@ -4,7 +4,8 @@ The image is written with PNG's Sub filter, so a run of background pixels filter
 pixel spans that hold content go through zlib; every zero run and every empty row is a deflate segment
 compressed once and reused (a segment ends with a full flush: it neither refers back nor is referred to,
 so segments can be concatenated). The zlib checksum is carried through the reused segments arithmetically.
-Cost scales with the object pixels, not the frame: ~10x faster than ``cv2.imencode`` on a 1080p flow map.
+Cost scales with the object pixels, not the frame: a 1080p KITTI flow map of a PandaSet pair (9 vehicles, 131k
+flow pixels) takes ~25 ms of CPU where ``cv2.imencode`` takes ~80 ms (shared 2-core VM).
 The decoded pixels are exactly the array given (lossless; tests read the files back with OpenCV).
 """
 
