@@ -58,6 +58,9 @@ class _CompiledTracer:
                                            c_double_p, c_double_p, c_double_p, c_double_p]
         lib.sot_rt_cast.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_long,
                                     ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+        if hasattr(lib, "sot_rt_cast8"):   # absent from a library built before it existed (rebuild: pip install)
+            lib.sot_rt_cast8.argtypes = lib.sot_rt_cast.argtypes
+            lib.sot_rt_has_packets.restype = ctypes.c_int
         if lib.sot_rt_load(str(embree).encode()) != 0:
             raise OSError(lib.sot_rt_error().decode(errors="replace"))
         return lib
@@ -80,6 +83,15 @@ def _embree_library_path() -> Path:
     except OSError:
         pass
     raise OSError("embreex's Embree 4 library was not found")
+
+
+def _packets(lib: ctypes.CDLL) -> bool:
+    """Trace with 8-ray packets (``sot_rt_cast8``) when the library has them; ``SOT_APPS_RAY_PACKETS=0`` turns
+    them off (tests compare both paths)."""
+    import os
+
+    return (os.environ.get("SOT_APPS_RAY_PACKETS", "1") != "0" and hasattr(lib, "sot_rt_cast8")
+            and bool(lib.sot_rt_has_packets()))
 
 
 def compiled_backend_available() -> bool:
@@ -125,7 +137,8 @@ class CompiledBackend:
         normal = np.empty((n, 3), np.float32)
         prim = np.empty(n, np.int32)
         geom = np.empty(n, np.int32)
-        err = self._lib.sot_rt_cast(self._handle, origins.ctypes.data, 0 if single else 1, directions.ctypes.data, n,
+        cast = self._lib.sot_rt_cast8 if _packets(self._lib) else self._lib.sot_rt_cast
+        err = cast(self._handle, origins.ctypes.data, 0 if single else 1, directions.ctypes.data, n,
                                     distance.ctypes.data, normal.ctypes.data, prim.ctypes.data, geom.ctypes.data)
         if err != 0:
             raise RuntimeError(f"Embree ray casting failed: {self._error()}")

@@ -105,3 +105,26 @@ def test_out_of_range_and_missed_rays_are_not_returned():
     np.testing.assert_array_equal(out.keep, [2, 5])
     np.testing.assert_array_equal(out.intensity, np.float32([0.5, 0.0]))   # object -1 (no object): reflectivity 0
     np.testing.assert_array_equal(out.xyz, np.float32([[6, 2, 3], [101, 2, 3]]))
+
+
+def test_ray_packets_give_the_same_hits_as_single_rays(monkeypatch):
+    """sot_rt_cast8 (8-ray packets) against sot_rt_cast (one ray at a time) on a sweep of vehicles and ground."""
+    from sot_apps.raycast.compiled import _CompiledTracer
+    from sot_apps.sensor.scan import build_static_scene
+    from sot_apps.synth.vehicles import random_vehicle
+
+    assert hasattr(_CompiledTracer.load(), "sot_rt_cast8")
+    rng = np.random.default_rng(2)
+    objects = _scene()[:1] + [SimObject(np.asarray(v.vertices), np.asarray(v.faces),
+                                        Trajectory.static(*rng.uniform(-30, 30, 2), -1.0, rng.uniform(-3, 3)), i)
+                              for i, v in enumerate(random_vehicle(rng) for _ in range(8))]
+    dirs, _, _ = load_sensor("hdl64e").ray_grid()
+    dirs = np.ascontiguousarray(dirs[: len(dirs) - 3], dtype=np.float32)   # not a multiple of 8: a partial packet
+    hits = {}
+    for packets in ("1", "0"):
+        monkeypatch.setenv("SOT_APPS_RAY_PACKETS", packets)
+        scene = build_static_scene(objects)
+        hits[packets] = scene.cast(np.zeros(3, np.float32), dirs)
+    assert (hits["1"].geom_id >= 1).sum() > 1000   # many vehicle hits
+    for name in ("distance", "normal", "prim_id", "geom_id"):
+        np.testing.assert_array_equal(getattr(hits["1"], name), getattr(hits["0"], name), err_msg=name)
