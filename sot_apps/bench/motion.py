@@ -26,11 +26,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..evaluation.motion import evaluate_motion, find_track_dirs, format_table, plot_accuracy
-    from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER
-
     from ..io import open_sequence
     from ..io.atomic import write_json
     from ..motion_export.sources import tracks_from_annotations, tracks_from_dirs
+    from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER
 
     sequence = open_sequence(args.sequence, format=getattr(args, "format", None))
     if args.horizon < 1:

@@ -29,10 +29,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..evaluation.realism import evaluate_realism, format_tables
-
     import sys
 
+    from ..evaluation.realism import evaluate_realism, format_tables
     from ..io import open_sequence
     from ..io.atomic import write_json
 

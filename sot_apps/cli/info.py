@@ -5,16 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-
-from ..errors import InputError
 from typing import TYPE_CHECKING
 
+from ..errors import InputError
 from ..io import FORMATS
 from ..objects.selection import DEFAULT_SELECTION
+from .common import add_subcommand
 
 if TYPE_CHECKING:
     from ..summary import SequenceSummary
-from .common import add_subcommand
 
 
 def register(subparsers) -> argparse.ArgumentParser:
