@@ -42,7 +42,7 @@ def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int =
     camera = seq.cameras[camera_name]
     options = FlowOptions()
     cache, lidar_cache = RayCache(), {}
-    rows, overhead, writing, vis = [], [], [], []
+    rows, overhead, writing, writing_cpu, vis = [], [], [], [], []
     for k in pairs:
         start = time.perf_counter()
         setup, flow_objects = build_pair(seq, camera, k, objects, options, lidar_cache)
@@ -61,9 +61,10 @@ def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int =
         with tempfile.TemporaryDirectory() as tmp:
             # the default outputs, synchronously on this one core (sot-apps flow writes them on a thread pool
             # while it computes the next pair), then the optional vis/ pictures on top
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             write_pair_outputs(Path(tmp) / "a", k, whole, camera.frames[k].image_path, False)
             writing.append((time.perf_counter() - t0) * 1e3)
+            writing_cpu.append((time.process_time() - c0) * 1e3)
             t0 = time.perf_counter()
             write_pair_outputs(Path(tmp) / "b", k, whole, camera.frames[k].image_path, True)
             vis.append((time.perf_counter() - t0) * 1e3 - writing[-1])
@@ -71,6 +72,7 @@ def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int =
             "pair_overhead_ms": float(np.mean(overhead)) if overhead else 0.0,
             "writing_ms": float(np.mean(writing)) if writing else 0.0,
             "writing_median_ms": float(np.median(writing)) if writing else 0.0,
+            "writing_cpu_median_ms": float(np.median(writing_cpu)) if writing_cpu else 0.0,
             "vis_ms": float(np.mean(vis)) if vis else 0.0}
 
 
@@ -98,7 +100,8 @@ def format_speed_table(result: dict) -> str:
     lines += ["", f"per-pair overhead (LiDAR occluders of k and k+1, cached across pairs): "
                   f"{result['pair_overhead_ms']:.0f} ms; writing a pair's outputs (2 KITTI PNGs, .flo, instance PNG; "
                   f"one core, not overlapped): mean {result['writing_ms']:.0f} ms, median "
-                  f"{result.get('writing_median_ms', result['writing_ms']):.0f} ms (target <= 60); "
+                  f"{result.get('writing_median_ms', result['writing_ms']):.0f} ms, CPU median "
+                  f"{result.get('writing_cpu_median_ms', 0.0):.0f} ms (target <= 60); "
                   f"optional vis/ pictures (--vis): +{result.get('vis_ms', 0.0):.0f} ms"]
     return "\n".join(lines)
 
