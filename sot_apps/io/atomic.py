@@ -158,11 +158,12 @@ def write_npz(path: str | Path, compressed: bool = True, level: int | None = Non
 
     buffer = io.BytesIO()
     method = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
-    with zipfile.ZipFile(buffer, "w", compression=method, allowZip64=True,
-                         compresslevel=level if compressed else None) as archive:
+    with zipfile.ZipFile(buffer, "w", compression=method, allowZip64=True) as archive:
         for name, value in arrays.items():
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
             info.compress_type = method
+            if compressed and level is not None:   # an entry made here takes its level from itself, not the archive
+                setattr(info, "compress_level" if hasattr(info, "compress_level") else "_compresslevel", level)
             with archive.open(info, "w", force_zip64=True) as handle:
                 np.lib.format.write_array(handle, np.asanyarray(value), allow_pickle=False)
     write_bytes(path, buffer.getvalue())
