@@ -68,7 +68,7 @@ def demo_config(out: Path, sequence: Path, synthetic: bool, scan_sensor: str = "
         flow_pairs = 10 if flow_pairs is None else flow_pairs
         cameras = cameras or ("front_camera",)
     stages = Stages(track=TrackStage(), bank=BankStage(), motion=MotionStage(),
-                    flow=FlowStage(cameras=cameras, max_pairs=flow_pairs),
+                    flow=FlowStage(cameras=cameras, max_pairs=flow_pairs, vis=True),   # the report shows the overlays
                     scans=ScanStage(sensor=scan_sensor, max_entries=1))
     return PipelineConfig(str(out), (SequenceConfig(str(sequence), objects=ObjectSource("annotations")),),
                           stages, "sot-apps demo")

@@ -115,6 +115,7 @@ class FlowStage:
     mode: str = "dense"
     max_pairs: int | None = None             # pairs 0..max_pairs (None = all)
     use_lidar: bool = True
+    vis: bool = False                        # also write vis/ pictures (colour wheel PNG, overlay JPEG)
 
 
 @dataclass(frozen=True)

@@ -193,7 +193,7 @@ def flow_camera(out: str, sequence: str, path: str, format: str | None, camera: 
             previous = None
         if previous != [o.object_id for o in objects]:
             shutil.rmtree(cam_root)
-    options = FlowOptions(mode=stage.mode, use_lidar=stage.use_lidar)
+    options = FlowOptions(mode=stage.mode, use_lidar=stage.use_lidar, write_vis=stage.vis)
     doc = annotate_camera(seq, camera, objects, flow_root, pairs=pairs, options=options, progress=False,
                           source="pipeline tracks")
     outputs = _files_under(cam_root)
