@@ -5,7 +5,9 @@ the sensor, which the placer checks for every candidate start at once (:func:`ge
 starts and frames, on the path's positions at the frame times):
 
 - ``far_approach``: the box centre is >= 55 m from the sensor at the first frame and closes at 5-12 m/s
-  (first-to-last range over time) without ever moving away by more than 0.2 m between frames;
+  (first-to-last range over time) without ever moving away by more than 0.2 m between frames, seen from the
+  front at the first frame (the line of sight at >= 150 degrees from the heading: head-on, as a vehicle
+  coming down the road, which shows the sensor its narrow front);
 - ``passing``: the vehicle drives past the sensor: the sensor's coordinate along the vehicle's heading
   (relative to the box centre) changes sign over the tracklet, and the nearest range is <= 15 m;
 - ``hidden``: no geometry beyond the range band; the benchmark removes every point of the vehicle for
@@ -34,6 +36,7 @@ __all__ = ["PROFILE_BANDS", "FAR_START_M", "FAR_CLOSING_MPS", "OBLIQUE_VIEW_DEG"
 
 FAR_START_M = 55.0
 FAR_CLOSING_MPS = (5.0, 12.0)
+FAR_HEAD_ON_DEG = 150.0
 PASSING_MAX_RANGE_M = 15.0
 OBLIQUE_VIEW_DEG = (20.0, 70.0)
 HIDDEN_FRAMES = (5, 15)           # how many frames a hidden tracklet is hidden (inclusive range)
@@ -43,10 +46,10 @@ OBLIQUE_POINTS = (15, 120)        # the median over frames of the points in the 
 NEAR_M = 30.0                     # far_approach: the frame it first comes within this range is recorded
 
 PROFILE_BANDS: dict[str, tuple[float, float]] = {
-    "far_approach": (58.0, 70.0),
+    "far_approach": (60.0, 75.0),
     "passing": (8.0, 35.0),
     "hidden": (8.0, 45.0),
-    "oblique": (35.0, 65.0),
+    "oblique": (40.0, 75.0),
 }
 
 
@@ -67,7 +70,9 @@ def geometry_ok(profile: str, positions: np.ndarray, headings: np.ndarray, senso
     if profile == "far_approach":
         closing = (r[:, 0] - r[:, -1]) / max(float(times_s[-1] - times_s[0]), 1e-9)
         monotone = (np.diff(r, axis=1) <= 0.2).all(axis=1) if r.shape[1] > 1 else np.ones(m, bool)
-        return (r[:, 0] >= FAR_START_M) & (closing >= FAR_CLOSING_MPS[0]) & (closing <= FAR_CLOSING_MPS[1]) & monotone
+        head_on = viewing_angle_deg(rel[:, 0], headings[:, 0]) >= FAR_HEAD_ON_DEG
+        return ((r[:, 0] >= FAR_START_M) & (closing >= FAR_CLOSING_MPS[0]) & (closing <= FAR_CLOSING_MPS[1])
+                & monotone & head_on)
     if profile == "passing":
         along = rel[..., 0] * np.cos(headings) + rel[..., 1] * np.sin(headings)  # the sensor along the path
         return (along[:, 0] * along[:, -1] < 0.0) & (r.min(axis=1) <= PASSING_MAX_RANGE_M)
