@@ -73,8 +73,6 @@ def hard_background(tmp_path_factory) -> Path:
     return write_world(tmp_path_factory.mktemp("road") / "road", frames=20, vehicles=0, seed=1, open_road=True)
 
 
-AV2_LOG_B = (Path(__file__).resolve().parents[2].parent / "shared" / "data" / "readers" / "av2_sensor_test" / "sensor"
-             / "val" / "adcf7d18-0510-35b0-a2fa-b4cea13a6d76")
 AV2_TRACKS = ("bc1b7963", "f5e7cc26", "6ef9e307", "842a35d7")   # cars with 465-1166 points in the single sweep
 
 
@@ -83,6 +81,7 @@ def real_bank(tmp_path_factory) -> Path:
     """A bank of 4 real, partial AV2 cars cut from one sweep (sot-apps bank build --from-annotations)."""
     from sot_apps.io import open_sequence
     from sot_apps.objects.bank import Bank, entries_from_annotations, write_bank_index
+    from tests.readers.paths import AV2_LOG_B
 
     root = tmp_path_factory.mktemp("real_bank")
     seq = open_sequence(AV2_LOG_B)
