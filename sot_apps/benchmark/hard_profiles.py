@@ -31,7 +31,8 @@ import math
 import numpy as np
 
 __all__ = ["PROFILE_BANDS", "FAR_START_M", "FAR_CLOSING_MPS", "OBLIQUE_VIEW_DEG", "PASSING_MAX_RANGE_M",
-           "HIDDEN_FRAMES", "NEAR_M", "FAR_MAX_START_POINTS", "OBLIQUE_POINTS", "geometry_ok", "points_ok", "extra_headings", "hidden_frames", "viewing_angle_deg",
+           "HIDDEN_FRAMES", "NEAR_M", "FAR_MAX_START_POINTS", "OBLIQUE_POINTS", "geometry_ok", "points_ok",
+           "extra_headings", "hidden_frames", "viewing_angle_deg",
            "tracklet_geometry"]
 
 FAR_START_M = 55.0

@@ -174,10 +174,10 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
 
     Tracklet i gets profile i mod P (``config.profiles``) and range band (i div P) mod bands, shuffled by the
     seed, so every profile meets every band; a profile of :data:`PROFILE_BANDS` starts in its own band instead.
-    Vehicles are drawn from the bank's ``config.split`` part. A copy takes tracklets in turn until ``per_copy`` are placed; a (profile, band) that finds
-    no place in a copy is not tried again in that copy (its tracklets wait for the next copy). One that finds no
-    place even in an empty copy is widened to the whole range; a profile that fails so in 3 empty copies makes the
-    background unusable."""
+    Vehicles are drawn from the bank's ``config.split`` part. A copy takes tracklets in turn until ``per_copy``
+    are placed; a (profile, band) that finds no place in a copy is not tried again in that copy (its tracklets
+    wait for the next copy). One that finds no place even in an empty copy is widened to the whole range; a
+    profile that fails so in 3 empty copies makes the background unusable."""
     frames = _frames(seq, config.frames)
     if config.replicas:
         return _plan_replicas(seq, bank, config, frames)
@@ -226,8 +226,8 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
                         hopeless[profile] = hopeless.get(profile, 0) + 1
                         if hopeless[profile] >= 3:
                             raise InputError(seq.root, f"could not place a {profile} tracklet on free ground of the "
-                                                       "background even in 3 empty copies (try other --frames, or a synthetic "
-                                                       "road: docs/benchmark.md)")
+                                                       "background even in 3 empty copies (try other --frames, or "
+                                                       "the synthetic open road: docs/benchmark.md)")
                     impossible.add(cell)
                 left.append(cell)
                 continue
@@ -339,7 +339,8 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
         if not v.listed:
             continue
         a, b = v.span if v.span is not None else (0, len(frames) - 1)
-        if not points_ok(v.motion.profile, counts[a:b + 1, j], (v.hidden[0] - a, v.hidden[1] - a) if v.hidden else None):
+        hidden = (v.hidden[0] - a, v.hidden[1] - a) if v.hidden else None
+        if not points_ok(v.motion.profile, counts[a:b + 1, j], hidden):
             unlisted[v.motion.profile] = unlisted.get(v.motion.profile, 0) + 1
             continue
         mean10 = float(counts[a:a + n, j].mean())
@@ -389,7 +390,8 @@ def make_benchmark(config: MakeConfig, progress: bool = True) -> dict:
         write_json(out / f"{level}.json", [e for e in entries if e["difficulty"] == level])
     counts = {"difficulty": {d: sum(e["difficulty"] == d for e in entries) for d in ("easy", "medium", "hard")},
               "profile": {p: sum(e["profile"] == p for e in entries)
-                          for p in list(config.profiles) + sorted({e["profile"] for e in entries} - set(config.profiles))}}
+                          for p in list(config.profiles)
+                          + sorted({e["profile"] for e in entries} - set(config.profiles))}}
     unlisted: dict[str, int] = {}
     for s in summaries:
         for p, n in s.get("unlisted", {}).items():

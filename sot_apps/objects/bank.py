@@ -50,7 +50,8 @@ from .meshes import SurfelParams, surfel_mesh
 from .shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
 from ..interrupts import import_trimesh
 
-__all__ = ["BankEntry", "Bank", "SPLITS", "bank_split", "split_entries", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
+__all__ = ["BankEntry", "Bank", "SPLITS", "bank_split", "split_entries", "read_bank", "write_bank_index",
+           "entry_from_points", "entry_from_track_dir",
            "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points",
            "track_points_by_frame"]
 

@@ -42,8 +42,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["PROFILES", "HARD_PROFILES", "ALL_PROFILES", "VehicleLimits", "MotionSpec", "MotionPath", "sample_motion", "integrate_motion",
-           "place_path", "place_states"]
+__all__ = ["PROFILES", "HARD_PROFILES", "ALL_PROFILES", "VehicleLimits", "MotionSpec", "MotionPath", "sample_motion",
+           "integrate_motion", "place_path", "place_states"]
 
 PROFILES: tuple[str, ...] = ("constant_speed", "hard_brake", "strong_accel", "stop_and_go", "lane_change", "turn",
                              "u_turn", "occluded")

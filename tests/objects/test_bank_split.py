@@ -32,7 +32,8 @@ def test_split_is_deterministic_disjoint_and_keeps_a_vehicle_together():
     assert bank_split(copy) == bank_split(entries[3])
     # tuned-on data (PandaSet: dev tracks and the benchmark's background) is always for choosing
     assert all(bank_split(_entry(f"p{i}", "pandaset_002", f"t{i}")) == "choose" for i in range(50))
-    assert bank_split(_entry("m", None, None, "/meshes/car.obj")) == bank_split(_entry("m2", None, None, "/meshes/car.obj"))
+    mesh = "/meshes/car.obj"
+    assert bank_split(_entry("m", None, None, mesh)) == bank_split(_entry("m2", None, None, mesh))
     with pytest.raises(ValueError):
         split_entries(entries, "tune")
 
