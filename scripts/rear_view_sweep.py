@@ -3,7 +3,8 @@
 The tests run a few scenes; this runs scenes 0..N-1 x tracker seeds 0..S-1 and prints the figures quoted in
 docs/tracker.md ("A rear view, and frame 1's sideways motion"):
 
-    python scripts/rear_view_sweep.py --preset full full_v4 --scenes 12 --seeds 3
+    python scripts/rear_view_sweep.py --preset full --scenes 12 --seeds 3
+    python scripts/rear_view_sweep.py --preset full --scenes 12 --seeds 3 --set motion.first_motion_along_heading=false
 """
 
 from __future__ import annotations
@@ -17,17 +18,17 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "tracker"))
 
 from test_motion_filter import _rear_view_sequence  # noqa: E402  (the tests' scene builder)
-from tracker import Tracker, get_preset  # noqa: E402
+from tracker import Tracker, get_preset, parse_overrides  # noqa: E402
 from tracker.geometry import wrap_angle  # noqa: E402
 
 
-def rear_view(preset: str, scenes: int, seeds: int) -> str:
+def rear_view(preset: str, scenes: int, seeds: int, overrides: dict) -> str:
     """Heading error of a 40-frame straight drive seen only from behind, and the sideways error of the box."""
     heading, sideways, first_sideways = [], [], []
     for scene in range(scenes):
         frames, boxes = _rear_view_sequence(40, seed=scene)
         for seed in range(seeds):
-            tracker = Tracker(get_preset(preset, seed=seed))
+            tracker = Tracker(get_preset(preset, seed=seed, **overrides))
             tracker.start(frames[0], boxes[0])
             h, a = [], []
             for frame, box in zip(frames[1:], boxes[1:]):
@@ -48,13 +49,13 @@ def rear_view(preset: str, scenes: int, seeds: int) -> str:
                if above.any() and (~above).any() else ""))
 
 
-def frame_gap(preset: str, scenes: int, seeds: int) -> str:
+def frame_gap(preset: str, scenes: int, seeds: int, overrides: dict) -> str:
     """Position error after a 4-frame gap (12 m/s): along the track and in all."""
     along, total = [], []
     for scene in range(scenes):
         frames, boxes = _rear_view_sequence(20, speed=12.0, seed=scene)
         for seed in range(seeds):
-            tracker = Tracker(get_preset(preset, seed=seed))
+            tracker = Tracker(get_preset(preset, seed=seed, **overrides))
             tracker.start(frames[0], boxes[0])
             for frame in frames[1:8]:
                 tracker.step(frame)
@@ -70,10 +71,13 @@ def main() -> int:
     parser.add_argument("--preset", nargs="+", default=["full"])
     parser.add_argument("--scenes", type=int, default=12)
     parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                        help="replace a tracker setting in every preset (e.g. motion.alpha=0.6); repeatable")
     args = parser.parse_args()
+    overrides = parse_overrides(args.set)
     for preset in args.preset:
-        print(f"{preset}: {rear_view(preset, args.scenes, args.seeds)}")
-        print(f"{preset}: {frame_gap(preset, args.scenes, args.seeds)}")
+        print(f"{preset}: {rear_view(preset, args.scenes, args.seeds, overrides)}")
+        print(f"{preset}: {frame_gap(preset, args.scenes, args.seeds, overrides)}")
     return 0
 
 

@@ -1,20 +1,26 @@
 """Run SOTracker on a :class:`~sot_apps.io.sequence.Sequence` and write ``DIR/track.json`` + ``DIR/shape.ply``.
 
-The one writer of track files: ``sot-apps track`` and the pipeline's tracking stage both call
-:func:`write_track_result`, and both start an annotated object at :func:`first_box_with_points`.
+One object (:func:`track_sequence`, ``sot-apps track``) or many in one pass over the sweeps
+(:func:`track_objects`, the pipeline's tracking stage: each sweep read and grounded once, every live object
+stepped; each object's result is the one tracking it alone gives). The one writer of track files: both call
+:func:`write_track_result`, and both start an annotated object at the first annotated box with enough points
+(:class:`StartSearch`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tracker import Box, Detections, TrackResult, TrackerConfig, points_in_box, track
+from tracker import (Box, Detections, FrameEstimate, LidarFrame, Tracker, TrackResult, TrackerConfig,
+                     cached_sweep_ground_mask, points_in_box, track)
 
 from .errors import InputError
 from .io.sequence import Sequence
@@ -24,7 +30,8 @@ from .io.tracks import FrameRecord, Size, TrackFile, write_track
 __all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read_shape_growth", "parse_init_box",
            "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence",
            "refine_track_fixed_lag", "refine_track_offline", "track_result_to_trackfile",
-           "write_track_result", "first_box_with_points", "TrackingFailed", "MIN_INIT_POINTS"]
+           "write_track_result", "first_box_with_points", "TrackingFailed", "MIN_INIT_POINTS", "StartSearch",
+           "ShapeRecorder", "ObjectRequest", "ObjectTrack", "PassTimes", "track_objects", "sweep_ground_once"]
 
 MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box
 
@@ -110,23 +117,45 @@ def track_sequence(seq: Sequence, init_box: Box, start: int = 0, end: int | None
     return track(seq, init_box, start, end, config, progress=wrap, detections=detections)
 
 
+class StartSearch:
+    """Where an annotated object's track starts: the first annotated (frame, box) whose box holds ``min_points``
+    non-ground points, as the tracker counts them at its start (no de-skew); the last annotated frame and frames
+    without a sweep cannot start a track. :meth:`attempt` tries one frame, :meth:`failure` says why none did."""
+
+    def __init__(self, seq: Sequence, annotated: list[tuple[int, Box]] | tuple[tuple[int, Box], ...],
+                 config: TrackerConfig, min_points: int = MIN_INIT_POINTS) -> None:
+        self.annotated, self.config, self.min_points = tuple(annotated), config, min_points
+        self.candidates = {k: box for k, box in self.annotated[:-1] if seq.frames[k].has_sweep}
+        self.best = (0, self.annotated[0][0])
+
+    def attempt(self, frame: LidarFrame) -> tuple[Tracker, FrameEstimate] | None:
+        """The tracker started at candidate ``frame`` and its start estimate when its box holds enough points,
+        else None."""
+        tracker = Tracker(self.config)
+        estimate = tracker.start(frame, self.candidates[frame.index])
+        n = estimate.num_points
+        if n >= self.min_points:
+            return tracker, estimate
+        self.best = max(self.best, (n, frame.index), key=lambda b: b[0])
+        return None
+
+    def failure(self) -> TrackingFailed:
+        annotated = self.annotated
+        last = annotated[-2][0] if len(annotated) > 1 else annotated[0][0]
+        return TrackingFailed(f"fewer than {self.min_points} LiDAR points in every annotated box (frames "
+                              f"{annotated[0][0]}..{last}; at most {self.best[0]} at frame {self.best[1]}); "
+                              f"nothing to track")
+
+
 def first_box_with_points(seq: Sequence, annotated: list[tuple[int, Box]] | tuple[tuple[int, Box], ...],
                           config: TrackerConfig, min_points: int = MIN_INIT_POINTS) -> tuple[int, Box]:
     """The first annotated (frame, box) whose box holds ``min_points`` non-ground points, as the tracker counts
     them at its start; the last annotated frame cannot start a track. None such: :class:`TrackingFailed`."""
-    from tracker import Tracker
-
-    best = (0, annotated[0][0])
-    for k, box in annotated[:-1]:
-        if not seq.frames[k].has_sweep:  # a frame without a sweep cannot start a track
-            continue
-        n = Tracker(config).start(seq.lidar_frame(k), box).num_points
-        if n >= min_points:
+    search = StartSearch(seq, annotated, config, min_points)
+    for k, box in search.candidates.items():
+        if search.attempt(seq.lidar_frame(k)) is not None:
             return k, box
-        best = max(best, (n, k), key=lambda b: b[0])
-    last = annotated[-2][0] if len(annotated) > 1 else annotated[0][0]
-    raise TrackingFailed(f"fewer than {min_points} LiDAR points in every annotated box (frames {annotated[0][0]}..{last}; "
-                         f"at most {best[0]} at frame {best[1]}); nothing to track")
+    raise search.failure()
 
 
 def track_result_to_trackfile(seq: Sequence, result: TrackResult, object_id: str, init_box: Box,
@@ -216,24 +245,34 @@ class ShapeGrowth:
                    tuple(np.asarray(s["points"], dtype=np.float64).reshape(-1, 3) for s in snaps))
 
 
+class ShapeRecorder:
+    """Keeps the tracker's shape after every frame that changed it (``on_frame`` of :func:`tracker.track` or of
+    the multi-object pass); :meth:`growth` picks ``shots`` of those snapshots."""
+
+    def __init__(self) -> None:
+        self.snapshots: dict[int, np.ndarray] = {}
+
+    def __call__(self, tracker, estimate) -> None:
+        snapshots = self.snapshots
+        if not snapshots or len(tracker.shape.points) != len(snapshots[max(snapshots)]):
+            snapshots[estimate.frame] = tracker.shape_points()
+
+    def growth(self, object_id: str, start: int, init_box: Box, shots: int = 4) -> ShapeGrowth:
+        keys = sorted(self.snapshots)
+        if len(keys) > shots:
+            keys = sorted({keys[int(round(i))] for i in np.linspace(0, len(keys) - 1, shots)})
+        return ShapeGrowth(object_id, start, tuple(float(v) for v in init_box.size), tuple(keys),
+                           tuple(self.snapshots[k] for k in keys))
+
+
 def track_with_shape_growth(seq: Sequence, init_box: Box, start: int, end: int, config: TrackerConfig,
                             object_id: str, shots: int = 4, detections: Detections | None = None
                             ) -> tuple[TrackResult, ShapeGrowth]:
     """:func:`tracker.track` (same frames, same result) that also keeps the shape after every frame that changed
     it, and returns ``shots`` of those snapshots."""
-    snapshots: dict[int, np.ndarray] = {}
-
-    def keep_changed_shape(tracker, estimate) -> None:
-        if not snapshots or len(tracker.shape.points) != len(snapshots[max(snapshots)]):
-            snapshots[estimate.frame] = tracker.shape_points()
-
-    result = track(seq, init_box, start, end, config, detections=detections, on_frame=keep_changed_shape)
-    keys = sorted(snapshots)
-    if len(keys) > shots:
-        keys = sorted({keys[int(round(i))] for i in np.linspace(0, len(keys) - 1, shots)})
-    growth = ShapeGrowth(object_id, start, tuple(float(v) for v in init_box.size), tuple(keys),
-                         tuple(snapshots[k] for k in keys))
-    return result, growth
+    recorder = ShapeRecorder()
+    result = track(seq, init_box, start, end, config, detections=detections, on_frame=recorder)
+    return result, recorder.growth(object_id, start, init_box, shots)
 
 
 def write_shape_growth(directory: str | Path, growth: ShapeGrowth) -> Path:
@@ -246,3 +285,332 @@ def read_shape_growth(directory: str | Path) -> ShapeGrowth | None:
     """The record written by :func:`write_shape_growth`, or None when the track has none."""
     path = Path(directory) / SHAPE_GROWTH_FILE
     return ShapeGrowth.from_json(json.loads(path.read_text())) if path.is_file() else None
+
+
+# ------------------------------------------------------------------------------------- multi-object pass
+
+@dataclass(frozen=True)
+class ObjectRequest:
+    """One object of :func:`track_objects`: ``init_box`` (world frame) at frame ``start``, tracked through ``end``.
+
+    ``annotated``: the object's annotated (frame, box) pairs; when given, the track starts at the first of them
+    whose box holds ``min_points`` points (:class:`StartSearch`) and ``start``/``init_box`` are not used.
+    ``max_frames``: track at most this many frames after the start."""
+
+    object_id: str
+    init_box: Box
+    start: int
+    end: int
+    annotated: tuple[tuple[int, Box], ...] = ()
+    max_frames: int | None = None
+
+
+@dataclass
+class ObjectTrack:
+    """One object's outcome of the pass: its result (in the pass's mode) or the reason it failed (``error``;
+    ``lacks_points``: a :class:`TrackingFailed`, the object had too few LiDAR points to start or follow)."""
+
+    object_id: str
+    start: int = -1
+    init_box: Box | None = None
+    result: TrackResult | None = None
+    growth: ShapeGrowth | None = None
+    error: str | None = None
+    lacks_points: bool = False
+    seconds: float = 0.0          # this object's own CPU seconds (its steps and refinement; the shared reads not)
+
+
+@dataclass
+class PassTimes:
+    """Where a pass spent its time (seconds): reading sweeps, their whole-sweep ground (once per sweep), the
+    objects' online steps, and the refinement (fixed-lag windows, offline gathering and solves)."""
+
+    read: float = 0.0
+    ground: float = 0.0
+    step: float = 0.0
+    refine: float = 0.0
+    sweeps: int = 0
+    object_frames: int = 0
+
+    def to_json(self) -> dict:
+        return {"read_s": round(self.read, 4), "ground_s": round(self.ground, 4), "step_s": round(self.step, 4),
+                "refine_s": round(self.refine, 4), "sweeps": self.sweeps, "object_frames": self.object_frames}
+
+
+MODES = ("online", "lag", "offline")
+
+
+class _Live:
+    """An object during the pass: its start search, then its tracker, recorder and refinement state."""
+
+    def __init__(self, request: ObjectRequest, seq: Sequence, config: TrackerConfig, min_points: int) -> None:
+        self.request = request
+        self.out = ObjectTrack(request.object_id)
+        self.search = StartSearch(seq, request.annotated, config, min_points) if request.annotated else None
+        self.first = min(self.search.candidates, default=None) if self.search else request.start
+        self.tracker: Tracker | None = None
+        self.end = -1
+        self.estimates: list = []
+        self.recorder: ShapeRecorder | None = None
+        self.smoother = None              # mode "lag": tracker.fixed_lag.FixedLagSmoother
+        self.final: list = []             # mode "lag": the estimates that became final
+        self.regions: list[np.ndarray] = []   # mode "offline": each frame's region points (its local crops)
+        self.previous: tuple[int, np.ndarray] | None = None
+
+    @property
+    def waiting(self) -> bool:
+        return self.out.start < 0 and self.out.error is None
+
+
+def _pose(seq: Sequence, k: int) -> tuple[int, np.ndarray]:
+    info = seq.frames[k]
+    return int(info.timestamp_ns), np.asarray(info.world_from_ego, dtype=np.float64)
+
+
+def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerConfig, mode: str = "online",
+                  lag: int = 10, detections: Detections | None = None, min_points: int = MIN_INIT_POINTS,
+                  shape_growth: bool = False, on_done=None, progress=None) -> tuple[list[ObjectTrack], PassTimes]:
+    """Track many objects of ``seq`` in ONE pass over its sweeps: each sweep is read once and its whole-sweep
+    ground computed once (the tracker's per-sweep cache, shared by every tracker on the sweep), every live
+    object is stepped (objects start and end at different frames). The result of each object is the one
+    tracking it alone gives (:func:`tracker.track`, then :func:`refine_track_fixed_lag` with ``mode="lag"`` or
+    :func:`refine_track_offline` with ``mode="offline"``), bit for bit: the refinements are fed from the sweeps
+    as the pass reads them (the fixed-lag window as it slides; offline, each object keeps only its region points
+    per frame until its solve). Refinement applies to ``config.method == "sot"``; other methods track alone.
+
+    An object whose start box (or every annotated box, see :class:`ObjectRequest`) holds fewer than
+    ``min_points`` points, that is lost after its start (no points in any later frame), or whose tracking raises,
+    fails alone (``ObjectTrack.error``). ``shape_growth``: also record :class:`ShapeGrowth`. ``on_done``:
+    callable(ObjectTrack) as each object finishes (then its result is not kept in the returned list, so a long
+    pass holds only live objects). ``progress``: callable(iterable) -> iterable over the frames.
+    Returns the objects' outcomes in request order and where the time went."""
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, not {mode!r}")
+    times = PassTimes()
+    refine = mode if config.method == "sot" else "online"
+    if config.method == "det":
+        return _track_alone(seq, requests, config, detections, min_points, shape_growth, on_done, times)
+    live = [_Live(r, seq, config, min_points) for r in requests]
+    for o in live:
+        if o.first is None:
+            o.out.error, o.out.lacks_points = str(o.search.failure()), True
+    sweep_ground = config.ground.remover == "sweep"
+    ground_args = config.ground.sweep_args() if sweep_ground else ()
+    last = max([o.request.end for o in live if o.first is not None], default=-1)
+    first = min([o.first for o in live if o.first is not None], default=last + 1)
+    results: list[ObjectTrack] = [o.out for o in live]
+    frames = range(first, last + 1)
+    for k in (progress(frames) if progress else frames):
+        starting = [o for o in live if o.waiting and (k in o.search.candidates if o.search else k == o.first)]
+        stepping = [o for o in live if o.tracker is not None and o.out.start < k <= o.end]
+        if not starting and not stepping:
+            continue
+        t0 = time.thread_time()
+        frame = seq.lidar_frame(k)
+        t1 = time.thread_time()
+        if sweep_ground and frame.has_sweep and len(frame.points_ego):
+            sweep_ground_once(seq, frame, ground_args)   # every tracker on the sweep reuses it
+        t2 = time.thread_time()
+        times.read += t1 - t0
+        times.ground += t2 - t1
+        times.sweeps += 1
+        for o in starting:
+            _start(o, seq, frame, config, refine, lag, shape_growth, times)
+            if o.tracker is not None:
+                _refine_frame(o, seq, frame, config, refine, times)
+        for o in stepping:
+            try:
+                t = time.thread_time()
+                estimate = o.tracker.step(frame, None if detections is None else detections.get(k))
+                o.estimates.append(estimate)
+                if o.recorder is not None:
+                    o.recorder(o.tracker, estimate)
+                dt = time.thread_time() - t
+                times.step += dt
+                times.object_frames += 1
+                o.out.seconds += dt
+                _refine_frame(o, seq, frame, config, refine, times)
+            except Exception as exc:  # noqa: BLE001 - one object's failure does not stop the others
+                _fail(o, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+        for o in starting + stepping:
+            if o.tracker is not None and o.out.error is None and k == o.end:
+                _finish(o, seq, config, refine, lag, min_points, times, on_done)
+    for o in live:
+        if o.waiting and o.search is not None:   # no candidate frame held enough points
+            o.out.error, o.out.lacks_points = str(o.search.failure()), True
+    return results, times
+
+
+def sweep_ground_once(seq: Sequence, frame: LidarFrame, ground_args: tuple) -> np.ndarray:
+    """The whole-sweep ground mask of ``frame`` (:func:`tracker.cached_sweep_ground_mask` with ``ground_args``),
+    made the tracker's cached mask for the sweep: taken from the sweep cache when ``seq`` reads through one and
+    it holds the mask, else computed once and stored there (every process and later run reuses it)."""
+    from tracker import remember_sweep_ground_mask, sweep_ground_mask
+
+    from .io.sweep_cache import SweepCache, code_digest
+
+    cache = SweepCache.of(seq)
+    if cache is None:
+        return cached_sweep_ground_mask(frame.points_ego, *ground_args)
+    # the mask's name: its parameters and the ground code (a changed algorithm never reads an old mask)
+    digest = hashlib.sha256(repr(tuple(ground_args)).encode() + code_digest(sweep_ground_mask))
+    name = "ground-" + digest.hexdigest()[:16]
+    mask = cache.load_mask(frame.index, name)
+    if mask is not None and len(mask) == len(frame.points_ego):
+        return remember_sweep_ground_mask(frame.points_ego, mask, *ground_args)
+    mask = cached_sweep_ground_mask(frame.points_ego, *ground_args)
+    cache.store_mask(frame.index, name, mask)
+    return mask
+
+
+def _fail(o: _Live, error: str, lacks_points: bool = False) -> None:
+    o.out.error, o.out.lacks_points = error, lacks_points
+    o.tracker, o.estimates, o.smoother, o.regions = None, [], None, []
+
+
+def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str, lag: int,
+           shape_growth: bool, times: PassTimes) -> None:
+    """Start ``o`` at ``frame`` (an annotated candidate or its given start) as :func:`tracker.track` would."""
+    from tracker import FixedLagSmoother
+
+    k = frame.index
+    t = time.thread_time()
+    try:
+        started = None
+        if o.search is not None:
+            started = o.search.attempt(frame)
+            if started is None:
+                return
+            box = o.search.candidates[k]
+        else:
+            if not frame.has_sweep:
+                _fail(o, f"the start frame {k} has no sweep; nothing to track", lacks_points=True)
+                return
+            box = o.request.init_box
+        previous = _pose(seq, k - 1) if config.deskew and k > 0 else None
+        if started is None or previous is not None:   # the search's start had no previous pose (no de-skew)
+            tracker = Tracker(config)
+            estimate = tracker.start(frame, box, previous)
+        else:
+            tracker, estimate = started
+    except Exception as exc:  # noqa: BLE001
+        _fail(o, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+        return
+    dt = time.thread_time() - t
+    times.step += dt
+    o.out.seconds += dt
+    o.tracker, o.out.start, o.out.init_box = tracker, k, box
+    end = o.request.end
+    o.end = end if o.request.max_frames is None else min(end, k + o.request.max_frames)
+    o.estimates = [estimate]
+    if shape_growth:
+        o.recorder = ShapeRecorder()
+        o.recorder(tracker, estimate)
+    if refine == "lag":
+        o.smoother = FixedLagSmoother(config, lag, np.asarray(box.size))
+        if config.deskew and k > 0:   # as tracker.refine_fixed_lag: the pose before the start de-skews it
+            o.smoother._previous = _pose(seq, k - 1)
+
+
+def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str,
+                  times: PassTimes) -> None:
+    """Feed the object's newest estimate to its refinement with the sweep in hand."""
+    from tracker import frame_region_points
+
+    if refine == "online":
+        return
+    t = time.thread_time()
+    # the region comes from the step's own crop when it holds the region, else from the part of the sweep that
+    # can reach it: the same points in the same order as from the whole sweep in the world frame, which the
+    # per-object refinements use (transform_points is element-wise: a row's result does not depend on the others);
+    # de-skewed sweeps take the per-object refinements' own path (no crop)
+    crop = None if config.deskew else o.tracker.last_crop
+    estimate = o.estimates[-1]
+    if refine == "lag":
+        o.final += o.smoother.add(frame, estimate, crop=crop)
+    else:
+        o.regions.append(frame_region_points(frame, estimate.box, config, config.refinement.offline, o.previous,
+                                             crop=crop))
+        o.previous = _pose(seq, frame.index)
+    dt = time.thread_time() - t
+    times.refine += dt
+    o.out.seconds += dt
+
+
+def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: int, min_points: int,
+            times: PassTimes, on_done) -> None:
+    """The object's last frame: the pipeline's checks, the offline solve, its result; then release it."""
+    from tracker import refine_offline
+
+    online = TrackResult(o.estimates, o.out.init_box.size, o.tracker.shape_points(), config)
+    why = lacking_points(online, min_points)
+    if why is not None:
+        _fail(o, why, lacks_points=True)
+    else:
+        t = time.thread_time()
+        try:
+            if refine == "lag":
+                o.final += o.smoother.finish()
+                result = TrackResult(o.final, np.asarray(online.size), o.smoother.shape, config, mode="lag", lag=lag)
+            elif refine == "offline":
+                result = refine_offline(None, online, config, points=o.regions)
+            else:
+                result = online
+        except Exception as exc:  # noqa: BLE001 - one object's failure does not stop the others
+            _fail(o, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+            result = None
+        dt = time.thread_time() - t
+        times.refine += dt
+        o.out.seconds += dt
+        if result is not None:
+            o.out.result = result
+            if o.recorder is not None:
+                o.out.growth = o.recorder.growth(o.request.object_id, o.out.start, o.out.init_box)
+            o.tracker, o.estimates, o.smoother, o.regions, o.final, o.recorder = None, [], None, [], [], None
+    if on_done is not None:
+        on_done(o.out)
+        o.out.result = None
+
+
+def lacking_points(result: TrackResult, min_points: int) -> str | None:
+    """Why an online ``result`` is no track (fewer than ``min_points`` points in the start box, or no points in
+    any later frame), or None."""
+    first, later = result.estimates[0], result.estimates[1:]
+    if first.num_points < min_points:
+        return (f"{first.num_points} LiDAR points in the initial box at frame {first.frame} (need at least "
+                f"{min_points}); nothing to track")
+    if later and all("no_points" in e.flags for e in later):
+        return "lost after the start frame (no points in any later frame)"
+    return None
+
+
+def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerConfig, detections, min_points: int,
+                 shape_growth: bool, on_done, times: PassTimes) -> tuple[list[ObjectTrack], PassTimes]:
+    """Methods other than SOTracker's (the Det baseline): each object tracked alone through :func:`tracker.track`."""
+    outs = []
+    for r in requests:
+        out = ObjectTrack(r.object_id)
+        t = time.thread_time()
+        try:
+            start, box = first_box_with_points(seq, r.annotated, config, min_points) if r.annotated else (r.start, r.init_box)
+            end = r.end if r.max_frames is None else min(r.end, start + r.max_frames)
+            recorder = ShapeRecorder() if shape_growth else None
+            result = track(seq, box, start, end, config, detections=detections, on_frame=recorder)
+            why = lacking_points(result, min_points)
+            if why is not None:
+                raise TrackingFailed(why)
+            out.result, out.start, out.init_box = result, start, box
+            if recorder is not None:
+                out.growth = recorder.growth(r.object_id, start, box)
+            times.object_frames += end - start
+        except TrackingFailed as exc:
+            out.error, out.lacks_points = str(exc), True
+        except Exception as exc:  # noqa: BLE001
+            out.error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        out.seconds = time.thread_time() - t
+        times.step += out.seconds
+        outs.append(out)
+        if on_done is not None:
+            on_done(out)
+            out.result = None
+    return outs, times

@@ -11,6 +11,19 @@ REPO = Path(__file__).resolve().parents[1]
 PANDASET_002 = Path(os.environ.get("SOT_APPS_PANDASET", REPO.parent / "shared" / "data" / "pandaset_002"))
 
 
+@pytest.fixture(autouse=True, scope="session")
+def sweep_cache_in_tmp(tmp_path_factory):
+    """The pipeline reads sweeps through the user's sweep cache (sot_apps.io.sweep_cache): in tests, a temporary
+    one (worker processes and CLI subprocesses inherit it)."""
+    previous = os.environ.get("SOT_APPS_CACHE_DIR")
+    os.environ["SOT_APPS_CACHE_DIR"] = str(tmp_path_factory.mktemp("sweep_cache"))
+    yield
+    if previous is None:
+        os.environ.pop("SOT_APPS_CACHE_DIR", None)
+    else:
+        os.environ["SOT_APPS_CACHE_DIR"] = previous
+
+
 @pytest.fixture(scope="session")
 def pandaset_root() -> Path:
     """The real PandaSet sequence 002. Missing data is a failure, not a skip: CI has it beside the repo."""

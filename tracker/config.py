@@ -1,262 +1,555 @@
-"""All SOTracker parameters in one frozen dataclass, plus the named presets of the paper's ablations.
+"""SOTracker parameters: one frozen dataclass per concern, nested in :class:`TrackerConfig`, and the named presets.
 
-Defaults are the paper's / the authors' implementation's values (see docs/tracker.md for where we
-deviate and why). ``full`` is the complete method tuned for speed (few outer iterations with an
-early stop); ``faithful`` reproduces the authors' implementation (whole-sweep ground removal, their
-frame-1 Finder, crop association, their RANSAC and iteration counts; docs/tracker.md compares the three).
+Defaults are the paper's / the authors' implementation's values (docs/tracker.md says where we deviate and why).
+Each string choice (``ground.remover``, ``search.association``, ``registration.metric``,
+``registration.data_free_frames``, ``shape.ransac.mode``, ``motion.model``, ``motion.prior_reference``,
+``motion.consistency``, ``height.model``, ``height.road``, ``first_frame.search``, ``method``) names a strategy
+that :class:`~tracker.sotracker.Tracker` picks once (tracker/strategies/).
+
+A config is built from a preset (:func:`get_preset`), a nested dict / YAML / JSON file (:meth:`TrackerConfig.from_dict`,
+:meth:`TrackerConfig.from_file`) and dotted overrides (``TrackerConfig.with_overrides(["motion.alpha=0.6"])``);
+errors name the field's path (``motion.alpha: expected a number, got 'x'``).
+
+``full`` is the complete method tuned for speed (few outer iterations with an early stop); ``faithful``
+reproduces the authors' implementation (whole-sweep ground removal, their frame-1 Finder, crop association,
+their RANSAC and iteration counts).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
-from typing import Any
+import difflib
+import functools
+import json
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping
 
 from .ground import GroundParams
 
-__all__ = ["TrackerConfig", "PRESETS", "DETECTION_PRESETS", "get_preset", "preset_names"]
+__all__ = ["TrackerConfig", "GroundConfig", "SearchConfig", "RegistrationConfig", "RansacConfig", "ShapeConfig",
+           "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "DetectionConfig", "OfflineParams",
+           "RefinementConfig", "LAG_PARAMS", "PRESETS", "DETECTION_PRESETS", "get_preset", "preset_names",
+           "parse_overrides"]
+
+
+def _choice(path: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise ValueError(f"{path}: expected one of {', '.join(allowed)}, got {value!r}")
+
+
+def _positive(section: object, prefix: str, *names: str) -> None:
+    for name in names:
+        if not getattr(section, name) > 0:
+            raise ValueError(f"{prefix}.{name}: must be positive, got {getattr(section, name)!r}")
 
 
 @dataclass(frozen=True)
-class TrackerConfig:
-    """Parameters of one tracking run. Lengths in metres, angles in radians."""
+class GroundConfig:
+    """Ground removal (GPF, Zermas et al. 2017). ``remover``: "local" per-cell planes on the tracker's local
+    region (tracker/ground.py); "sweep" (upstream) one plane for the whole sweep in the ego (sensor) frame
+    (tracker/sweep_ground.py); "none" keeps every point."""
 
-    # --- loss weights (paper: ICP 1, Shape 1, MC 0.1, MP 0.1); a zero weight disables the term
-    weight_icp: float = 1.0
-    weight_shape: float = 1.0
-    weight_mc: float = 0.1
-    weight_mp: float = 0.1
-    # --- Detection term (Det+SOT, docs/detection.md); weight 0 = off. ``method="det"``: no point
-    # registration at all, the detections associated with a constant-velocity Kalman filter (the paper's Det row)
-    weight_det: float = 0.0
-    det_min_score: float = 0.5           # a detection below this score is never used
-    det_min_iou: float = 0.1             # BEV IoU with the motion model's prediction needed to associate
-    det_max_distance: float = 0.0        # > 0: no detection passes min_iou -> the nearest centre within this (m)
-    method: str = "sot"                  # "sot" (SOTracker, with Det when weight_det > 0) or "det" (baseline)
-    # --- search regions (box size factors, applied to length, width AND height)
-    search_scale: float = 1.5            # gamma_in
-    first_search_scale: float = 3.0      # frame-1 wide search
-    first_icp_iterations: int = 50       # ICP-only outer iterations of the frame-1 search
-    first_search: str = "moving"         # "moving": the crop follows the estimate, source = previous points +
-                                         # sub-shape; "finder" (upstream): start-box points (x1.0) against a
-                                         # fixed crop of the start box x first_search_scale (tracker/finder.py)
+    remover: str = "local"
+    lpr_count: int = 20                  # lowest-point representative: mean z of this many lowest points
+    seed_threshold: float = 1.2          # seeds: points lower than LPR + this
+    distance_threshold: float = 0.3      # ground: distance to the plane below this
+    iterations: int = 10
+    segment_length: float = 8.0          # per-segment planes along the principal direction
+    outlier_depth: float = 0.5           # drop points this far below the robust lowest level (sub-ground noise)
+    margin: float = 1.5                  # ground is fitted on the search box grown by this much (BEV)
+
+    def __post_init__(self) -> None:
+        _choice("ground.remover", self.remover, ("local", "sweep", "none"))
+
+    def params(self) -> GroundParams:
+        """The local planes' settings as :class:`~tracker.ground.GroundParams`."""
+        return GroundParams(lpr_count=self.lpr_count, seed_threshold=self.seed_threshold,
+                            distance_threshold=self.distance_threshold, iterations=self.iterations,
+                            segment_length=self.segment_length, outlier_depth=self.outlier_depth)
+
+    def sweep_args(self) -> tuple[int, float, float, int]:
+        """The whole-sweep ground's settings, in the order of :func:`~tracker.sweep_ground.sweep_ground_mask`
+        (and of its cache key: every user of one sweep's mask passes the same tuple)."""
+        return (self.lpr_count, self.seed_threshold, self.distance_threshold, self.iterations)
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """Where the target points are searched and how they are paired (box size factors apply to l, w and h).
+    ``association``: "global" one kd-tree over the local points, pairs whose target is outside the crop dropped,
+    subsets drawn once per frame; "crop" (upstream) 1-NN among the crop's points, source and crop resampled
+    (<= max_points, with replacement) every outer iteration."""
+
+    scale: float = 1.5                   # gamma_in
     crop_scale: float = 1.1              # gamma_aft: previous-frame points for the ICP term
-    shape_crop_scale: float = 1.0        # points added to the shape / sub-shape
-    # --- shape model
-    use_shape: bool = True               # shape term at all
-    shape_update: bool = True            # S(All): aggregate at key frames; False = S(1)
-    keyframe_interval: int = 5
-    voxel_size: float = 0.05
-    use_subshape: bool = True
-    subshape_frames: int = 2
-    # --- association / RANSAC for the shape term
-    use_ransac: bool = True
-    ransac_max_iterations: int = 200
-    ransac_confidence: float = 0.99
-    ransac_sample_size: int = 3
-    ransac_inlier_threshold: float = 0.2
-    ransac_min_inliers: int = 10
-    ransac_score_pairs: int = 300        # hypotheses are scored on at most this many random pairs
-    max_points: int = 1000               # random subsample of each point set
-    min_points: int = 10                 # a term with fewer pairs contributes 0
-    data_norm_min: int = 0               # > 0: data terms are sums / max(pairs, this) when the crop is sparse
+    growth: float = 0.0                  # > 0 (ctrv): the search box grows by this many sigmas of the predicted centre
+    max_scale: float = 4.0               # cap of the grown search scale
     min_target_points: int = 5           # a search region with fewer points: the frame runs on the prior
-    data_free_frames: str = "prior"      # a frame without data terms: "prior" keeps the prediction (flag
-                                         # prior_only); "motion_terms" (upstream) still minimises MP + MC
-    icp_metric: str = "point"            # "point" (paper) or "plane": point-to-plane + plane_point_weight * point
+    max_points: int = 1000               # random subsample of each point set
+    association: str = "global"
+
+    def __post_init__(self) -> None:
+        _choice("search.association", self.association, ("global", "crop"))
+        _positive(self, "search", "scale", "crop_scale", "max_points")
+
+
+@dataclass(frozen=True)
+class RegistrationConfig:
+    """The per-frame loss minimisation (Algorithm 2). ``metric``: "point" (paper) or "plane" (point-to-plane +
+    ``plane_point_weight`` x point). ``data_free_frames``: a frame without data terms "prior" keeps the
+    prediction (flag prior_only); "motion_terms" (upstream) still minimises MP + MC."""
+
+    icp_weight: float = 1.0              # paper: 1; 0 disables the ICP term
+    metric: str = "point"
     plane_point_weight: float = 0.1
     normal_neighbors: int = 8
     normal_radius: float = 0.5
     max_pair_distance: float = 0.0       # > 0: ICP pairs farther than this are dropped (0 = keep all, upstream)
-    association: str = "global"          # "global": one kd-tree over the local points, pairs whose target is
-                                         # outside the crop dropped, subsets drawn once per frame; "crop"
-                                         # (upstream): 1-NN among the crop's points, source and crop resampled
-                                         # (<= max_points, with replacement) every outer iteration
-    ransac_mode: str = "fixed"           # "fixed": the same hypotheses every outer iteration, < ransac_min_inliers
-                                         # inliers drops the shape term; "upstream": the estimate itself is the
-                                         # first hypothesis, new draws every outer iteration, too few inliers
-                                         # keeps all pairs
-    # --- motion prior
-    alpha: float = 0.5                   # prior <- alpha * prior + (1 - alpha) * delta
-    prior_frame: str = "world"           # "world" (paper); "object": average the motion in the box frame;
-                                         # "turn": world frame, turned by the averaged turn rate (tracker/motion.py)
-    z_mode: str = "icp"                  # "icp": dz from the loss like dx, dy; "ground": the box keeps its start
-                                         # height above the local road plane; "fixed": dz = 0; "filter": slow
-                                         # estimate from the registration's z with the road as a prior
-    max_speed_change: float = 0.0        # > 0: |dx, dy - predicted| capped at this along / half across (m/frame)
+    min_points: int = 10                 # a term with fewer pairs contributes 0
+    data_norm_min: int = 0               # > 0: data terms are sums / max(pairs, this) when the crop is sparse
+    data_free_frames: str = "prior"
     min_quality: float = 0.0             # > 0: a frame whose fit quality is below this continues on the prior
-    max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
-    coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
-    # --- robust online tracking (issue 12); the defaults keep the paper's behaviour
-    motion_model: str = "average"        # "average": moving-average prior (paper); "ctrv": CTRV Kalman filter over
-                                         # [x, y, heading, speed, turn rate], predicted with the elapsed time (s);
-                                         # the box heading is the filtered one (the box turns about its points)
-    prior_per_second: bool = False       # "average": the prior is a velocity (motion / elapsed time), predicted
-                                         # for the elapsed time (frame gaps); False = per frame (paper)
-    ctrv_accel_sigma: float = 4.0        # m/s^2, acceleration noise of the CTRV filter
-    ctrv_yaw_accel_sigma: float = 3.0    # rad/s^2, turn-rate noise (abrupt steering)
-    ctrv_position_sigma: float = 0.1     # m, noise of the registered centre as a measurement
-    ctrv_heading_sigma: float = 0.05     # rad, noise of the registered heading as a measurement
-    travel_heading_sigma: float = 0.0    # > 0 (ctrv): the direction of travel of the object's points is a heading
-                                         # measurement with this noise floor (rad) (+ position noise / distance)
-    travel_min_distance: float = 0.2     # m: shorter displacements give no travel heading
-    first_motion_along_heading: bool = False  # "average": the first motion (frame 1's, or start()'s initial_motion)
-                                         # seeds the prior with only its part along the start box's heading (its
-                                         # sideways part would be predicted on as a sideways velocity)
-    first_hypotheses: int = 0            # > 0: frame-1 search from this many motions along the heading (scored by
-                                         # the points they explain) in the normal search box; 0 = one wide search
-    first_max_speed: float = 30.0        # m/s: the frame-1 hypotheses reach this far forward (a third backwards)
-    first_max_yaw: float = 0.0           # > 0: frame-1 heading change cap (rad)
-    height_drift_sigma: float = 0.02     # z_mode "filter": z random walk per frame (m)
-    height_fit_sigma: float = 0.15       # z_mode "filter": noise of the registration's z (m)
-    height_road_sigma: float = 0.05      # z_mode "filter": noise of road height + offset (m)
-    height_offset_gain: float = 0.05     # z_mode "filter": the height above the road follows the estimate this slowly
-    height_road: str = "local"           # z_mode "filter"/"ground": the road under the box from "local" per-cell
-                                         # planes (tracker/ground.py, fitted for this even when ground_scope is
-                                         # "sweep"), from the points the ground "removal" took, or "none"
-    reacquire: bool = False              # a start box holding fewer than min_target_points points: hold it and
-                                         # search ahead (first_max_speed x time since the start) and a third
-                                         # back along its heading; once min_target_points are found, restart
-                                         # there with the travelled motion as the prior (see docs/tracker.md)
-    search_growth: float = 0.0           # > 0 (ctrv): the search box grows by this many sigmas of the predicted centre
-    max_search_scale: float = 4.0        # cap of the grown search scale
-    mp_reference: str = "prior"          # "prior" (paper) or "iteration" (upstream: previous outer iteration)
-    symmetric_mc: bool = True            # MC on both components; False = upstream's x-only form
-    # --- ground removal (GPF, Zermas et al. 2017)
-    ground_removal: bool = True
-    ground_scope: str = "local"          # "local": per-cell planes on the tracker's local region (tracker/ground.py);
-                                         # "sweep" (upstream): one plane for the whole sweep in the ego (sensor)
-                                         # frame (tracker/sweep_ground.py)
-    gpf_lpr_count: int = 20              # lowest-point representative: mean z of this many lowest points
-    gpf_seed_threshold: float = 1.2      # seeds: points lower than LPR + this
-    gpf_distance_threshold: float = 0.3  # ground: distance to the plane below this
-    gpf_iterations: int = 10
-    gpf_segment_length: float = 8.0      # per-segment planes along the principal direction
-    gpf_outlier_depth: float = 0.5       # drop points this far below the robust lowest level (sub-ground noise)
-    gpf_margin: float = 1.5              # ground is fitted on the search box grown by this much (BEV)
-    # --- solver
     outer_iterations: int = 20           # max outer iterations (correspondences recomputed each)
     solver_iterations: int = 10          # max Gauss-Newton/LM steps per outer iteration
     anderson_depth: int = 0              # > 0: Anderson acceleration of the outer loop with this history
     convergence_tolerance: float = 1e-4  # stop the outer loop when the update is smaller (m / rad)
-    # --- misc
+
+    def __post_init__(self) -> None:
+        _choice("registration.metric", self.metric, ("point", "plane"))
+        _choice("registration.data_free_frames", self.data_free_frames, ("prior", "motion_terms"))
+        _positive(self, "registration", "outer_iterations")
+
+
+@dataclass(frozen=True)
+class RansacConfig:
+    """RANSAC on the shape term's pairs. ``mode``: "fixed" the same hypotheses every outer iteration, fewer than
+    ``min_inliers`` inliers drops the shape term; "upstream" the estimate itself is the first hypothesis, new
+    draws every outer iteration, too few inliers keeps all pairs; "none" keeps all pairs."""
+
+    mode: str = "fixed"
+    max_iterations: int = 200
+    confidence: float = 0.99
+    sample_size: int = 3
+    inlier_threshold: float = 0.2
+    min_inliers: int = 10
+    score_pairs: int = 300               # hypotheses are scored on at most this many random pairs
+
+    def __post_init__(self) -> None:
+        _choice("shape.ransac.mode", self.mode, ("fixed", "upstream", "none"))
+        _positive(self, "shape.ransac", "max_iterations")
+
+
+@dataclass(frozen=True)
+class ShapeConfig:
+    """The shape model and its term (paper weight 1; ``enabled`` False or weight 0: no shape term)."""
+
+    enabled: bool = True
+    weight: float = 1.0
+    aggregate: bool = True               # S(All): aggregate at key frames; False = S(1), the start frame's points
+    keyframe_interval: int = 5
+    voxel_size: float = 0.05
+    subshape: bool = True
+    subshape_frames: int = 2
+    crop_scale: float = 1.0              # points added to the shape / sub-shape
+    ransac: RansacConfig = field(default_factory=RansacConfig)
+
+    def __post_init__(self) -> None:
+        _positive(self, "shape", "keyframe_interval", "voxel_size")
+
+
+@dataclass(frozen=True)
+class CTRVConfig:
+    """The CTRV Kalman filter of ``motion.model="ctrv"`` over [x, y, heading, speed, turn rate]."""
+
+    accel_sigma: float = 4.0             # m/s^2, acceleration noise
+    yaw_accel_sigma: float = 3.0         # rad/s^2, turn-rate noise (abrupt steering)
+    position_sigma: float = 0.1          # m, noise of the registered centre as a measurement
+    heading_sigma: float = 0.05          # rad, noise of the registered heading as a measurement
+    travel_heading_sigma: float = 0.0    # > 0: the direction of travel of the object's points is a heading
+                                         # measurement with this noise floor (rad) (+ position noise / distance)
+    travel_min_distance: float = 0.2     # m: shorter displacements give no travel heading
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """The motion model, the motion prior (MP) and motion consistency (MC) terms, and the motion limits.
+
+    ``model``: "average" the paper's moving-average prior in the world frame; "object" averaged in the box
+    frame; "turn" world frame, turned by the averaged turn rate (tracker/motion.py); "ctrv" a CTRV Kalman filter
+    (``ctrv``), predicted with the elapsed time, the box heading the filtered one. ``prior_reference``: the MP
+    term's reference, "prior" (paper) or "iteration" (upstream: the previous outer iteration).
+    ``consistency``: the MC term on both components ("symmetric") or upstream's "x_only" form."""
+
+    model: str = "average"
+    alpha: float = 0.5                   # prior <- alpha * prior + (1 - alpha) * delta
+    per_second: bool = False             # "average" models: the prior is a velocity, predicted for the elapsed
+                                         # time (frame gaps); False = per frame (paper)
+    coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
+    first_motion_along_heading: bool = False  # "average" models: the first motion seeds the prior with only its
+                                         # part along the start box's heading
+    prior_weight: float = 0.1            # MP (paper 0.1; 0: off)
+    prior_reference: str = "prior"
+    consistency_weight: float = 0.1      # MC (paper 0.1; 0: off)
+    consistency: str = "symmetric"
+    max_speed_change: float = 0.0        # > 0: |dx, dy - predicted| capped at this along / half across (m/frame)
+    max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
+    ctrv: CTRVConfig = field(default_factory=CTRVConfig)
+
+    def __post_init__(self) -> None:
+        _choice("motion.model", self.model, ("average", "object", "turn", "ctrv"))
+        _choice("motion.prior_reference", self.prior_reference, ("prior", "iteration"))
+        _choice("motion.consistency", self.consistency, ("symmetric", "x_only"))
+
+
+@dataclass(frozen=True)
+class HeightConfig:
+    """The box height. ``model``: "icp" dz from the loss like dx, dy; "ground" the box keeps its start height above
+    the road; "fixed" dz = 0; "filter" a slow estimate from the registration's z with the road as a prior.
+    ``road`` ("ground"/"filter"): the road under the box from "local" per-cell planes (fitted for this even when
+    the ground remover is "sweep"), from the points the ground "removal" took, or "none"."""
+
+    model: str = "icp"
+    road: str = "local"
+    drift_sigma: float = 0.02            # "filter": z random walk per frame (m)
+    fit_sigma: float = 0.15              # "filter": noise of the registration's z (m)
+    road_sigma: float = 0.05             # "filter": noise of road height + offset (m)
+    offset_gain: float = 0.05            # "filter": the height above the road follows the estimate this slowly
+
+    def __post_init__(self) -> None:
+        _choice("height.model", self.model, ("icp", "ground", "fixed", "filter"))
+        _choice("height.road", self.road, ("local", "removal", "none"))
+
+
+@dataclass(frozen=True)
+class FirstFrameConfig:
+    """Frame 1 (no motion prior yet) and the empty start. ``search``: "moving" one ICP-only search in the start box
+    scaled ``scale`` that follows the estimate (source: previous points + sub-shape); "hypotheses" ICP-only
+    searches from ``hypotheses`` motions along the heading in the normal search box, scored by the points they
+    explain (tracker/first_frame.py); "finder" (upstream) the start-box points against a fixed crop of the start
+    box x ``scale`` (tracker/finder.py). ``reacquire``: a start box holding fewer than
+    ``search.min_target_points`` points is held while a region ahead (``max_speed`` x time since the start) and a
+    third of that behind is searched; once enough points are found the track restarts there."""
+
+    search: str = "moving"
+    scale: float = 3.0                   # frame-1 wide search ("moving", "finder")
+    icp_iterations: int = 50             # ICP-only outer iterations of the frame-1 search
+    hypotheses: int = 9                  # "hypotheses": how many motions along the heading
+    max_speed: float = 30.0              # m/s: the hypotheses (and the empty start's search) reach this far forward
+    max_yaw: float = 0.0                 # > 0: frame-1 heading change cap (rad)
+    reacquire: bool = False
+
+    def __post_init__(self) -> None:
+        _choice("first_frame.search", self.search, ("moving", "hypotheses", "finder"))
+        _positive(self, "first_frame", "scale", "hypotheses")
+
+
+@dataclass(frozen=True)
+class DetectionConfig:
+    """The Detection term (Det+SOT, docs/detection.md); ``weight`` 0 = off. With ``method="det"`` the detections
+    alone are tracked with a constant-velocity Kalman filter (the paper's Det row)."""
+
+    weight: float = 0.0
+    min_score: float = 0.5               # a detection below this score is never used
+    min_iou: float = 0.1                 # BEV IoU with the motion model's prediction needed to associate
+    max_distance: float = 0.0            # > 0: no detection passes min_iou -> the nearest centre within this (m)
+
+
+@dataclass(frozen=True)
+class OfflineParams:
+    """Parameters of the offline / fixed-lag refinement (metres, radians; tracker/offline.py)."""
+
+    outer_iterations: int = 8           # shape rebuilds
+    gn_iterations: int = 3              # Gauss-Newton steps per shape
+    region_scale: float = 1.6           # points gathered around the online box (l, w and h)
+    crop_scale: float = 1.15            # data-term points: inside the current box scaled by this
+    ground_margin: float = 3.0          # ground planes are fitted on the region grown by this (BEV)
+    ground: str = "tracker"             # "tracker": the tracker's own ground (remover "sweep": the cached
+                                        # whole-sweep mask, no fit); "local": planes fitted on that region
+    max_points: int = 250               # per frame, random subset (seeded)
+    point_sigma: float = 0.05
+    effective_points: float = 40.0
+    huber_delta: float = 0.1
+    tangent_weight: float = 0.3         # beta: 0 = point-to-plane, 1 = point-to-point
+    max_pair_distance: float = 0.8
+    normal_neighbours: int = 10
+    smooth_sigma_xy: float = 0.03       # per frame^2 (10 Hz: 3 m/s^2 -> 0.03 m)
+    smooth_sigma_z: float = 0.02
+    smooth_sigma_heading: float = 0.01
+    anchor_sigma_xyz: float = 1.0
+    anchor_sigma_heading: float = 0.3
+    voxel: float = 0.05
+    shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
+    min_shape_points: int = 10
+    folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
+    first_frame_weight: float = 1.0     # data weight of frame 0 (its registration sets the gauge)
+    gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
+    trial_pairs: str = "rematch"        # a Gauss-Newton step's cost check: "rematch" the trial's points to the
+                                        # shape; "fixed": keep the pairs the step was linearised on
+
+    def __post_init__(self) -> None:
+        _choice("refinement.*.ground", self.ground, ("local", "tracker"))
+        _choice("refinement.*.trial_pairs", self.trial_pairs, ("rematch", "fixed"))
+        _choice("refinement.*.gauge", self.gauge, ("regauge", "fix_first"))
+
+
+# the fixed-lag window's solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started);
+# the window's shapes from at most 300 points per frame in 10 cm voxels (the offline problem's cost is in its
+# shapes); at most 150 data points per frame (offline: 250). Measured with 3 seeds, 150 changes lag 5 / 10 Acc/Rob
+# by +0.2/+0.2 and 0.0/+0.3 on the 9 dev tracks, by -0.5/-0.3 and +0.2/+0.2 on a synthetic world (seed spread
+# there 0.5-0.8), and saves ~20 % of a window solve; one Gauss-Newton step per window instead of two lost 0.5-0.6
+# Acc on the dev tracks, a context of 3 final frames instead of 5 lost 0.3-0.6. The window's points lose the
+# tracker's ground (``ground="tracker"``; with ground.remover "sweep" the online step's cached whole-sweep mask, no
+# plane fit per frame): against local planes, 3 seeds, lag 5 / 10 Acc +1.3 / +1.2 on the benchmark's first 64,
+# +1.6 / +1.1 on the dev tracks, -0.2 to +0.5 on synthetic worlds W1-W3. A step's cost check keeps the pairs the
+# step was linearised on (trial_pairs="fixed": one correspondence search per step, not two or more): ~13 % of a
+# window solve; against re-matching, 3 seeds, lag 5 / 10 Acc -0.2 / -0.1 on the benchmark's first 64, 0.0 / +0.1
+# on the dev tracks, 0.0 to +0.1 on W1-W3.
+LAG_PARAMS = OfflineParams(outer_iterations=1, gn_iterations=2, voxel=0.1, shape_points_per_frame=300,
+                           max_points=150, trial_pairs="fixed")
+
+
+@dataclass(frozen=True)
+class RefinementConfig:
+    """The refinements after the online pass: ``offline`` the whole-sequence solve (tracker/offline.py), ``lag``
+    the fixed-lag window's solve over ``lag_context`` already-final frames + the free ones (tracker/fixed_lag.py)."""
+
+    offline: OfflineParams = field(default_factory=OfflineParams)
+    lag: OfflineParams = LAG_PARAMS
+    lag_context: int = 5
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Parameters of one tracking run, one section per concern. Lengths in metres, angles in radians.
+    ``method``: "sot" (SOTracker, with the Detection term when ``detection.weight > 0``) or "det" (baseline)."""
+
+    method: str = "sot"
     seed: int = 0
     deskew: bool = False                 # de-skew ego motion with per-point times (needs the previous pose)
     preset: str = "custom"
-
-    def replace(self, **changes: Any) -> "TrackerConfig":
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    def sweep_ground_args(self) -> tuple[int, float, float, int]:
-        """The whole-sweep ground's settings, in the order of :func:`~tracker.sweep_ground.sweep_ground_mask`
-        (and of its cache key: every user of one sweep's mask passes the same tuple)."""
-        return (self.gpf_lpr_count, self.gpf_seed_threshold, self.gpf_distance_threshold, self.gpf_iterations)
-
-    def ground_params(self) -> GroundParams:
-        """The ground-removal settings (the ``gpf_*`` fields) as :class:`~tracker.ground.GroundParams`."""
-        return GroundParams(lpr_count=self.gpf_lpr_count, seed_threshold=self.gpf_seed_threshold,
-                            distance_threshold=self.gpf_distance_threshold, iterations=self.gpf_iterations,
-                            segment_length=self.gpf_segment_length, outlier_depth=self.gpf_outlier_depth)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "TrackerConfig":
-        """Config from a dict; unknown keys are an error (ValueError)."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - names)
-        if unknown:
-            raise ValueError(f"unknown tracker config keys: {', '.join(unknown)}")
-        base = cls()
-        values = {}
-        for f in dataclasses.fields(cls):
-            if f.name in data:
-                default = getattr(base, f.name)
-                value = data[f.name]
-                if isinstance(default, bool):
-                    value = bool(value)
-                elif isinstance(default, int):
-                    value = int(value)
-                elif isinstance(default, float):
-                    value = float(value)
-                values[f.name] = value
-        return cls(**values)
+    ground: GroundConfig = field(default_factory=GroundConfig)
+    search: SearchConfig = field(default_factory=SearchConfig)
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    shape: ShapeConfig = field(default_factory=ShapeConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    height: HeightConfig = field(default_factory=HeightConfig)
+    first_frame: FirstFrameConfig = field(default_factory=FirstFrameConfig)
+    detection: DetectionConfig = field(default_factory=DetectionConfig)
+    refinement: RefinementConfig = field(default_factory=RefinementConfig)
 
     def __post_init__(self) -> None:
-        if self.icp_metric not in ("point", "plane"):
-            raise ValueError(f"icp_metric must be 'point' or 'plane', not {self.icp_metric!r}")
-        if self.z_mode not in ("icp", "ground", "fixed", "filter"):
-            raise ValueError(f"z_mode must be 'icp', 'ground', 'fixed' or 'filter', not {self.z_mode!r}")
-        if self.motion_model not in ("average", "ctrv"):
-            raise ValueError(f"motion_model must be 'average' or 'ctrv', not {self.motion_model!r}")
-        if self.prior_frame not in ("world", "object", "turn"):
-            raise ValueError(f"prior_frame must be 'world', 'object' or 'turn', not {self.prior_frame!r}")
-        if self.method not in ("sot", "det"):
-            raise ValueError(f"method must be 'sot' or 'det', not {self.method!r}")
-        if self.mp_reference not in ("prior", "iteration"):
-            raise ValueError(f"mp_reference must be 'prior' or 'iteration', not {self.mp_reference!r}")
-        choices = {"association": ("global", "crop"), "ransac_mode": ("fixed", "upstream"),
-                   "first_search": ("moving", "finder"), "ground_scope": ("local", "sweep"),
-                   "height_road": ("local", "removal", "none"),
-                   "data_free_frames": ("prior", "motion_terms")}
-        for name, allowed in choices.items():
-            if getattr(self, name) not in allowed:
-                raise ValueError(f"{name} must be one of {', '.join(allowed)}, not {getattr(self, name)!r}")
-        if self.association == "crop" and self.icp_metric != "point":
-            raise ValueError("association='crop' supports icp_metric='point' only")
-        for name in ("search_scale", "first_search_scale", "crop_scale", "voxel_size", "keyframe_interval",
-                     "max_points", "ransac_max_iterations", "outer_iterations"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive")
+        _choice("method", self.method, ("sot", "det"))
+        if self.search.association == "crop" and self.registration.metric != "point":
+            raise ValueError("search.association 'crop' supports registration.metric 'point' only")
+
+    # ------------------------------------------------------------------ building
+    def to_dict(self) -> dict[str, Any]:
+        """The nested dict (:meth:`from_dict` reads it back)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "TrackerConfig":
+        """Config from a nested dict (missing keys keep their defaults). An unknown key or a value of the wrong
+        type is a ValueError naming the field's path."""
+        return _build(cls, data, "")
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> "TrackerConfig":
+        """Config from a YAML (.yaml, .yml; needs PyYAML) or JSON file holding the nested dict."""
+        path = Path(path)
+        text = path.read_text()
+        if path.suffix.lower() in (".yaml", ".yml"):
+            try:
+                import yaml  # type: ignore[import-untyped]
+            except ImportError as exc:  # an optional dependency
+                raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml, or sot-apps[yaml])") from exc
+            data = yaml.safe_load(text)
+        else:
+            data = json.loads(text)
+        if not isinstance(data, dict):
+            raise ValueError(f"{path}: expected a mapping of tracker settings")
+        try:
+            return cls.from_dict(data)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+
+    def updated(self, changes: Mapping[str, Any]) -> "TrackerConfig":
+        """A copy with the fields at dotted paths replaced (``{"motion.alpha": 0.6, "seed": 2}``); values are
+        checked and converted as in :meth:`from_dict` (strings are parsed as on the command line)."""
+        data = self.to_dict()
+        for path, value in changes.items():
+            section, name, _ = _resolve(path)
+            parent = data
+            for part in path.split(".")[:-1]:
+                parent = parent[part]
+            parent[name] = _coerce(path, _field_type(section, name), value)
+        return TrackerConfig.from_dict(data)
+
+    def with_overrides(self, items: Iterable[str]) -> "TrackerConfig":
+        """A copy with ``PATH=VALUE`` overrides applied (``["motion.alpha=0.6", "ground.remover=local"]``)."""
+        return self.updated(parse_overrides(items))
+
+    def replace(self, **changes: Any) -> "TrackerConfig":
+        """A copy with top-level fields (or whole sections) replaced."""
+        return dataclasses.replace(self, **changes)
+
+
+@functools.lru_cache(maxsize=None)
+def _field_types(cls: Any) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _field_type(cls: Any, name: str) -> Any:
+    return _field_types(cls)[name]
+
+
+def _resolve(path: str) -> tuple[Any, str, Any]:
+    """(dataclass holding the field, field name, its type) of a dotted path; unknown: ValueError with a hint."""
+    cls: Any = TrackerConfig
+    parts = path.split(".")
+    for i, part in enumerate(parts):
+        names = [f.name for f in dataclasses.fields(cls)]
+        if part not in names:
+            prefix = ".".join(parts[:i])
+            known = [f"{prefix}.{n}" if prefix else n for n in names]
+            close = difflib.get_close_matches(path, _all_paths(), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else f"; known here: {', '.join(known)}"
+            raise ValueError(f"{path}: unknown tracker setting{hint}")
+        kind = _field_type(cls, part)
+        if i < len(parts) - 1:
+            if not dataclasses.is_dataclass(kind):
+                raise ValueError(f"{path}: {'.'.join(parts[:i + 1])} is not a section")
+            cls = kind
+    return cls, parts[-1], _field_type(cls, parts[-1])
+
+
+def _all_paths(cls: Any = TrackerConfig, prefix: str = "") -> list[str]:
+    out: list[str] = []
+    for f in dataclasses.fields(cls):
+        kind = _field_type(cls, f.name)
+        path = prefix + f.name
+        out += _all_paths(kind, path + ".") if dataclasses.is_dataclass(kind) else [path]
+    return out
+
+
+def _coerce(path: str, kind: Any, value: Any) -> Any:
+    """``value`` as a ``kind`` field (bool, int, float, str); strings are parsed (true/false/1/0 for bools)."""
+    if dataclasses.is_dataclass(kind):
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            return dataclasses.asdict(value)
+        if not isinstance(value, Mapping):
+            raise ValueError(f"{path}: expected a section (mapping), got {value!r}")
+        return value
+    if kind is bool:
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.strip().lower() in ("true", "false", "1", "0"):
+            return value.strip().lower() in ("true", "1")
+        if isinstance(value, int) and value in (0, 1):
+            return bool(value)
+        raise ValueError(f"{path}: expected true or false, got {value!r}")
+    if kind in (int, float):
+        name = "an integer" if kind is int else "a number"
+        exact = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if exact and (kind is float or float(value).is_integer()):
+            return kind(value)
+        if isinstance(value, str):
+            try:
+                return kind(value.strip())
+            except ValueError:
+                pass
+        raise ValueError(f"{path}: expected {name}, got {value!r}")
+    if not isinstance(value, str):
+        raise ValueError(f"{path}: expected a string, got {value!r}")
+    return value.strip()
+
+
+def _build(cls: Any, data: Mapping[str, Any], prefix: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{prefix.rstrip('.') or 'config'}: expected a mapping, got {data!r}")
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        path = prefix + unknown[0]
+        close = difflib.get_close_matches(path, _all_paths(), n=3)
+        hint = f"; did you mean {', '.join(close)}?" if close else ""
+        raise ValueError(f"{path}: unknown tracker setting{hint}")
+    values = {}
+    for name in names & set(data):
+        kind = _field_type(cls, name)
+        value = _coerce(prefix + name, kind, data[name])
+        values[name] = _build(kind, value, prefix + name + ".") if dataclasses.is_dataclass(kind) else value
+    try:
+        return cls(**values)
+    except ValueError as exc:
+        message = str(exc)
+        raise ValueError(message.replace("refinement.*.", prefix)) from None
+
+
+def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
+    """``PATH=VALUE`` strings as {dotted path: typed value}; a malformed item, an unknown path or a value of the
+    wrong type is a ValueError naming the path (``motion.alpha: expected a number, got 'x'``)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        path, sep, text = item.partition("=")
+        path = path.strip()
+        if not sep or not path:
+            raise ValueError(f"{item!r}: expected PATH=VALUE (e.g. motion.alpha=0.6)")
+        _, _, kind = _resolve(path)
+        if dataclasses.is_dataclass(kind):
+            raise ValueError(f"{path}: is a section; set one of its fields (e.g. {path}.{dataclasses.fields(kind)[0].name})")
+        out[path] = _coerce(path, kind, text)
+    return out
 
 
 DET_WEIGHT = 0.03  # Detection-term weight of det_sot: ~ (sigma_ICP / sigma_Det)^2, docs/detection.md
 
-_FULL_V1 = TrackerConfig(outer_iterations=10, first_icp_iterations=20, solver_iterations=6, convergence_tolerance=2e-3,
-                      anderson_depth=3, symmetric_mc=False, prior_frame="object", alpha=0.6, max_yaw_change=0.03,
-                      min_target_points=3, max_points=600, gpf_seed_threshold=0.3, gpf_distance_threshold=0.2,
-                      z_mode="ground",
-                      preset="full_v1")
-# full_v2 = full_v1 + the robust online pieces of issue 12 (each one a field)
-_FULL_V2 = _FULL_V1.replace(first_hypotheses=9, first_max_yaw=0.1, z_mode="filter", prior_per_second=True,
-                            preset="full_v2")
-# full_v3 = full_v2 with one ground plane per sweep, whose ground near the box is the height's road (chosen on the
-# generated benchmark and the synthetic worlds, docs/tracker.md "Choosing full on the generated benchmark")
-_FULL_V3 = _FULL_V2.replace(ground_scope="sweep", height_road="removal", preset="full_v3")
-# full_v4 = full_v3 with the turn-rate prior: the world-frame average motion turned by the averaged turn rate, so
-# the box's heading error never steers the prediction (chosen on the generated benchmark and the synthetic
-# worlds with 3 seeds, docs/tracker.md "The motion prior's frame, again"; `full` of 2026-11-26)
-_FULL_V4 = _FULL_V3.replace(prior_frame="turn", preset="full_v4")
-# full = full_v4 with frame 1's motion seeding the prior only along the start box's heading (chosen on the generated
-# benchmark and the synthetic worlds with 3 seeds, docs/tracker.md "A rear view")
-_FULL = _FULL_V4.replace(first_motion_along_heading=True, preset="full")
-_FAITHFUL = TrackerConfig(outer_iterations=20, first_icp_iterations=50, solver_iterations=50,
-                          convergence_tolerance=0.0, mp_reference="iteration", symmetric_mc=False,
-                          ground_scope="sweep", first_search="finder", association="crop", ransac_mode="upstream",
-                          ransac_score_pairs=1000, min_target_points=10, coast_yaw_decay=1.0,
-                          data_free_frames="motion_terms",
-                          preset="faithful")
+# full: the complete method tuned for speed (chosen on the generated benchmark and the synthetic worlds, 3 seeds)
+_FULL = TrackerConfig(
+    preset="full",
+    ground=GroundConfig(remover="sweep", seed_threshold=0.3, distance_threshold=0.2),
+    search=SearchConfig(min_target_points=3, max_points=600),
+    registration=RegistrationConfig(outer_iterations=10, solver_iterations=6, convergence_tolerance=2e-3,
+                                    anderson_depth=3),
+    motion=MotionConfig(model="turn", alpha=0.6, per_second=True, first_motion_along_heading=True,
+                        consistency="x_only", max_yaw_change=0.03),
+    height=HeightConfig(model="filter", road="removal"),
+    first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
+)
+# faithful: the authors' implementation (docs/tracker.md)
+_FAITHFUL = TrackerConfig(
+    preset="faithful",
+    ground=GroundConfig(remover="sweep"),
+    search=SearchConfig(association="crop", min_target_points=10),
+    registration=RegistrationConfig(outer_iterations=20, solver_iterations=50, convergence_tolerance=0.0,
+                                    data_free_frames="motion_terms"),
+    shape=ShapeConfig(ransac=RansacConfig(mode="upstream", score_pairs=1000)),
+    motion=MotionConfig(prior_reference="iteration", consistency="x_only", coast_yaw_decay=1.0),
+    first_frame=FirstFrameConfig(search="finder", icp_iterations=50),
+)
+
+
+def _ablation(name: str, **sections: Any) -> TrackerConfig:
+    return _FULL.updated(sections).replace(preset=name)
+
 
 PRESETS: dict[str, TrackerConfig] = {
     "full": _FULL,
-    "full_v1": _FULL_V1,
-    "full_v2": _FULL_V2,
-    "full_v3": _FULL_V3,
-    "full_v4": _FULL_V4,
     "faithful": _FAITHFUL,
-    "icp_mp": _FULL.replace(use_shape=False, weight_mc=0.0, preset="icp_mp"),
-    "icp_mp_s1": _FULL.replace(shape_update=False, weight_mc=0.0, preset="icp_mp_s1"),
-    "icp_mp_sall": _FULL.replace(weight_mc=0.0, preset="icp_mp_sall"),
-    "no_ground_removal": _FULL.replace(ground_removal=False, preset="no_ground_removal"),
-    "no_ransac": _FULL.replace(use_ransac=False, preset="no_ransac"),
-    "no_subshape": _FULL.replace(use_subshape=False, preset="no_subshape"),
+    # the paper's ablations, each from full
+    "icp_mp": _ablation("icp_mp", **{"shape.enabled": False, "motion.consistency_weight": 0.0}),
+    "icp_mp_s1": _ablation("icp_mp_s1", **{"shape.aggregate": False, "motion.consistency_weight": 0.0}),
+    "icp_mp_sall": _ablation("icp_mp_sall", **{"motion.consistency_weight": 0.0}),
+    "no_ground_removal": _ablation("no_ground_removal", **{"ground.remover": "none"}),
+    "no_ransac": _ablation("no_ransac", **{"shape.ransac.mode": "none"}),
+    "no_subshape": _ablation("no_subshape", **{"shape.subshape": False}),
     # the paper's Det+SOT row: full + the Detection term (weight: docs/detection.md)
-    "det_sot": _FULL.replace(weight_det=DET_WEIGHT, preset="det_sot"),
+    "det_sot": _ablation("det_sot", **{"detection.weight": DET_WEIGHT}),
     # the paper's Det row: detections + a constant-velocity Kalman filter, no point registration
-    "det": _FULL.replace(method="det", preset="det"),
+    "det": _ablation("det", method="det"),
 }
-
 
 # presets that need per-frame detections (track(..., detections=...))
 DETECTION_PRESETS: tuple[str, ...] = ("det_sot", "det")
@@ -266,9 +559,10 @@ def preset_names() -> list[str]:
     return list(PRESETS)
 
 
-def get_preset(name: str, **overrides: Any) -> TrackerConfig:
-    """A named preset (see PRESETS), optionally with fields replaced. Unknown name: ValueError."""
+def get_preset(name: str, **changes: Any) -> TrackerConfig:
+    """A named preset (see PRESETS) with fields at dotted paths replaced (``get_preset("full", seed=2,
+    **{"motion.alpha": 0.6})``; see :meth:`TrackerConfig.updated`). Unknown name or field: ValueError."""
     if name not in PRESETS:
         raise ValueError(f"unknown tracker preset {name!r}; known: {', '.join(PRESETS)}")
     config = PRESETS[name]
-    return config.replace(**overrides) if overrides else config
+    return config.updated(changes) if changes else config

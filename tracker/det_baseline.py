@@ -86,8 +86,8 @@ def track_detections(source: FrameSource, init_box: Box, start: int, end: int, c
         t0 = time.perf_counter()
         predicted = Box(*kf.predict(), *size)
         frame_dets = detections.get(k)
-        det = associate_detection(predicted, frame_dets, config.det_min_score, config.det_min_iou,
-                                  config.det_max_distance)
+        d = config.detection
+        det = associate_detection(predicted, frame_dets, d.min_score, d.min_iou, d.max_distance)
         if det is None:
             quality, flags = 0.0, ("prior_only",)
         else:

@@ -23,37 +23,23 @@ import time
 
 import numpy as np
 
-from .config import TrackerConfig
+from .config import LAG_PARAMS, OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box
-from .offline import OfflineParams, _box, _rebuild_shape, frame_region_points, refine_states
+from .offline import _box, _rebuild_shape, frame_region_points, refine_states
 from .sotracker import FrameEstimate, LocalCrop, Tracker, TrackResult
 
 __all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag"]
 
-# per window solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started); the
-# window's shapes from at most 300 points per frame in 10 cm voxels (the offline problem's cost is in its shapes);
-# at most 150 data points per frame (offline: 250). Measured with 3 seeds, 150 changes lag 5 / 10 Acc/Rob by
-# +0.2/+0.2 and 0.0/+0.3 on the 9 dev tracks, by -0.5/-0.3 and +0.2/+0.2 on a synthetic world (seed spread there
-# 0.5-0.8), and saves ~20 % of a window solve; one Gauss-Newton step per window instead of two lost 0.5-0.6 Acc
-# on the dev tracks, a context of 3 final frames instead of 5 lost 0.3-0.6 (docs/tracker.md). The window's points
-# lose the tracker's ground (OfflineParams.ground; with ground_scope="sweep" the online step's cached whole-sweep
-# mask, no plane fit per frame): against local planes, 3 seeds, lag 5 / 10 Acc +1.3 / +1.2 on the benchmark's
-# first 64, +1.6 / +1.1 on the dev tracks, -0.2 to +0.5 on synthetic worlds W1-W3 (docs/tracker.md). A step's
-# cost check keeps the pairs the step was linearised on (trial_pairs="fixed": one correspondence search per step,
-# not two or more): ~13 % of a window solve; against re-matching, 3 seeds, lag 5 / 10 Acc -0.2 / -0.1 on the
-# benchmark's first 64, 0.0 / +0.1 on the dev tracks, 0.0 to +0.1 on W1-W3 (docs/tracker.md).
-LAG_PARAMS = OfflineParams(outer_iterations=1, gn_iterations=2, voxel=0.1, shape_points_per_frame=300,
-                           max_points=150, trial_pairs="fixed")
-
-
 class FixedLagSmoother:
     """Sliding-window refinement of online estimates; ``add`` returns the estimates that became final."""
 
-    def __init__(self, config: TrackerConfig, lag: int, size: np.ndarray, params: OfflineParams = LAG_PARAMS,
-                 context: int = 5) -> None:
+    def __init__(self, config: TrackerConfig, lag: int, size: np.ndarray, params: OfflineParams | None = None,
+                 context: int | None = None) -> None:
         if lag < 1:
             raise ValueError(f"lag must be at least 1, not {lag}")
+        params = params or config.refinement.lag
+        context = config.refinement.lag_context if context is None else context
         self.config, self.lag, self.params, self.context = config, int(lag), params, int(context)
         self.size = np.asarray(size, dtype=np.float64)
         self.online: list[FrameEstimate] = []
@@ -88,7 +74,7 @@ class FixedLagSmoother:
 
     def finish(self) -> list[FrameEstimate]:
         """The estimates not yet final (the last ``lag`` frames), as they stand; builds the shape (all frames)."""
-        self.shape = _rebuild_shape(self.points, self.states, self.size, OfflineParams().voxel)
+        self.shape = _rebuild_shape(self.points, self.states, self.size, self.config.refinement.offline.voxel)
         return self._emit(len(self.online))
 
     def _emit(self, upto: int) -> list[FrameEstimate]:
@@ -112,7 +98,8 @@ class FixedLagTracker:
     """Streaming fixed-lag tracking: ``start`` / ``step`` return the estimates that became final
     (state k is final after frame k + lag); ``finish`` returns the rest; ``result`` the whole TrackResult."""
 
-    def __init__(self, config: TrackerConfig, lag: int, params: OfflineParams = LAG_PARAMS, context: int = 5) -> None:
+    def __init__(self, config: TrackerConfig, lag: int, params: OfflineParams | None = None,
+                 context: int | None = None) -> None:
         self.config, self.lag, self.params, self.context = config, lag, params, context
         self.front = Tracker(config)
         self.final: list[FrameEstimate] = []
@@ -140,9 +127,9 @@ class FixedLagTracker:
 
 
 def refine_fixed_lag(source: FrameSource, result: TrackResult, lag: int, config: TrackerConfig | None = None,
-                     params: OfflineParams = LAG_PARAMS, context: int = 5) -> TrackResult:
+                     params: OfflineParams | None = None, context: int | None = None) -> TrackResult:
     """The fixed-lag result of a finished online ``result`` (the same states as streaming with
-    :class:`FixedLagTracker`)."""
+    :class:`FixedLagTracker`). ``params``, ``context``: default ``config.refinement.lag``, ``.lag_context``."""
     config = config or result.config
     smoother = FixedLagSmoother(config, lag, np.asarray(result.size), params, context)
     getter = getattr(source, "points_world", None)

@@ -2,8 +2,10 @@
 
 Conventions (docs/conventions.md): right-handed, z up, metres, radians. A box is its centre
 (x, y, z), its heading (angle of the LENGTH axis from +x, counter-clockwise about +z), and its
-length, width, height. The object frame has x forward along the length, y to the left, z up, and
-its origin at the box centre. A transform is a 4x4 matrix named ``target_from_source``.
+length, width, height; optionally roll and pitch (default 0: a level box). The object frame has x
+forward along the length, y to the left, z up, and its origin at the box centre; its rotation is
+Rz(heading) @ Ry(pitch) @ Rx(roll), so the heading stays the yaw of the length axis and a positive
+pitch lowers the front. A transform is a 4x4 matrix named ``target_from_source``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ __all__ = [
     "State",
     "wrap_angle",
     "rotation_z",
+    "rotation_zyx",
+    "zyx_angles",
     "make_transform",
     "invert_transform",
     "transform_points",
@@ -35,6 +39,26 @@ def rotation_z(theta: float) -> np.ndarray:
     """3x3 rotation by ``theta`` radians counter-clockwise about +z."""
     c, s = np.cos(theta), np.sin(theta)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotation_zyx(heading: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
+    """3x3 rotation Rz(heading) @ Ry(pitch) @ Rx(roll); exactly :func:`rotation_z` when pitch = roll = 0."""
+    if pitch == 0.0 and roll == 0.0:
+        return rotation_z(heading)
+    cy, sy, cp, sp, cr, sr = np.cos(heading), np.sin(heading), np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def zyx_angles(rotation: np.ndarray) -> tuple[float, float, float]:
+    """(heading, pitch, roll) of a 3x3 rotation R = Rz(heading) @ Ry(pitch) @ Rx(roll); heading is the yaw
+    of R's x axis, pitch in [-pi/2, pi/2]."""
+    r = np.asarray(rotation, dtype=np.float64)
+    heading = float(np.arctan2(r[1, 0], r[0, 0]))
+    pitch = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
+    roll = float(np.arctan2(r[2, 1], r[2, 2]))
+    return heading, pitch, roll
 
 
 def make_transform(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
@@ -93,7 +117,11 @@ class State:
 
 @dataclass(frozen=True)
 class Box:
-    """An upright 3D box: centre, heading of the length axis, and size (see module docstring)."""
+    """A 3D box: centre, heading of the length axis, size, and optional roll and pitch (see module docstring).
+
+    ``to_array``/``from_array``/``state`` carry the 7 upright values only (the tracker estimates x, y, z and
+    heading); roll and pitch are kept by ``with_state``, ``scaled`` and ``transformed(..., keep_tilt=True)``.
+    """
 
     x: float
     y: float
@@ -102,6 +130,16 @@ class Box:
     length: float
     width: float
     height: float
+    roll: float = 0.0
+    pitch: float = 0.0
+
+    @property
+    def is_level(self) -> bool:
+        return self.roll == 0.0 and self.pitch == 0.0
+
+    def rotation(self) -> np.ndarray:
+        """3x3 rotation of the object frame: Rz(heading) @ Ry(pitch) @ Rx(roll)."""
+        return rotation_zyx(self.heading, self.pitch, self.roll)
 
     @property
     def center(self) -> np.ndarray:
@@ -117,12 +155,12 @@ class Box:
         return State(self.x, self.y, self.z, self.heading)
 
     def with_state(self, state: State) -> "Box":
-        return Box(state.x, state.y, state.z, state.heading, self.length, self.width, self.height)
+        return Box(state.x, state.y, state.z, state.heading, self.length, self.width, self.height, self.roll, self.pitch)
 
     def scaled(self, factor: float) -> "Box":
         """The same box with length, width and height multiplied by ``factor``."""
         return Box(self.x, self.y, self.z, self.heading,
-                   self.length * factor, self.width * factor, self.height * factor)
+                   self.length * factor, self.width * factor, self.height * factor, self.roll, self.pitch)
 
     def to_array(self) -> np.ndarray:
         """[x, y, z, heading, length, width, height]."""
@@ -136,7 +174,7 @@ class Box:
 
     def world_from_object(self) -> np.ndarray:
         """4x4 transform taking object-frame points (x along the length) to the box's frame of reference."""
-        return make_transform(rotation_z(self.heading), self.center)
+        return make_transform(self.rotation(), self.center)
 
     def object_from_world(self) -> np.ndarray:
         return invert_transform(self.world_from_object())
@@ -154,9 +192,17 @@ class Box:
         """(4, 2) bird's-eye-view corners, counter-clockwise."""
         return self.corners()[:4, :2]
 
-    def transformed(self, target_from_source: np.ndarray) -> "Box":
-        """This box (expressed in ``source``) expressed in ``target``; only yaw of the transform is kept for heading."""
+    def transformed(self, target_from_source: np.ndarray, keep_tilt: bool = False) -> "Box":
+        """This box (expressed in ``source``) expressed in ``target``.
+
+        ``keep_tilt=False``: an upright box whose heading gains only the yaw of the transform (roll and pitch
+        are dropped). ``keep_tilt=True``: the same solid in ``target`` (its full rotation, as roll and pitch).
+        """
         center = transform_points(target_from_source, self.center[None])[0]
+        if keep_tilt:
+            heading, pitch, roll = zyx_angles(np.asarray(target_from_source)[:3, :3] @ self.rotation())
+            return Box(float(center[0]), float(center[1]), float(center[2]), heading,
+                       self.length, self.width, self.height, roll, pitch)
         heading = wrap_angle(self.heading + yaw_of_transform(target_from_source))
         return Box(float(center[0]), float(center[1]), float(center[2]), float(heading),
                    self.length, self.width, self.height)
@@ -167,8 +213,12 @@ def points_in_box(points: np.ndarray, box: Box, scale: float | tuple[float, floa
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     scale_xyz = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,))
     half = box.size * scale_xyz / 2.0
-    c, s = np.cos(box.heading), np.sin(box.heading)
     d = points - box.center
+    if not box.is_level:  # tilted box: object-frame coordinates R^T d
+        r = box.rotation()
+        local = d[:, 0:1] * r[0] + d[:, 1:2] * r[1] + d[:, 2:3] * r[2]
+        return np.all(np.abs(local) <= half, axis=1)
+    c, s = np.cos(box.heading), np.sin(box.heading)
     local_x = c * d[:, 0] + s * d[:, 1]
     local_y = -s * d[:, 0] + c * d[:, 1]
     return (np.abs(local_x) <= half[0]) & (np.abs(local_y) <= half[1]) & (np.abs(d[:, 2]) <= half[2])

@@ -4,7 +4,7 @@ Data-generation users have the whole sequence, so nothing forces the estimate of
 frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
 
 1. every frame's points near its online box (ground removed as the tracker removes it: the cached
-   whole-sweep plane with ``ground_scope="sweep"``, else planes fitted on the region with its GPF
+   whole-sweep plane with ``ground.remover="sweep"``, else planes fitted on the region with its GPF
    parameters; cropped with the box scaled ``region_scale``) are gathered once (world frame);
 2. frames are split into ``folds`` interleaved folds (k mod folds). For each fold a shape is rebuilt from
    the frames NOT in it: points in the current boxes (scale 1.0), moved to the object frame, voxelised
@@ -43,7 +43,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 from scipy.spatial import cKDTree
 
-from .config import TrackerConfig
+from .config import OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
@@ -52,46 +52,6 @@ from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
 
 __all__ = ["OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states", "refine_offline"]
-
-
-@dataclass(frozen=True)
-class OfflineParams:
-    """Parameters of the offline refinement (metres, radians)."""
-
-    outer_iterations: int = 8           # shape rebuilds
-    gn_iterations: int = 3              # Gauss-Newton steps per shape
-    region_scale: float = 1.6           # points gathered around the online box (l, w and h)
-    crop_scale: float = 1.15            # data-term points: inside the current box scaled by this
-    ground_margin: float = 3.0          # ground planes are fitted on the region grown by this (BEV)
-    ground: str = "tracker"             # "tracker": the tracker's own ground (ground_scope "sweep": the cached
-                                        # whole-sweep mask, no fit); "local": planes fitted on that region
-    max_points: int = 250               # per frame, random subset (seeded)
-    point_sigma: float = 0.05
-    effective_points: float = 40.0
-    huber_delta: float = 0.1
-    tangent_weight: float = 0.3         # beta: 0 = point-to-plane, 1 = point-to-point
-    max_pair_distance: float = 0.8
-    normal_neighbours: int = 10
-    smooth_sigma_xy: float = 0.03       # per frame^2 (10 Hz: 3 m/s^2 -> 0.03 m)
-    smooth_sigma_z: float = 0.02
-    smooth_sigma_heading: float = 0.01
-    anchor_sigma_xyz: float = 1.0
-    anchor_sigma_heading: float = 0.3
-    voxel: float = 0.05
-    shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
-    min_shape_points: int = 10
-    folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
-    first_frame_weight: float = 1.0     # data weight of frame 0 (its registration sets the gauge)
-    gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
-    trial_pairs: str = "rematch"        # a Gauss-Newton step's cost check: "rematch" the trial's points to the
-                                        # shape; "fixed": keep the pairs the step was linearised on (one
-                                        # correspondence search per step instead of two or more)
-
-    def __post_init__(self) -> None:
-        if self.ground not in ("local", "tracker"):
-            raise ValueError(f"OfflineParams.ground must be 'local' or 'tracker', not {self.ground!r}")
-        if self.trial_pairs not in ("rematch", "fixed"):
-            raise ValueError(f"OfflineParams.trial_pairs must be 'rematch' or 'fixed', not {self.trial_pairs!r}")
 
 
 @dataclass
@@ -142,7 +102,7 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
                         world: np.ndarray | None = None, crop: LocalCrop | None = None) -> np.ndarray:
     """Ground-removed world points of ``frame`` inside ``box`` scaled ``region_scale``.
 
-    The ground is the tracker's (``params.ground="tracker"``): with ``ground_scope="sweep"`` the whole-sweep
+    The ground is the tracker's (``params.ground="tracker"``): with ``ground.remover="sweep"`` the whole-sweep
     plane's, cached per sweep so the online step has already paid for it; else (or with ``"local"``) planes
     fitted on the region grown by ``ground_margin``.
     ``previous``: (timestamp_ns, world_from_ego) of the frame before (de-skew only); ``world``: the frame's
@@ -151,11 +111,12 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
     inside it and its ground is this one (the same points, in the same order, without another pass over the
     sweep)."""
     pts_ego = np.asarray(frame.points_ego)
-    sweep_ground = config.ground_removal and config.ground_scope == "sweep" and params.ground == "tracker"
+    removes_ground = config.ground.remover != "none"
+    sweep_ground = config.ground.remover == "sweep" and params.ground == "tracker"
     if (crop is not None and crop.frame == frame.index and crop.ground == ("sweep" if sweep_ground else "none")
-            and (sweep_ground or not config.ground_removal) and crop.contains(box, params.region_scale)):
+            and (sweep_ground or not removes_ground) and crop.contains(box, params.region_scale)):
         return crop.points[points_in_box(crop.points, box, params.region_scale)]
-    above_ground = ~cached_sweep_ground_mask(pts_ego, *config.sweep_ground_args()) if sweep_ground else None
+    above_ground = ~cached_sweep_ground_mask(pts_ego, *config.ground.sweep_args()) if sweep_ground else None
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
                   and len(frame.point_time_offset_ns) == len(pts_ego))
@@ -179,8 +140,8 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
     near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
     local = world[near]
     local = local[np.all(np.isfinite(local), axis=1)]
-    if config.ground_removal and not sweep_ground and len(local) >= 3:
-        local = local[~ground_mask(local, config.ground_params())]
+    if removes_ground and not sweep_ground and len(local) >= 3:
+        local = local[~ground_mask(local, config.ground.params())]
     return local[points_in_box(local, box, params.region_scale)]
 
 
@@ -582,12 +543,15 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
     return out, _rebuild_shape(points, states, size, params.voxel) if with_shape else None
 
 
-def refine_offline(source: FrameSource, result: TrackResult, config: TrackerConfig | None = None,
-                   params: OfflineParams | None = None) -> TrackResult:
-    """Offline-refined copy of an online ``result`` (see the module docstring)."""
+def refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig | None = None,
+                   params: OfflineParams | None = None, points: list[np.ndarray] | None = None) -> TrackResult:
+    """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
+    ``config.refinement.offline``. ``points``: each frame's region points as :func:`gather_frame_points` gives
+    them, when the caller gathered them while tracking (then ``source`` is not read and may be None)."""
     config = config or result.config
-    params = params or OfflineParams()
-    points = gather_frame_points(source, result, config, params)
+    params = params or config.refinement.offline
+    if points is None:
+        points = gather_frame_points(source, result, config, params)
     online = np.array([e.state.to_array() for e in result.estimates])
     states, shape = refine_states(points, online, np.asarray(result.size), params, seed=config.seed)
     estimates: list[FrameEstimate] = []

@@ -9,19 +9,20 @@ ignores the lowest ``ignore_lowest`` share of the heights (PandaSet sweeps hold 
 metres below the road). The plane's normal points up (upstream takes the SVD's sign; on the PandaSet sweeps
 that is up: 16–20k of ~106k points are removed).
 
-Used by ``full``, ``full_v3`` and ``faithful`` (``TrackerConfig.ground_scope="sweep"``): by their online
-steps, their fixed-lag window and their offline refinement; ``full_v1`` and ``full_v2`` fit planes on the
-tracker's local region (:mod:`tracker.ground`).
+Used by ``full`` and ``faithful`` (``ground.remover="sweep"``): by their online steps, their fixed-lag window
+and their offline refinement; ``ground.remover="local"`` fits planes on the tracker's local region
+(:mod:`tracker.ground`).
 """
 
 from __future__ import annotations
 
 import math
+from functools import partial
 import weakref
 
 import numpy as np
 
-__all__ = ["sweep_ground_mask", "cached_sweep_ground_mask"]
+__all__ = ["sweep_ground_mask", "cached_sweep_ground_mask", "remember_sweep_ground_mask"]
 
 # id(points) -> (weak reference to points, parameters, mask); an entry dies with its array
 _CACHE: dict[int, tuple[weakref.ref, tuple, np.ndarray]] = {}
@@ -133,16 +134,28 @@ def _upward_smallest_eigenvector(a: np.ndarray) -> np.ndarray:
     return vector if vector[2] >= 0 else -vector
 
 
-def cached_sweep_ground_mask(points: np.ndarray, *params: float) -> np.ndarray:
+def _forget(key: int, _ref: object) -> None:
+    _CACHE.pop(key, None)
+
+
+def cached_sweep_ground_mask(points: np.ndarray, lpr_count: int, seed_threshold: float, distance_threshold: float,
+                             iterations: int) -> np.ndarray:
     """:func:`sweep_ground_mask` of ``points`` remembered while the array lives (several trackers on the
     same sweep — an evaluation, a multi-object run — compute it once). Treat the array as read-only."""
+    params = (lpr_count, seed_threshold, distance_threshold, iterations)
     key = id(points)
     entry = _CACHE.get(key)
     if entry is not None and entry[0]() is points and entry[1] == params:
         return entry[2]
-    mask = sweep_ground_mask(points, *params)
+    return remember_sweep_ground_mask(points, sweep_ground_mask(points, *params), *params)
+
+
+def remember_sweep_ground_mask(points: np.ndarray, mask: np.ndarray, *params: float) -> np.ndarray:
+    """Make ``mask`` — :func:`sweep_ground_mask` ``(points, *params)`` computed before, e.g. stored with the sweep —
+    what :func:`cached_sweep_ground_mask` returns for ``points`` while the array lives; returns ``mask``."""
+    key = id(points)
     try:
-        ref = weakref.ref(points, lambda _, k=key: _CACHE.pop(k, None))
+        ref = weakref.ref(points, partial(_forget, key))
     except TypeError:  # not weak-referenceable (a view of a foreign buffer): no caching
         return mask
     _CACHE[key] = (ref, params, mask)

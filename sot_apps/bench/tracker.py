@@ -182,14 +182,14 @@ def _times_online(row: dict[str, Any], online: dict[str, Any]) -> dict[str, floa
 
 
 def _time_sweep_ground(source, frames: list[int], config) -> np.ndarray:
-    """``ground_scope="sweep"``: CPU ms of the whole-sweep ground mask per sweep (one plane per sweep, shared by
+    """``ground.remover="sweep"``: CPU ms of the whole-sweep ground mask per sweep (one plane per sweep, shared by
     every object tracked in that sweep), measured once per sweep; the cache is then warm, so the step times
     that follow exclude it. Other presets: empty."""
-    if not (config.ground_removal and config.ground_scope == "sweep"):
+    if config.ground.remover != "sweep":
         return np.zeros(0)
     from tracker import cached_sweep_ground_mask, sweep_ground_mask
 
-    params = config.sweep_ground_args()
+    params = config.ground.sweep_args()
     ms = []
     for k in frames:
         points = source.lidar_frame(k).points_ego

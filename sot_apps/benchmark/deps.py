@@ -23,7 +23,7 @@ def eval_ground_params():
     """The ground removal ``sot-apps eval`` uses for pseudo-ground-truth shapes (default tracker settings)."""
     from tracker import TrackerConfig
 
-    return TrackerConfig().ground_params()
+    return TrackerConfig().ground.params()
 
 
 __all__ = ["eval_ground_params", "CachedSource", "EvalConfig", "TrackSpec", "json_safe", "resolve_presets",

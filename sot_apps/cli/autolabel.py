@@ -15,7 +15,9 @@ def register(subparsers) -> argparse.ArgumentParser:
         subparsers, "autolabel", help="auto-label every vehicle of a sequence from detections (Det+SOT, offline)",
         description="Associate detections into tracks, start SOT (det_sot) at each track's most reliable detection, "
                     "track forward and backward, refine offline, and write DIR/sequence (canonical, the labels as "
-                    "its boxes), DIR/kitti/label_02/0000.txt (+ calib) and DIR/av2/annotations.feather. With "
+                    "its boxes), DIR/kitti/label_02/0000.txt (+ calib; only when the sequence has a camera), "
+                    "DIR/av2/annotations.feather and DIR/av2/submission.feather (AV2's detection submission form, "
+                    "with scores). With "
                     "--evaluate, print the label quality against the sequence's annotations next to the raw "
                     "detections (docs/detection.md). Without --detections the model-free detector runs first.",
         examples=["sot-apps autolabel ../shared/data/pandaset_002 --detections dets.json --out labels --evaluate",
@@ -59,11 +61,11 @@ def run(args: argparse.Namespace) -> int:
         detections = detect_sequence(sequence, progress=lambda f: progress(f, "detect"))
     labels, det_tracks = autolabel(CachedSource(sequence), detections, get_preset("det_sot", seed=args.seed),
                                    offline=not args.no_offline, progress=progress)
-    paths = write_autolabels(args.out, sequence, labels, with_sequence=not args.no_sequence)
+    written = write_autolabels(args.out, sequence, labels, with_sequence=not args.no_sequence)
     print(f"{len(labels)} labelled tracks ({sum(len(lbl.boxes) for lbl in labels)} boxes) from "
           f"{sum(len(d) for d in detections.values())} detections")
-    for fmt, path in paths.items():
-        print(f"wrote {fmt}: {path}")
+    for line in written:
+        print(line)
     if args.evaluate:
         from ..detection.autolabel import labels_as_detections, tracks_as_detections
         from ..evaluation.detection import autolabel_quality, format_quality_table, ground_truth_frames, rows_for_json

@@ -24,7 +24,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "--simulate-detections learned --seeds 3",
                   "sot-apps eval --benchmark out/bench/benchmark.json --preset full faithful --seeds 3",
                   "sot-apps eval --benchmark out/bench/benchmark.json --preset det_sot --simulate-detections learned "
-                  "--set weight_det=0.1 --seeds 3",
+                  "--set detection.weight=0.1 --seeds 3",
                   "sot-apps eval --benchmark lidar-sot --lists ../shared/data/readers/lidar_sot_benchmark/vehicle "
                   "WAYMO_DIR"])
     parser.add_argument("sequence", metavar="SEQUENCE", nargs="?", default=None,
@@ -56,8 +56,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="instead of --detections: ground truth with a detector's errors, simulated per seed "
                              "(profiles: learned, noisy, clean; docs/detection.md)")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="FIELD=VALUE",
-                        help="replace a tracker setting (a TrackerConfig field, e.g. weight_det=0.1) in every preset; "
-                             "repeatable; the value is read as the field's type")
+                        help="replace a tracker setting (a dotted TrackerConfig path, e.g. detection.weight=0.1 or "
+                             "motion.alpha=0.6) in every preset; repeatable; the value is read as the field's type")
     parser.set_defaults(func=run)
     declare_outputs(parser, files=("json",))
     return parser
@@ -152,44 +152,17 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
 
 
 def parse_overrides(items: list[str], presets: list[str]) -> dict:
-    """``FIELD=VALUE`` strings as TrackerConfig field replacements, each value read as the field's type
-    (bool: true/false/1/0); an unknown field, a bad value, or a result every preset rejects is an InputError."""
-    import dataclasses
-    import difflib
-
-    from tracker import get_preset, TrackerConfig
+    """``PATH=VALUE`` strings as {dotted TrackerConfig path: typed value} (:func:`tracker.parse_overrides`); an
+    unknown path, a bad value, or a result a preset rejects is an InputError."""
+    from tracker import get_preset
+    from tracker import parse_overrides as parse
 
     from ..errors import InputError
 
-    defaults = TrackerConfig()
-    names = [f.name for f in dataclasses.fields(TrackerConfig)]
-    out: dict = {}
-    for item in items:
-        name, sep, text = item.partition("=")
-        name, text = name.strip(), text.strip()
-        if not sep or not name:
-            raise InputError(None, f"--set {item!r}: expected FIELD=VALUE")
-        if name not in names:
-            close = difflib.get_close_matches(name, names, n=3)
-            hint = f"; did you mean {', '.join(close)}?" if close else ""
-            raise InputError(None, f"--set: unknown tracker setting {name!r}{hint} (fields: docs/tracker.md)")
-        default = getattr(defaults, name)
-        kind = ("true or false" if isinstance(default, bool) else "an integer" if isinstance(default, int)
-                else "a number" if isinstance(default, float) else "")
-        try:
-            if isinstance(default, bool):
-                if text.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError(text)
-                value = text.lower() in ("true", "1")
-            elif isinstance(default, int):
-                value = int(text)
-            elif isinstance(default, float):
-                value = float(text)
-            else:
-                value = text
-        except ValueError:
-            raise InputError(None, f"--set {name}={text}: {name} takes {kind}") from None
-        out[name] = value
+    try:
+        out = parse(items)
+    except ValueError as exc:
+        raise InputError(None, f"--set {exc} (settings: docs/tracker.md)") from None
     for preset in presets:
         try:
             get_preset(preset, **out)

@@ -363,27 +363,31 @@ def tracks_as_detections(tracks: list[DetectionTrack]) -> dict[int, FrameDetecti
 
 
 def write_autolabels(out_dir, sequence, labels: list[AutoLabel], category: str = "Car",
-                     with_sequence: bool = True) -> dict[str, str]:
-    """Write the labels as a canonical sequence (its boxes = the labels), KITTI tracking label_02 and AV2
-    annotations.feather under ``out_dir``; returns the written paths by format."""
+                     with_sequence: bool = True) -> list[str]:
+    """Write the labels under ``out_dir``: ``kitti/label_02/0000.txt`` (+ calib; only with a camera, KITTI's 2D
+    boxes need one), ``av2/annotations.feather`` and ``av2/submission.feather`` (with the track scores), and
+    the canonical ``sequence`` (its boxes = the labels). The writers are the ones of ``convert --labels``
+    (:mod:`sot_apps.io.labels`). Returns one report line per output."""
     from pathlib import Path
 
     from ..io.canonical import write_sequence
-    from ..io.labels import write_av2_annotations, write_kitti_tracking
+    from ..io.label_export import export_labels
+    from ..io.labels import LabelTrack, kitti_camera
     from ..io.sequence import BoxAnnotation
 
     out_dir = Path(out_dir)
-    tracks = [(label.track_id, category, label.score, label.boxes) for label in labels]
-    world_from_ego = [np.asarray(f.world_from_ego) for f in sequence.frames]
-    world_from_lidar = [w @ np.asarray(sequence.ego_from_lidar) for w in world_from_ego]
-    paths = {"kitti": str(write_kitti_tracking(out_dir / "kitti", tracks, world_from_lidar)),
-             "av2": str(write_av2_annotations(out_dir / "av2" / "annotations.feather", tracks, world_from_ego,
-                                              [int(f.timestamp_ns) for f in sequence.frames], sequence.id))}
+    tracks = [LabelTrack(label.track_id, category, label.boxes, label.score) for label in labels]
+    lines = []
+    if kitti_camera(sequence) is not None:
+        lines += export_labels(sequence, "kitti", out_dir / "kitti", tracks)
+    else:
+        lines.append("kitti: not written (the sequence has no camera, and KITTI's 2D boxes need one)")
+    lines += export_labels(sequence, "av2", out_dir / "av2", tracks, submission=True)
     if with_sequence:
         annotations = [[] for _ in sequence.frames]
         for label in labels:
             for k, box in label.boxes.items():
                 annotations[k].append(BoxAnnotation(label.track_id, category, box))
         labelled = dataclasses.replace(sequence, annotations=annotations, _cache=sequence._cache)
-        paths["sequence"] = str(write_sequence(labelled, out_dir / "sequence", progress=False))
-    return paths
+        lines.append(f"wrote sequence: {write_sequence(labelled, out_dir / 'sequence', progress=False)}")
+    return lines

@@ -21,7 +21,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from tracker import Box, TrackerConfig, accuracy, get_preset, iou_3d_batch, robustness, track, wrap_angle
+from tracker import Box, accuracy, get_preset, iou_3d_batch, parse_overrides, robustness, track, wrap_angle
 
 from ..errors import InputError
 
@@ -63,11 +63,9 @@ def load_reference(path: str | Path) -> dict[str, dict[int, np.ndarray]]:
 def compare_with_reference(source, track_id: str, gt_boxes: Sequence[Box], frames: Sequence[int],
                            reference: dict[int, np.ndarray], preset: str = "faithful", seed: int = 0,
                            overrides: dict[str, Any] | None = None) -> ReferenceComparison:
-    """Track ``track_id`` with ``preset`` (fields replaced by ``overrides``) from ``gt_boxes[0]`` over
+    """Track ``track_id`` with ``preset`` (dotted paths replaced by ``overrides``) from ``gt_boxes[0]`` over
     ``frames`` and compare with ``reference`` on the frames the reference holds."""
-    config = get_preset(preset, seed=seed)
-    if overrides:
-        config = TrackerConfig.from_dict({**config.to_dict(), **overrides})
+    config = get_preset(preset, seed=seed, **(overrides or {}))
     result = track(source, gt_boxes[0], frames[0], frames[-1], config)
     keep = [i for i, k in enumerate(frames) if i > 0 and k in reference]
     ours = np.array([result.boxes[i].to_array() for i in keep])
@@ -109,18 +107,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--tracks", default=None, help="comma-separated prefixes (default: all in the reference)")
     parser.add_argument("--frames", action="store_true", help="print per-frame rows")
-    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
-                        help="override TrackerConfig fields of the preset")
+    parser.add_argument("--set", nargs="*", default=[], metavar="PATH=VALUE",
+                        help="override settings of the preset (dotted TrackerConfig paths, e.g. motion.alpha=0.6)")
     args = parser.parse_args(argv)
-    overrides = dict(item.split("=", 1) for item in args.set)
-    for key, value in overrides.items():  # from_dict converts numbers; booleans need an explicit parse
-        if value.lower() in ("true", "false"):
-            overrides[key] = value.lower() == "true"
-        else:
-            try:
-                overrides[key] = float(value)
-            except ValueError:
-                pass
+    overrides = parse_overrides(args.set)
     sequence = open_sequence(args.sequence)
     reference = load_reference(args.reference)
     source = CachedSource(sequence)

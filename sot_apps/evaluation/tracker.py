@@ -142,7 +142,7 @@ def prepare_tracks(sequence: LidarSequence, track_ids: Iterable[str], source: Ca
     """TrackSpecs for ``track_ids`` (unique prefixes allowed); spans are cut at ``end_frame``. Without
     ``with_shape`` no pseudo-ground-truth shape is built (Shape is then NaN)."""
     tracks = sequence.tracks()
-    ground = TrackerConfig().ground_params()
+    ground = TrackerConfig().ground.params()
     specs = []
     for prefix in track_ids:
         tid = sequence.resolve_track_id(prefix)

@@ -179,5 +179,5 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
             out.append(obj)
             continue
         out.append(replace(obj, trajectory=Trajectory.from_samples(traj.times_ns, states, traj.end,
-                                                                    traj.max_extrapolation_ns)))
+                                                                    traj.max_extrapolation_ns, traj.tilts)))
     return out

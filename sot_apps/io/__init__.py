@@ -69,9 +69,18 @@ def _detect_waymo(path: Path) -> str | None:
     return None
 
 
-def open_sequence(path: str | Path, format: str | None = None) -> Sequence:
-    """Open a sequence; ``format`` forces a reader (one of FORMATS)."""
-    path = Path(path)
+def open_sequence(path: str | Path, format: str | None = None, cache: bool = False) -> Sequence:
+    """Open a sequence; ``format`` forces a reader (one of FORMATS). ``cache``: read the sweeps through the
+    one-time conversion cache (:mod:`sot_apps.io.sweep_cache`; bulk work such as the pipeline)."""
+    seq = _open_sequence(Path(path), format)
+    if cache:
+        from .sweep_cache import with_sweep_cache
+
+        with_sweep_cache(seq)
+    return seq
+
+
+def _open_sequence(path: Path, format: str | None) -> Sequence:
     fmt = format or detect_format(path)
     if fmt == "pandaset":
         from .pandaset import read_pandaset

@@ -12,8 +12,10 @@ Conversion to the project's conventions (the dataset's quirks stay here):
 - ``world_from_ego`` = ``city_SE3_egovehicle`` (the row at the frame time, else interpolated);
 - points stay in the ego frame (AV2 stores them so); ``offset_ns`` is the per-point time offset;
 - cuboids: quaternion (qw, qx, qy, qz) rotates object -> ego, (tx, ty, tz) is the centre, length
-  along the object's x: heading = yaw of the object's x axis in the world; ``track_uuid`` is the
-  track id and ``category`` the label;
+  along the object's x; in the world the box keeps its full rotation (world_from_ego @ ego_from_object:
+  heading = yaw of the object's x axis, plus the roll and pitch the ego pose gives it);
+  ``track_uuid`` is the track id, ``category`` the label and ``num_interior_pts`` the box's
+  ``num_points``;
 - cameras: ``egovehicle_SE3_sensor`` of a ring/stereo camera is ``ego_from_camera`` (OpenCV axes),
   distortion (k1, k2, k3) -> OpenCV (k1, k2, 0, 0, k3); an image per frame is the camera's image
   nearest in time (per-image time from its file name); without images the camera has no frames;
@@ -109,8 +111,10 @@ def _annotations(path: Path, frame_index: dict[int, int], world_from_ego: list[n
     out: list[list[BoxAnnotation]] = [[] for _ in world_from_ego]
     for i, box_ego in enumerate(cuboid_boxes_in_ego(cols, path)):
         k = frame_index[int(cols["timestamp_ns"][i])]
-        box = box_ego.transformed(world_from_ego[k])
-        out[k].append(BoxAnnotation(track_id=str(cols["track_uuid"][i]), label=str(cols["category"][i]), box=box))
+        box = box_ego.transformed(world_from_ego[k], keep_tilt=True)
+        count = int(cols["num_interior_pts"][i]) if "num_interior_pts" in cols else None
+        out[k].append(BoxAnnotation(track_id=str(cols["track_uuid"][i]), label=str(cols["category"][i]), box=box,
+                                    num_points=count))
     return out
 
 

@@ -34,7 +34,7 @@ from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, S
 
 __all__ = ["read_sequence", "write_sequence", "read_points_file", "sequence_to_json", "SCHEMA_VERSION"]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: boxes may carry roll, pitch, num_points (a version-1 file reads as level boxes)
 POINT_ARRAYS = {"xyz": np.float32, "intensity": np.float32, "time_offset_ns": np.int64}
 
 
@@ -132,8 +132,9 @@ def read_sequence(root: str | Path) -> Sequence:
     if any("boxes" in f for f in doc["frames"]):
         annotations = [[BoxAnnotation(track_id=b["track_id"], label=b["label"],
                                       box=Box(float(b["x"]), float(b["y"]), float(b["z"]), float(b["heading"]),
-                                              float(b["length"]), float(b["width"]), float(b["height"])),
-                                      stationary=b.get("stationary"))
+                                              float(b["length"]), float(b["width"]), float(b["height"]),
+                                              roll=float(b.get("roll", 0.0)), pitch=float(b.get("pitch", 0.0))),
+                                      stationary=b.get("stationary"), num_points=b.get("num_points"))
                         for b in f.get("boxes", [])] for f in doc["frames"]]
 
     paths = [f.points_path for f in frames]
@@ -160,6 +161,10 @@ def _box_json(ann: BoxAnnotation) -> dict[str, Any]:
     b = ann.box
     out: dict[str, Any] = {"track_id": ann.track_id, "label": ann.label, "x": b.x, "y": b.y, "z": b.z,
                            "heading": b.heading, "length": b.length, "width": b.width, "height": b.height}
+    if not b.is_level:
+        out["roll"], out["pitch"] = b.roll, b.pitch
+    if ann.num_points is not None:
+        out["num_points"] = int(ann.num_points)
     if ann.stationary is not None:
         out["stationary"] = bool(ann.stationary)
     return out

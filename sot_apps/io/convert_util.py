@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from tracker.geometry import Box, make_transform, wrap_angle
+from tracker.geometry import Box, make_transform, zyx_angles
 
 from ..errors import InputError
 
@@ -50,15 +50,15 @@ def box_from_transform(target_from_object: np.ndarray, length: float, width: flo
                        path: Path, where: str) -> Box:
     """A box whose object frame (x along the length, z up, origin at the centre) is ``target_from_object``.
 
-    The heading is the yaw of the object's x axis in ``target`` (roll and pitch are dropped).
+    The heading is the yaw of the object's x axis in ``target``; roll and pitch keep the rest of the rotation
+    (``Box.rotation()`` reproduces it).
     """
     size = [float(length), float(width), float(height)]
     if not all(math.isfinite(v) and v > 0 for v in size):
         raise InputError(path, f"{where}: box size {size} must be finite and positive")
-    x_axis = target_from_object[:3, 0]
-    heading = float(wrap_angle(math.atan2(x_axis[1], x_axis[0])))
+    heading, pitch, roll = zyx_angles(target_from_object[:3, :3])
     c = target_from_object[:3, 3]
-    return Box(float(c[0]), float(c[1]), float(c[2]), heading, *size)
+    return Box(float(c[0]), float(c[1]), float(c[2]), heading, *size, roll=roll, pitch=pitch)
 
 
 def pose_at(times_ns: np.ndarray, poses: np.ndarray, time_ns: int, path: Path, max_gap_ns: int = 200_000_000) -> np.ndarray:

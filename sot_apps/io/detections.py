@@ -32,7 +32,7 @@ from ..schemas import load_json, validate
 from .atomic import write_json
 
 __all__ = ["DETECTION_FORMATS", "detect_detection_format", "read_detections", "read_kitti_calib",
-           "KITTI_CAMERA_FROM_LIDAR", "kitti_to_lidar_boxes", "lidar_to_kitti_boxes", "detections_to_json",
+           "KITTI_CAMERA_FROM_LIDAR", "kitti_to_lidar_boxes", "detections_to_json",
            "write_detections", "boxes_to_frame", "read_sequence_detections"]
 
 DETECTION_FORMATS = ("json", "kitti", "nuscenes")
@@ -101,18 +101,6 @@ def kitti_to_lidar_boxes(hwl: np.ndarray, xyz_bottom: np.ndarray, rotation_y: np
     heading = np.arctan2(forward[:, 1], forward[:, 0])
     centre = bottom + np.outer(hwl[:, 0] / 2.0, [0.0, 0.0, 1.0])  # upright box: half its height above the bottom
     return np.column_stack([centre, heading, hwl[:, 2], hwl[:, 1], hwl[:, 0]])
-
-
-def lidar_to_kitti_boxes(boxes: np.ndarray, rect_from_lidar: np.ndarray = KITTI_CAMERA_FROM_LIDAR
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Inverse of :func:`kitti_to_lidar_boxes`: (hwl (N, 3), bottom centre in the camera (N, 3), rotation_y (N,))."""
-    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
-    bottom = boxes[:, :3] - np.outer(boxes[:, 6] / 2.0, [0.0, 0.0, 1.0])
-    xyz = transform_points(rect_from_lidar, bottom)
-    forward = np.stack([np.cos(boxes[:, 3]), np.sin(boxes[:, 3]), np.zeros(len(boxes))], axis=1)
-    forward_cam = forward @ rect_from_lidar[:3, :3].T
-    rotation_y = np.arctan2(-forward_cam[:, 2], forward_cam[:, 0])
-    return boxes[:, [6, 5, 4]], xyz, rotation_y
 
 
 def _parse_kitti_lines(path: Path, text: str, has_frame: bool, frame: int | None) -> list[tuple[int, str, list[float]]]:

@@ -23,10 +23,14 @@ Conversion to the project's conventions:
   Without oxts every ``world_from_ego`` is the identity (the ego motion is unknown);
 - frame times: frame number x 100 ms (the tracking and object releases give no timestamps);
 - labels (rectified camera-0 frame, x right, y down, z forward): (x, y, z) is the bottom centre, so
-  the centre is (x, y - h/2, z); ``velo_from_rect = inv(R0_rect @ Tr_velo_to_cam)``; the heading is the
-  yaw, in the velodyne frame, of the length direction (cos ry, 0, -sin ry); length, width, height =
+  the centre is (x, y - h/2, z); ``velo_from_rect = inv(R0_rect @ Tr_velo_to_cam)``; the box is level in
+  the rectified camera frame (up = -y), so in the velodyne frame it keeps that frame's small tilt: the
+  heading is the yaw of the length direction (cos ry, 0, -sin ry), roll and pitch the rest (boxes go to
+  the world with the full ego pose, as the other readers'); length, width, height =
   l, w, h; the track id column is the track id (object layout: ``NNNNNN-i``, no identity over
-  frames); DontCare rows are dropped;
+  frames); DontCare rows are dropped, but the frames they name are frames of the sequence (the
+  devkit's sequence length is the label file's last frame + 1: 447 for 0001, whose frames 426-446 hold
+  only DontCare rows; its seqmap says ``0001 empty 000000 000447``);
 - View-of-Delft (object layout with ``pose/``): its rotation is about the lidar's -z axis, so the
   heading is ``-rotation - pi/2`` and the centre is ``inv(Tr_velo_to_cam) @ (x, y, z) + (0, 0, h/2)``;
   ``world_from_ego = odomToCamera @ Tr_velo_to_cam`` (the odometry frame; despite its name the
@@ -44,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle
+from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle, zyx_angles
 
 from ..errors import InputError
 from .convert_util import read_float32_records, read_text_lines, split_selector
@@ -167,6 +171,17 @@ def parse_label_line(line: str, path: Path, n: int, tracking: bool) -> dict | No
             "x": x, "y": y, "z": z, "ry": ry}
 
 
+def _label_frame(line: str, path: Path, n: int) -> int:
+    """The frame number of a tracking label line (any type, DontCare included)."""
+    try:
+        frame = int(line.split()[0])
+    except ValueError as exc:
+        raise InputError(path, f"line {n}: frame number is not an integer ({exc})") from exc
+    if frame < 0:
+        raise InputError(path, f"line {n}: negative frame number {frame}")
+    return frame
+
+
 def label_box_in_velo(label: dict, calib: KittiCalib, vod: bool = False) -> Box:
     """The label's box in the velodyne (= ego) frame (conventions in the module docstring)."""
     velo_from_rect = invert_transform(calib.rect_from_velo) if not vod else invert_transform(
@@ -175,11 +190,14 @@ def label_box_in_velo(label: dict, calib: KittiCalib, vod: bool = False) -> Box:
     if vod:
         centre = transform_points(velo_from_rect, np.array([[label["x"], label["y"], label["z"]]]))[0] + [0.0, 0.0, h / 2]
         heading = -label["ry"] - math.pi / 2
-    else:
-        centre = transform_points(velo_from_rect, np.array([[label["x"], label["y"] - h / 2, label["z"]]]))[0]
-        direction = velo_from_rect[:3, :3] @ np.array([math.cos(label["ry"]), 0.0, -math.sin(label["ry"])])
-        heading = math.atan2(direction[1], direction[0])
-    return Box(float(centre[0]), float(centre[1]), float(centre[2]), float(wrap_angle(heading)), l, w, h)
+        return Box(float(centre[0]), float(centre[1]), float(centre[2]), float(wrap_angle(heading)), l, w, h)
+    centre = transform_points(velo_from_rect, np.array([[label["x"], label["y"] - h / 2, label["z"]]]))[0]
+    # object axes in the rectified camera frame: length (cos ry, 0, -sin ry), left (sin ry, 0, cos ry), up -y
+    c, s = math.cos(label["ry"]), math.sin(label["ry"])
+    rect_from_object = np.array([[c, s, 0.0], [0.0, 0.0, -1.0], [-s, c, 0.0]])
+    u, _, vt = np.linalg.svd(velo_from_rect[:3, :3] @ rect_from_object)   # R0_rect @ Tr is rigid only to ~1e-6
+    heading, pitch, roll = zyx_angles(u @ vt)
+    return Box(float(centre[0]), float(centre[1]), float(centre[2]), heading, l, w, h, roll=roll, pitch=pitch)
 
 
 def oxts_to_world_from_imu(oxts: np.ndarray) -> np.ndarray:
@@ -288,15 +306,17 @@ def read_kitti_tracking(path: str | Path) -> Sequence:
     sweeps = _numbered(root / "velodyne" / name, (".bin",))
     labels_path = root / "label_02" / f"{name}.txt"
     labels = []
+    last_labelled = -1  # the last frame of the label file, DontCare rows included (they are frames too)
     if labels_path.is_file():
         for n, line in enumerate(read_text_lines(labels_path), start=1):
             if line.strip():
                 label = parse_label_line(line, labels_path, n, tracking=True)
                 if label is not None:
                     labels.append(label)
+                last_labelled = max(last_labelled, _label_frame(line, labels_path, n))
     oxts_path = root / "oxts" / f"{name}.txt"
     oxts = _read_oxts(oxts_path) if oxts_path.is_file() else None
-    last = max([*sweeps, *(lab["frame"] for lab in labels), -1 if oxts is None else len(oxts) - 1])
+    last = max([*sweeps, last_labelled, -1 if oxts is None else len(oxts) - 1])
     if last < 0:
         raise InputError(root, f"sequence {name}: no velodyne files, labels or oxts")
     count = last + 1
@@ -316,7 +336,7 @@ def read_kitti_tracking(path: str | Path) -> Sequence:
     if labels_path.is_file():
         annotations = [[] for _ in range(count)]
         for lab in labels:
-            box = label_box_in_velo(lab, calib).transformed(world_from_ego[lab["frame"]])
+            box = label_box_in_velo(lab, calib).transformed(world_from_ego[lab["frame"]], keep_tilt=True)
             annotations[lab["frame"]].append(BoxAnnotation(track_id=str(lab["track_id"]), label=lab["type"], box=box))
     images = _numbered(root / "image_02" / name, (".png", ".jpg"))
     cameras = {"image_02": _camera(calib, "image_02", images, list(range(count)), times, world_from_ego)}
@@ -381,7 +401,7 @@ def read_kitti_object(path: str | Path) -> Sequence:
             for n, line in enumerate(lines, start=1):
                 label = parse_label_line(line, label_path, n, tracking=False) if line.strip() else None
                 if label is not None:
-                    box = label_box_in_velo(label, calibs[k], vod=vod).transformed(world_from_ego[k])
+                    box = label_box_in_velo(label, calibs[k], vod=vod).transformed(world_from_ego[k], keep_tilt=True)
                     boxes.append(BoxAnnotation(track_id=f"{sweeps[f].stem}-{len(boxes)}", label=label["type"], box=box))
             annotations.append(boxes)
     images = _numbered(root / "image_2", (".png", ".jpg"))

@@ -18,7 +18,7 @@ Conversion to the project's conventions:
   ego frame with the sample_data's ``calibrated_sensor`` (``ego_from_lidar``); no per-point times;
 - boxes: ``translation`` is the centre in the global frame, ``size`` is (width, length, height),
   ``rotation`` turns the box frame (x along the length) into the global frame: heading = yaw of the
-  box's x axis; the ``instance_token`` is the track id, the category name the label;
+  box's x axis, roll and pitch the rest of the rotation; the ``instance_token`` is the track id, the category name the label;
 - cameras: ``camera_intrinsic`` is K (images are undistorted), the camera's ``calibrated_sensor`` is
   ``ego_from_camera`` (OpenCV axes); frame k's image is the camera's sample_data nearest in time,
   posed with its own ``ego_pose`` (per-image time); images only when all files exist.

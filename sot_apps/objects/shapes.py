@@ -113,7 +113,7 @@ def object_points_by_frame(seq, tracks: dict[str, TrackBoxes], params: ShapePara
     for tid, track in tracks.items():
         trajectory = Trajectory.from_samples([stamps[tid][int(k)] for k in track.frames],
                                              [b.state.to_array() for b in track.boxes], params.end,
-                                             params.max_extrapolation_ns)
+                                             params.max_extrapolation_ns, [(b.roll, b.pitch) for b in track.boxes])
         trajectories[tid] = trajectory
         for k, (pts, t) in near_points[tid].items():
             box = track.box_at(k)

@@ -177,6 +177,13 @@ class ExecutorSession:
             return self._run_dask(tasks, desc, progress)
         raise ValueError(f"unknown executor kind {spec.kind!r}")
 
+    def worker_count(self) -> int:
+        """How many tasks can run at once: the local workers, or the Dask cluster's workers now."""
+        spec = self.spec
+        if spec.kind == "dask":
+            return max(1, len(self._dask_client().scheduler_info().get("workers", {})))
+        return 1 if spec.kind == "inline" else max(1, spec.workers)
+
     def on_every_worker(self, fn: Callable[..., Any], *args: Any) -> list[Any]:
         """Run ``fn(*args)`` once in every worker, e.g. to fill its worker-local caches before a batch; returns
         one result per worker reached. Dask: every worker of the client (``Client.run``); inline: this process;

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import os
 import re
 from dataclasses import dataclass
@@ -33,7 +34,7 @@ from ..io.sequence import Sequence
 from .config import ObjectSource, PipelineConfig, SequenceConfig
 
 __all__ = ["ObjectPlan", "SequencePlan", "Plan", "make_plan", "open_cached", "open_sequences", "worker_cache_info",
-           "safe_name"]
+           "safe_name", "track_chunks", "MAX_OBJECTS_PER_TASK"]
 
 
 def safe_name(text: str) -> str:
@@ -44,8 +45,9 @@ def safe_name(text: str) -> str:
 def open_cached(path: str, format: str | None = None) -> Sequence:
     """The worker-local sequence cache: a sequence is opened once per process and kept between tasks (every
     stage function opens its sequence through this). The runner fills it in every Dask worker before the
-    first batch (:func:`open_sequences`), so no task pays for opening a sequence."""
-    return open_sequence(path, format=format)
+    first batch (:func:`open_sequences`), so no task pays for opening a sequence. Sweeps are read through the
+    one-time conversion cache (:mod:`sot_apps.io.sweep_cache`)."""
+    return open_sequence(path, format=format, cache=True)
 
 
 def open_sequences(sources: list[tuple[str, str | None]]) -> int:
@@ -207,3 +209,37 @@ def make_plan(config: PipelineConfig) -> Plan:
 
 def plan_json(plan: Plan) -> str:
     return json.dumps([o.to_json() for o in plan.objects], sort_keys=True)
+
+
+# a tracking task holds at most this many live objects (each keeps its track and, offline, its region points)
+MAX_OBJECTS_PER_TASK = 32
+# fewer sequences than workers: chunks per worker (dynamic scheduling evens out objects of unequal cost)
+SPLIT_PER_WORKER = 4
+
+
+def track_chunks(objects: list[ObjectPlan], workers: int,
+                 max_objects: int = MAX_OBJECTS_PER_TASK) -> list[list[ObjectPlan]]:
+    """The tracking stage's work units: each a chunk of ONE sequence's objects, tracked in one pass over its
+    sweeps. A sequence is one chunk unless it has more than ``max_objects`` objects or there are fewer sequences
+    than ``workers``: then each sequence is split into up to ``SPLIT_PER_WORKER`` chunks per worker, so the
+    workers share the work evenly although objects cost very differently (a dense vehicle several times a far
+    one; the extra passes re-read the sweeps from the sweep cache, and their ground masks with them). Objects
+    go to the chunk with the fewest planned frames so far, longest first, keep plan order inside a chunk;
+    chunks come largest first (the executors start them in that order)."""
+    by_sequence: dict[str, list[ObjectPlan]] = {}
+    for o in objects:
+        by_sequence.setdefault(o.sequence, []).append(o)
+    if not by_sequence:
+        return []
+    workers = max(1, workers)
+    per_sequence = 1 if len(by_sequence) >= workers else math.ceil(SPLIT_PER_WORKER * workers / len(by_sequence))
+    chunks: list[tuple[int, list[ObjectPlan]]] = []
+    for objs in by_sequence.values():
+        n = min(len(objs), max(per_sequence, math.ceil(len(objs) / max_objects)))
+        loads, members = [0] * n, [[] for _ in range(n)]
+        for i in sorted(range(len(objs)), key=lambda i: objs[i].start - objs[i].end):
+            j = min((j for j in range(n) if len(members[j]) < max_objects), key=lambda j: loads[j])
+            members[j].append(i)
+            loads[j] += objs[i].end - objs[i].start
+        chunks += [(load, [objs[i] for i in sorted(m)]) for load, m in zip(loads, members) if m]
+    return [c for _, c in sorted(chunks, key=lambda lc: -lc[0])]

@@ -1,6 +1,6 @@
 """``run_pipeline``: plan, then run the stages in three batches through one executor.
 
-1. tracking, one task per object (parallel over workers);
+1. tracking, one task per (sequence, chunk of its objects): one pass over the sweeps (parallel over workers);
 2. bank entries, motion export and flow, one task per sequence (flow: per sequence and camera);
    then the bank index is written;
 3. simulated scans, one task per (bank entry, range).
@@ -26,7 +26,7 @@ from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
 from .health import health_lines, run_track_health
 from .lock import RunLock
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
-from .plan import Plan, make_plan, open_sequences, safe_name
+from .plan import Plan, make_plan, open_sequences, safe_name, track_chunks
 from . import stages as st
 
 __all__ = ["UnitRecord", "PipelineResult", "run_pipeline"]
@@ -60,6 +60,9 @@ class PipelineResult:
     failures: Path
     stage_seconds: dict[str, float] = field(default_factory=dict)
     track_health: list[dict] = field(default_factory=list)   # per finished track: pipeline.health
+    # the tracking stage's CPU seconds (of the tasks' threads) summed over its tasks: read, ground, step, refine, write,
+    # overhead, cpu, wall; and the largest task's CPU seconds (max_task_cpu_s)
+    track_times: dict[str, float] = field(default_factory=dict)
 
     def by_stage(self, stage: str) -> list[UnitRecord]:
         return [u for u in self.units if u.stage == stage]
@@ -110,10 +113,14 @@ def _marker(out: Path, key: str) -> DoneMarker:
     return DoneMarker(out, key)
 
 
+def _unit_digest(digest_doc: dict) -> str:
+    # the code is part of the configuration: a unit finished by other code is not reused
+    return config_digest({"unit": digest_doc, "code": code_digest()})
+
+
 def _make_unit(out: Path, stage: str, key: str, sequence: str | None, obj: str | None, digest_doc: dict,
                fn: Callable, kwargs: dict) -> _Unit:
-    # the code is part of the configuration: a unit finished by other code is not reused
-    digest = config_digest({"unit": digest_doc, "code": code_digest()})
+    digest = _unit_digest(digest_doc)
     if _marker(out, key).is_done(digest):
         return _Unit(stage, key, sequence, obj, digest, None)
     return _Unit(stage, key, sequence, obj, digest, Task(key, fn, kwargs={**kwargs, "digest": digest}))
@@ -140,6 +147,57 @@ def _run_units(units: list[_Unit], out: Path, session: ExecutorSession, desc: st
         else:
             records.append(UnitRecord(u.stage, u.key, u.sequence, u.object, "failed", o.seconds, error=o.error))
     return records
+
+
+def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
+                  progress: bool) -> tuple[list[UnitRecord], dict[str, float]]:
+    """The tracking stage: every unfinished object, in chunks of one sequence each tracked in one pass
+    (:func:`~sot_apps.pipeline.plan.track_chunks`); one record per object (a chunk's time shared by its objects'
+    CPU time) and the stage's time breakdown summed over the chunks (read, ground, step, refine, write, overhead)."""
+    track_stage = dataclasses.asdict(stage)
+    digests = {o.key: _unit_digest({"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage})
+               for o in plan.objects}
+    todo = [o for o in plan.objects if not _marker(out, f"track/{o.key}").is_done(digests[o.key])]
+    chunks = track_chunks(todo, session.worker_count()) if todo else []
+    tasks = [Task(f"track/{c[0].sequence}/chunk{i}", st.track_objects,
+                  kwargs={"out": str(out), "plans": c, "stage": stage,
+                          "digests": {o.object_id: digests[o.key] for o in c}})
+             for i, c in enumerate(chunks)]
+    outcomes = session.run(tasks, "track", progress)
+    for o in outcomes:
+        if o.environment:   # a full disk or an unwritable output stops the run (finished objects resume)
+            raise OutputError(None, o.error or "cannot write an output")
+    ran: dict[str, UnitRecord] = {}
+    breakdown: dict[str, float] = {}
+    for chunk, outcome in zip(chunks, outcomes):
+        entries = {e["object"]: e for e in (outcome.result or {}).get("objects", [])} if outcome.ok else {}
+        for name, value in ((outcome.result or {}).get("times", {}) if outcome.ok else {}).items():
+            breakdown[name] = breakdown.get(name, 0.0) + value
+        if outcome.ok:
+            breakdown["max_task_cpu_s"] = max(breakdown.get("max_task_cpu_s", 0.0), outcome.result["times"]["cpu_s"])
+        cpu = sum(e["cpu_s"] for e in entries.values()) or 1.0
+        for o in chunk:
+            key, e = f"track/{o.key}", entries.get(o.object_id)
+            share = outcome.seconds * (e["cpu_s"] / cpu if e else 1.0 / len(chunk))
+            if e is not None and e["ok"]:
+                ran[o.key] = UnitRecord("track", key, o.sequence, o.object_id, "done", share, result=e["result"],
+                                        outputs=_marker(out, key).outputs())
+            elif e is None and _marker(out, key).is_done(digests[o.key]):   # written before the chunk failed
+                ran[o.key] = UnitRecord("track", key, o.sequence, o.object_id, "done", share,
+                                        outputs=_marker(out, key).outputs())
+            else:
+                ran[o.key] = UnitRecord("track", key, o.sequence, o.object_id, "failed", share,
+                                        error=e["error"] if e else outcome.error)
+    records = []
+    for o in plan.objects:
+        if o.key in ran:
+            records.append(ran[o.key])
+            continue
+        marker = _marker(out, f"track/{o.key}").record()
+        extra = {k: v for k, v in marker.items() if k not in ("name", "config", "outputs", "finished_unix")}
+        records.append(UnitRecord("track", f"track/{o.key}", o.sequence, o.object_id, "cached", result=extra or None,
+                                  outputs=marker.get("outputs", {})))
+    return records, breakdown
 
 
 def _track_checksums(out: Path, sequence: str, objects: list[str]) -> dict[str, dict[str, str]]:
@@ -172,24 +230,21 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
     stages = config.stages
     records: list[UnitRecord] = []
     stage_seconds: dict[str, float] = {}
+    track_times: dict[str, float] = {}
 
     # ---- 0. every Dask worker opens the planned sequences into its cache once (tasks then reuse them)
     start = time.perf_counter()
     session.on_every_worker(open_sequences, [(s.path, s.format) for s in plan.sequences])
     stage_seconds["open"] = time.perf_counter() - start
 
-    # ---- 1. tracking (per object)
+    # ---- 1. tracking: one task per (sequence, chunk of its objects), one pass over the sweeps each
     finished: dict[str, list[str]] = {s.name: [] for s in plan.sequences}
     if stages.track.enabled:
-        track_stage = dataclasses.asdict(stages.track)
-        units = [_make_unit(out, "track", f"track/{o.key}", o.sequence, o.object_id,
-                            {"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage},
-                            st.track_object, {"out": str(out), "plan": o, "stage": stages.track})
-                 for o in plan.objects]
         start = time.perf_counter()
-        track_records = _run_units(units, out, session, "track", progress)
+        track_records, stage_times = _run_tracking(plan, out, stages.track, session, progress)
         stage_seconds["track"] = time.perf_counter() - start
         records += track_records
+        track_times.update(stage_times)
         for r in track_records:
             if r.status in ("done", "cached"):
                 finished[r.sequence].append(r.object)
@@ -282,9 +337,9 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
     health = run_track_health(out, records)
     manifest = write_manifest(out, {**config.to_json(), "executor": executor.describe(),
                                     "objects": [o.to_json() for o in plan.objects]}, stage_docs, started,
-                              {"track_health": health})
+                              {"track_health": health, "track_times": track_times})
     return PipelineResult(out, plan, records, time.perf_counter() - t0, manifest, failures_path, stage_seconds,
-                          health)
+                          health, track_times)
 
 
 def _sha_or_none(path: Path) -> str | None:

@@ -15,14 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tracking import (TrackingFailed, first_box_with_points, refine_track_fixed_lag, refine_track_offline, track_with_shape_growth, write_shape_growth,
-                        write_track_result)
+from ..tracking import ObjectRequest, ObjectTrack, TrackingFailed, write_shape_growth, write_track_result
+from ..tracking import track_objects as track_objects_pass
 from .config import BankStage, FlowStage, MotionStage, TrackStage
 from .manifest import DoneMarker
 from .plan import ObjectPlan, open_cached
 
-__all__ = ["TrackingFailed", "track_object", "bank_sequence", "motion_sequence", "flow_camera", "simulate_scene",
-           "track_dir", "scene_name", "MOTION_EVAL_FILE"]
+__all__ = ["TrackingFailed", "track_objects", "write_object", "bank_sequence", "motion_sequence", "flow_camera",
+           "simulate_scene", "track_dir", "scene_name", "MOTION_EVAL_FILE"]
 
 
 def track_dir(out: str | Path, sequence: str, object_id: str) -> Path:
@@ -35,54 +35,69 @@ def _files_under(directory: Path) -> list[Path]:
 
 # ---------------------------------------------------------------------------------------------- track
 
-def track_object(out: str, plan: ObjectPlan, stage: TrackStage, digest: str) -> dict:
-    """Track one object and write ``OUT/<seq>/tracks/<object>/{track.json, shape.ply, shape_growth.json}``
-    (sot_apps.tracking; the shape-growth record is what the report draws)."""
+def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests: dict[str, str]) -> dict:
+    """Track a chunk of one sequence's objects in one pass over its sweeps (:func:`sot_apps.tracking.track_objects`:
+    each sweep read and grounded once) and write each object as it finishes:
+    ``OUT/<seq>/tracks/<object>/{track.json, shape.ply, shape_growth.json}`` and its completion marker
+    (``digests[object_id]``). Returns per object its result or error (``TrackingFailed: ...`` when it had too few
+    LiDAR points to start or follow) and where the chunk's time went (CPU seconds)."""
     from tracker import get_preset
 
-    seq = open_cached(plan.sequence_path, plan.format)
+    t0, cpu0 = time.perf_counter(), time.thread_time()
+    first = plans[0]
+    seq = open_cached(first.sequence_path, first.format)
     config = get_preset(stage.preset, **dict(stage.overrides or {}))
-    min_points = stage.min_init_points
-    start_frame, init_box = plan.start, plan.init_box
-    if plan.annotated and stage.start == "first_with_points":
-        try:
-            start_frame, init_box = first_box_with_points(seq, plan.annotated, config, min_points)
-        except TrackingFailed as exc:
-            raise TrackingFailed(f"{plan.key}: {exc}") from None
-    if not seq.frames[start_frame].has_sweep:
-        raise TrackingFailed(f"{plan.key}: the start frame {start_frame} has no sweep; nothing to track")
-    end_frame = plan.end if stage.max_frames is None else min(plan.end, start_frame + stage.max_frames)
-    start = time.perf_counter()
     detections = None
-    if plan.detections:
+    if first.detections:
         from ..io.detections import read_sequence_detections
 
-        detections = read_sequence_detections(plan.detections, seq)
-    result, growth = track_with_shape_growth(seq, init_box, start_frame, end_frame, config, plan.object_id,
-                                             detections=detections)
-    first = result.estimates[0]
-    if first.num_points < min_points:
-        raise TrackingFailed(f"{plan.key}: {first.num_points} LiDAR points in the initial box at frame {start_frame} "
-                             f"(need at least {min_points}); nothing to track")
-    later = result.estimates[1:]
-    if later and all("no_points" in e.flags for e in later):
-        raise TrackingFailed(f"{plan.key}: lost after the start frame (no points in any later frame)")
-    if config.method == "sot" and stage.mode == "offline":
-        result = refine_track_offline(seq, result)
-    elif config.method == "sot" and stage.mode == "lag":
-        result = refine_track_fixed_lag(seq, result, stage.lag)
-    seconds = time.perf_counter() - start
+        detections = read_sequence_detections(first.detections, seq)
+    by_id = {p.object_id: p for p in plans}
+    requests = [ObjectRequest(p.object_id, p.init_box, p.start, p.end,
+                              p.annotated if stage.start == "first_with_points" else (), stage.max_frames)
+                for p in plans]
+    written: dict[str, dict] = {}
+    write_seconds = [0.0]
+
+    def write(track: ObjectTrack) -> None:
+        if track.error is None:
+            cpu = time.thread_time()
+            written[track.object_id] = write_object(out, by_id[track.object_id], track, digests[track.object_id])
+            write_seconds[0] += time.thread_time() - cpu
+
+    tracks, times = track_objects_pass(seq, requests, config, stage.mode, stage.lag, detections, stage.min_init_points,
+                                       shape_growth=True, on_done=write)
+    objects = []
+    for t in tracks:
+        plan = by_id[t.object_id]
+        if t.error is None:
+            objects.append({"object": t.object_id, "ok": True, "cpu_s": round(t.seconds, 4),
+                            "result": written[t.object_id]})
+        else:
+            error = f"TrackingFailed: {plan.key}: {t.error}" if t.lacks_points else t.error
+            objects.append({"object": t.object_id, "ok": False, "cpu_s": round(t.seconds, 4), "error": error})
+    cpu = time.thread_time() - cpu0
+    breakdown = times.to_json() | {"write_s": round(write_seconds[0], 4), "cpu_s": round(cpu, 4),
+                                   "wall_s": round(time.perf_counter() - t0, 4)}
+    breakdown["overhead_s"] = round(cpu - times.read - times.ground - times.step - times.refine - write_seconds[0], 4)
+    return {"sequence": first.sequence, "objects": objects, "times": breakdown}
+
+
+def write_object(out: str, plan: ObjectPlan, track: ObjectTrack, digest: str) -> dict:
+    """One tracked object's outputs and completion marker; returns its summary for the manifest."""
+    result = track.result
     directory = track_dir(out, plan.sequence, plan.object_id)
     # Per-frame time_ms is left out (it differs run to run): pipeline outputs are reproducible byte for byte;
     # the unit's total time is in the manifest.
-    write_track_result(directory, seq, result, plan.object_id, init_box, plan.label, with_time_ms=False)
-    growth_path = write_shape_growth(directory, growth)
+    write_track_result(directory, open_cached(plan.sequence_path, plan.format), result, plan.object_id,
+                       track.init_box, plan.label, with_time_ms=False)
+    growth_path = write_shape_growth(directory, track.growth)
     qualities = [float(np.clip(e.quality, 0.0, 1.0)) for e in result.estimates]
     DoneMarker(Path(out), f"track/{plan.key}").mark(digest, [directory / "track.json", directory / "shape.ply",
                                                              growth_path],
                                                     extra={"frames": len(qualities)})
     return {"sequence": plan.sequence, "object": plan.object_id, "frames": len(qualities),
-            "tracked_frames": len(qualities) - 1, "seconds": round(seconds, 3),
+            "tracked_frames": len(qualities) - 1, "seconds": round(track.seconds, 3),
             "mean_quality": round(float(np.mean(qualities)), 4), "shape_points": int(len(result.shape))}
 
 

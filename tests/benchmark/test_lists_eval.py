@@ -99,13 +99,13 @@ def test_eval_benchmark_with_simulated_detections_and_set(small_benchmark, capsy
     assert json.loads(report.read_text())["tables"]["det"]["all"]["acc"] > 0.85
     capsys.readouterr()
     assert main(["eval", "--benchmark", listing, "--first", "2", "--preset", "det_sot", "--simulate-detections",
-                 "learned", "--set", "weight_det=0.1", "--set", "det_min_iou=0.2"]) == 0
-    assert "set weight_det=0.1 det_min_iou=0.2" in capsys.readouterr().out
+                 "learned", "--set", "detection.weight=0.1", "--set", "detection.min_iou=0.2"]) == 0
+    assert "set detection.weight=0.1 detection.min_iou=0.2" in capsys.readouterr().out
     assert main(["eval", "--benchmark", listing, "--preset", "det"]) == 2  # a detection preset needs detections
-    assert main(["eval", "--benchmark", listing, "--set", "weight_dett=0.1"]) == 2
-    assert "unknown tracker setting 'weight_dett'; did you mean weight_det" in capsys.readouterr().err
-    assert main(["eval", "--benchmark", listing, "--set", "max_points=many"]) == 2
-    assert "max_points takes an integer" in capsys.readouterr().err
+    assert main(["eval", "--benchmark", listing, "--set", "detection.weightt=0.1"]) == 2
+    assert "detection.weightt: unknown tracker setting; did you mean detection.weight" in capsys.readouterr().err
+    assert main(["eval", "--benchmark", listing, "--set", "search.max_points=many"]) == 2
+    assert "search.max_points: expected an integer, got 'many'" in capsys.readouterr().err
 
 
 def test_eval_benchmark_adds_fixed_lag_and_offline_rows(small_benchmark, capsys, tmp_path):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pyarrow.feather as feather
 import pytest
@@ -12,10 +14,24 @@ from sot_apps.io.detections import read_detections
 from tracker.metrics import iou_3d_batch, iou_bev_batch
 
 
+FRONT_K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 180.0], [0.0, 0.0, 1.0]])
+# a front camera 1.5 m up, looking along ego +x (OpenCV axes: x right = -y ego, y down = -z ego, z = +x ego)
+EGO_FROM_FRONT = np.array([[0.0, 0.0, 1.0, 1.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 1.5], [0.0, 0.0, 0.0, 1.0]])
+
+
+def _add_front_camera(path):
+    """A calibration-only front camera (no images) in a canonical sequence.json: KITTI labels need a camera."""
+    doc = json.loads(path.read_text())
+    doc["cameras"] = {"front": {"K": FRONT_K.tolist(), "distortion": [0.0] * 5, "width": 640, "height": 360,
+                                "ego_from_camera": EGO_FROM_FRONT.tolist(), "frames": []}}
+    path.write_text(json.dumps(doc))
+
+
 @pytest.fixture(scope="module")
 def labelled(tmp_path_factory):
     root = tmp_path_factory.mktemp("autolabel")
     assert main(["synth", "--out", str(root / "world"), "--frames", "20", "--vehicles", "3", "--seed", "0"]) == 0
+    _add_front_camera(root / "world" / "sequence.json")
     assert main(["autolabel", str(root / "world"), "--simulate", "learned", "--seed", "0", "--out",
                  str(root / "labels"), "--quiet"]) == 0
     return root
@@ -43,21 +59,34 @@ def test_every_moving_vehicle_is_recovered_by_one_track(labelled):
         assert iou3d >= 0.7, (trk.track_id, iou3d)
 
 
-def test_the_three_label_formats_hold_the_same_boxes(labelled):
+def test_the_label_formats_hold_the_same_boxes(labelled):
+    """KITTI holds the labels the front camera sees (with 2D boxes and scores), AV2 all of them (with scores in
+    the submission table): the same boxes as the canonical copy."""
     world = open_sequence(labelled / "world")
     canonical = open_sequence(labelled / "labels" / "sequence")
     world_from_lidar = [np.asarray(f.world_from_ego) @ world.ego_from_lidar for f in world.frames]
     kitti = read_detections(labelled / "labels" / "kitti" / "label_02" / "0000.txt", world_from_lidar,
                             kitti_calib=labelled / "labels" / "kitti" / "calib" / "0000.txt")
+    rows = [line.split() for line in (labelled / "labels" / "kitti" / "label_02" / "0000.txt").read_text().splitlines()]
+    assert rows and all(len(r) == 18 and min(float(v) for v in r[6:10]) >= 0 for r in rows)  # 2D box, score
     table = feather.read_table(labelled / "labels" / "av2" / "annotations.feather").to_pandas()
+    submission = feather.read_table(labelled / "labels" / "av2" / "submission.feather").to_pandas()
+    assert len(submission) == len(table) and submission.score.between(0, 1).all() and submission.score.min() < 1
+    assert set(table.category) == {"REGULAR_VEHICLE"}
+    seen = 0
     for k in range(len(world)):
         ours = np.array([a.box.to_array() for a in canonical.annotations[k]]).reshape(-1, 7)
-        assert len(kitti.get(k, ())) == len(ours) == int((table.timestamp_ns == world.frames[k].timestamp_ns).sum())
-        if len(ours):
-            order = np.lexsort(ours[:, :2].T)
-            other = kitti[k].boxes[np.lexsort(kitti[k].boxes[:, :2].T)]
-            np.testing.assert_allclose(other[:, [0, 1, 2, 4, 5, 6]], ours[order][:, [0, 1, 2, 4, 5, 6]], atol=1e-4)
-    # AV2 boxes are in the ego frame: unit yaw quaternions, positive sizes
+        assert len(ours) == int((table.timestamp_ns == world.frames[k].timestamp_ns).sum())
+        ego = ours[:, :3] - world.frames[k].world_from_ego[:3, 3]
+        ego = ego @ world.frames[k].world_from_ego[:3, :3]
+        ahead = int((ego[:, 0] > 4.0 + 1.2 * np.abs(ego[:, 1]) * 500 / 320).sum())   # well inside the view
+        found = kitti[k].boxes if k in kitti else np.zeros((0, 7))
+        assert ahead <= len(found) <= len(ours)
+        for box in found:   # each KITTI box is one of the labels
+            assert np.abs(ours[:, [0, 1, 2, 4, 5, 6]] - box[[0, 1, 2, 4, 5, 6]]).max(axis=1).min() < 1e-4
+        seen += len(found)
+    assert seen > 0
+    # AV2 boxes are in the ego frame (level here: the synthetic ego does not tilt), positive sizes
     np.testing.assert_allclose(table.qw ** 2 + table.qz ** 2, 1.0, atol=1e-9)
     assert (table[["length_m", "width_m", "height_m"]] > 0).all().all()
 

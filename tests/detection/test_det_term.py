@@ -58,12 +58,12 @@ def test_detection_term_pulls_an_ambiguous_track_onto_the_detections():
     err_det = np.abs(xs(with_det) - truth)[1:]
     assert err_plain[-1] > 5.0                 # without detections the track cannot follow the slide
     # det_sot's small weight (docs/detection.md) competes with the motion prior: the pull takes a few frames and
-    # swings a little (last three frames: 0.22, 0.05, 0.11 m with full; 0.28, 0.15, 0.02 with full_v4), against
+    # swings a little (last three frames: 0.22, 0.05, 0.11 m with full), against
     # more than 5 m without detections
     assert err_det.max() < 2.0 and err_det[-1] < 0.15
     assert all("det" in e.flags for e in with_det.estimates[1:])
     # a weight above the motion prior's holds the track on the detections from the first frame
-    strong = track(source, START, config=get_preset("det_sot", weight_det=1.0), detections=detections())
+    strong = track(source, START, config=get_preset("det_sot", **{"detection.weight": 1.0}), detections=detections())
     assert np.all(np.abs(xs(strong) - truth)[1:] < 0.1)
 
 
@@ -78,7 +78,7 @@ def test_detections_below_the_score_or_iou_threshold_have_no_effect():
                                       np.array([b.to_array() for b in plain.boxes]))
         assert not any("det" in e.flags for e in other.estimates)
     # thresholds are configurable: the low-score detections count once the threshold is lowered
-    lowered = track(source, START, config=get_preset("det_sot", det_min_score=0.4), detections=detections(score=0.45))
+    lowered = track(source, START, config=get_preset("det_sot", **{"detection.min_score": 0.4}), detections=detections(score=0.45))
     assert abs(xs(lowered)[-1] - truth_x(FRAMES - 1)) < 0.2
 
 
@@ -121,7 +121,7 @@ def test_a_frame_without_points_minimises_prior_plus_detection():
     source = GapSource()
     dets = detections(offset=0.0)
     dets[6] = FrameDetections(dets[6].boxes + np.array([0.6, 0, 0, 0, 0, 0, 0]), dets[6].scores)  # a jump
-    config = get_preset("det_sot", weight_det=0.1)
+    config = get_preset("det_sot", **{"detection.weight": 0.1})
     coasting = track(source, START, config=get_preset("full"))
     result = track(source, START, config=config, detections=dets)
     assert "det_only" in result.estimates[6].flags and "prior_only" not in result.estimates[6].flags
@@ -150,7 +150,7 @@ def test_distance_gate_reanchors_a_track_that_coasted_off_its_object():
     dets = {k: FrameDetections(np.array([[truth_x(k), 2.0 if k >= 5 else 0.0, 0.8, 0.0, 4.5, 1.9, 1.6]]),
                                np.array([0.9])) for k in range(1, FRAMES)}
     paper = track(source, START, config=get_preset("det_sot"), detections=dets)
-    gated = track(source, START, config=get_preset("det_sot", det_max_distance=5.0), detections=dets)
+    gated = track(source, START, config=get_preset("det_sot", **{"detection.max_distance": 5.0}), detections=dets)
     assert not any("det" in e.flags for e in paper.estimates[5:8])
     assert all("det_only" in e.flags for e in gated.estimates[5:8])
     assert abs(paper.boxes[7].y) < 0.05 and gated.boxes[7].y > 0.5

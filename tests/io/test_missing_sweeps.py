@@ -128,7 +128,7 @@ def test_tracker_prior_scales_with_elapsed_time():
     keeps its prior per second, ``prior_per_second``, as ``full`` does)."""
     from tracker import Box, LidarFrame, Tracker, TrackerConfig
 
-    tracker = Tracker(TrackerConfig(prior_per_second=True))
+    tracker = Tracker(TrackerConfig().with_overrides(["motion.per_second=true"]))
     eye = np.eye(4)
     # 1 m per 0.1 s frame as the known initial motion
     tracker.start(LidarFrame(0, 0, np.zeros((0, 3)), eye), Box(0, 0, 0.8, 0, 4, 2, 1.6),

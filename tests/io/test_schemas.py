@@ -54,7 +54,9 @@ def test_schemas_are_versioned_and_have_ids():
     for name in ("sequence", "track"):
         schema = load_schema(name)
         assert schema["$id"].endswith(f"/{name}/{schema['version']}.schema.json")
-        assert schema["properties"]["schema_version"]["const"] == schema["version"]
+        accepted = schema["properties"]["schema_version"]
+        assert accepted.get("const", schema["version"]) == schema["version"]
+        assert max(accepted.get("enum", [schema["version"]])) == schema["version"]
 
 
 def test_valid_documents_pass(sequence_doc):
@@ -75,7 +77,7 @@ SEQUENCE_CASES = [
     ("nan", ["cameras", "front_camera", "K", 0, 0], float("-inf"), "cameras.front_camera.K[0][0]: non-finite"),
     ("unknown", ["frames", 0, "colour"], "red", "frames[0].colour: unknown field"),
     ("unknown", ["extra"], 1, "extra: unknown field"),
-    ("value", ["schema_version"], 2, "schema_version"),
+    ("value", ["schema_version"], 3, "schema_version"),
     ("value", ["frames", 0, "world_from_ego"], [[1, 0, 0, 0]] * 3, "frames[0].world_from_ego"),
     ("value", ["frames", 0, "points"], "../elsewhere.npz", "frames[0].points"),
 ]

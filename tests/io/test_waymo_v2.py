@@ -4,6 +4,7 @@ segment by an independent writer (tests/io/waymo_synth.py) and compared with its
 from __future__ import annotations
 
 import shutil
+from fractions import Fraction
 from pathlib import Path
 
 import cv2
@@ -99,7 +100,7 @@ def test_synthetic_camera(synthetic):
     point = transform_points(truth.world_from_ego[0], np.array([[20.0, -1.5, 0.5]]))[0]
     for k in range(2):
         frame = camera.frames[k]
-        assert frame.timestamp_ns == round(truth.image_times_s[k] * 1e6) * 1000
+        assert frame.timestamp_ns == round(Fraction(truth.image_times_s[k]) * 10 ** 9)
         assert frame.image_path.read_bytes() == ws.jpeg(k)
         uv = cv2.projectPoints(transform_points(invert_transform(frame.world_from_camera), point[None]),
                                np.zeros(3), np.zeros(3), camera.K, camera.distortion)[0][0, 0]

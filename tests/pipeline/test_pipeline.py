@@ -98,16 +98,16 @@ def test_interrupted_run_resumes_without_redoing_finished_objects(reference_run,
     _, reference_sums = reference_run
     out = tmp_path / "out"
     config = PipelineConfig.from_json(pipeline_doc(tiny_worlds, out))
-    original = stage_module.track_object
+    original = stage_module.write_object
     calls: list[str] = []
 
-    def interrupt_after_three(out, plan, stage, digest):
+    def interrupt_after_three(out, plan, track, digest):
         if len(calls) == 3:
-            raise KeyboardInterrupt   # Ctrl-C while the fourth object is being tracked
+            raise KeyboardInterrupt   # Ctrl-C while the fourth object is being written
         calls.append(plan.key)
-        return original(out, plan, stage, digest)
+        return original(out, plan, track, digest)
 
-    monkeypatch.setattr(stage_module, "track_object", interrupt_after_three)
+    monkeypatch.setattr(stage_module, "write_object", interrupt_after_three)
     with pytest.raises(KeyboardInterrupt):
         run_pipeline(config, ExecutorSpec("inline"), progress=False)
     assert calls == ["synth_s4/veh_000", "synth_s4/veh_001", "synth_s4/veh_002"]
@@ -120,11 +120,11 @@ def test_interrupted_run_resumes_without_redoing_finished_objects(reference_run,
 
     rerun: list[str] = []
 
-    def counting(out, plan, stage, digest):
+    def counting(out, plan, track, digest):
         rerun.append(plan.key)
-        return original(out, plan, stage, digest)
+        return original(out, plan, track, digest)
 
-    monkeypatch.setattr(stage_module, "track_object", counting)
+    monkeypatch.setattr(stage_module, "write_object", counting)
     result = run_pipeline(config, ExecutorSpec("inline"), progress=False)
     assert rerun == ["synth_s5/veh_000", "synth_s5/veh_001", "synth_s5/veh_002"]
     assert [u.status for u in result.by_stage("track")] == ["cached"] * 3 + ["done"] * 3
@@ -198,13 +198,20 @@ def test_object_without_points_fails_while_the_others_finish(tiny_worlds, tmp_pa
     assert sorted(e["source"]["object_id"] for e in bank["entries"]) == ["veh_000", "veh_001"]
 
 
-def test_bench_counts_the_tracked_frames(tiny_worlds):
-    """`sot-apps bench pipeline` measures what it says: frames tracked after each start, per configuration."""
-    from sot_apps.bench.pipeline import format_table, measure
+def test_bench_counts_the_object_frames_and_reads_each_sweep_once(tiny_worlds, tmp_path):
+    """`sot-apps bench pipeline` measures what it says: frames tracked after each start, per configuration; the
+    two objects share one pass (each of the 4 sweeps read once) and the CPU breakdown adds up to the tasks' CPU."""
+    from sot_apps.bench.pipeline import PARTS, format_table, measure
+    from sot_apps.pipeline.config import ObjectSource, PipelineConfig, SequenceConfig, Stages, TrackStage
 
-    rows = measure(tiny_worlds[0], [("inline", 1)], objects=2, max_frames=3)
-    assert [(r["objects"], r["failed"], r["tracked_frames"]) for r in rows] == [(2, 0, 6)]
-    assert rows[0]["executor"] == "in process" and rows[0]["frames_per_s"] > 0 and rows[0]["speedup"] == 1.0
+    config = PipelineConfig(str(tmp_path / "out"), (SequenceConfig(str(tiny_worlds[0]), objects=ObjectSource(
+        "annotations", max_objects=2)),), Stages(track=TrackStage(max_frames=3)))
+    rows = measure(config, [("inline", 1, None)])
+    assert [(r["objects"], r["failed"], r["object_frames"], r["sweeps_read"]) for r in rows] == [(2, 0, 6, 4)]
+    r = rows[0]
+    assert r["executor"] == "in process" and r["object_frames_per_s"] > 0 and r["speedup"] == 1.0
+    assert r["cpu_breakdown_s"]["step"] > 0 and r["cpu_breakdown_s"]["refine"] > 0   # offline: refined
+    assert abs(sum(r["cpu_breakdown_s"].values()) - r["cpu_s"]) < 0.05 + 0.01 * len(PARTS)
     assert "| 2 | 6 |" in format_table(rows)
 
 

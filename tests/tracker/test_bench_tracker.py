@@ -52,10 +52,8 @@ def test_sweep_ground_is_timed_once_per_sweep_and_shown_apart():
     for k in range(4):
         points = seq.lidar_frame(k).points_ego
         entry = _CACHE[id(points)]
-        assert entry[0]() is points and np.array_equal(entry[2], sweep_ground_mask(
-            points, config.gpf_lpr_count, config.gpf_seed_threshold, config.gpf_distance_threshold,
-            config.gpf_iterations))
-    assert _time_sweep_ground(seq, [0, 1], get_preset("full_v2")).size == 0   # local ground: nothing shared
+        assert entry[0]() is points and np.array_equal(entry[2], sweep_ground_mask(points, *config.ground.sweep_args()))
+    assert _time_sweep_ground(seq, [0, 1], get_preset("full", **{"ground.remover": "local"})).size == 0   # nothing shared
 
     row = {"row": "full", "acc": 0.9, "rob": 0.9, "frames": 3, "cpu_median_ms": 10.0, "cpu_mean_ms": 11.0,
            "cpu_p90_ms": 12.0, "cpu_frame1_mean_ms": 50.0, "cpu_median_ms_k2": 10.0, "wall_median_ms": 10.0,

@@ -12,6 +12,12 @@ import pytest
 from sot_apps.errors import InputError
 from sot_apps.evaluation.reference import compare_with_reference, load_reference
 from tracker.config import TrackerConfig, get_preset
+from tracker.sotracker import Tracker
+from tracker.strategies.association import CropAssociation
+from tracker.strategies.first_frame import FinderSearch
+from tracker.strategies.ground import SweepGround
+from tracker.strategies.inliers import UpstreamRansac
+from tracker.strategies.loss import IterationReference, MotionTermsOnly, XOnlyConsistency
 from tracker.finder import finder_icp, resample
 from tracker.geometry import Box
 from tracker.ground import fit_plane
@@ -143,14 +149,24 @@ def test_resample_draws_with_replacement_only_above_the_limit():
 
 def test_faithful_preset_uses_the_upstream_behaviours():
     c = get_preset("faithful")
-    assert (c.ground_scope, c.first_search, c.association, c.ransac_mode) == ("sweep", "finder", "crop", "upstream")
-    assert (c.outer_iterations, c.first_icp_iterations, c.convergence_tolerance) == (20, 50, 0.0)
+    assert (c.ground.remover, c.first_frame.search, c.search.association, c.shape.ransac.mode) == (
+        "sweep", "finder", "crop", "upstream")
+    assert (c.registration.outer_iterations, c.first_frame.icp_iterations,
+            c.registration.convergence_tolerance) == (20, 50, 0.0)
     d = TrackerConfig()
-    assert (d.ground_scope, d.first_search, d.association, d.ransac_mode) == ("local", "moving", "global", "fixed")
-    with pytest.raises(ValueError, match="association"):
-        TrackerConfig(association="tree")
+    assert (d.ground.remover, d.first_frame.search, d.search.association, d.shape.ransac.mode) == (
+        "local", "moving", "global", "fixed")
+    # each upstream behaviour is its own strategy, chosen once
+    s = Tracker(c).strategies
+    reg = s.registration
+    assert (type(s.ground), type(s.first_frame), type(reg.association), type(reg.inliers), type(reg.reference),
+            type(reg.consistency), type(reg.data_free)) == (
+        SweepGround, FinderSearch, CropAssociation, UpstreamRansac, IterationReference, XOnlyConsistency,
+        MotionTermsOnly)
+    with pytest.raises(ValueError, match="search.association"):
+        TrackerConfig.from_dict({"search": {"association": "tree"}})
     with pytest.raises(ValueError, match="point"):
-        TrackerConfig(association="crop", icp_metric="plane")
+        TrackerConfig().with_overrides(["search.association=crop", "registration.metric=plane"])
 
 
 @pytest.mark.slow

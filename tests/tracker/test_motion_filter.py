@@ -132,7 +132,7 @@ def _rear_view_sequence(n: int, speed: float = 10.0, heading: float = 0.4, seed:
 def test_straight_drive_seen_only_from_behind_keeps_its_heading_within_2_degrees(scene):
     """The issue's bound, on 4 scenes. Measured on 12 such scenes x 3 seeds (docs/tracker.md, "A rear view"):
     `full` stays within 1.80 degrees (mean 0.30) since frame 1's motion seeds the prior only along the start
-    heading; before that (`full_v4`) 12 of the 36 runs went above 2 degrees (at most 2.58), the box sliding
+    heading; before that 12 of the 36 runs went above 2 degrees (at most 2.58), the box sliding
     sideways along the face, and this test, on one scene, had passed by luck."""
     frames, boxes = _rear_view_sequence(40, seed=scene)
     tracker = Tracker(get_preset("full"))
@@ -155,6 +155,7 @@ def test_a_gap_of_four_frames_is_predicted_with_the_elapsed_time(scene):
     offset = est.box.center[:2] - boxes[12].center[:2]
     along = offset @ [np.cos(heading), np.sin(heading)]
     # the distance travelled over the gap (measured on 12 scenes x 3 seeds: |along| <= 0.04 m, in all <= 0.13 m;
-    # with full_v4, whose box slid sideways along the face, up to 0.41 m in all: docs/tracker.md "A rear view")
+    # before frame 1's motion seeded the prior along the heading, the box slid sideways along the face, up to
+    # 0.41 m in all: docs/tracker.md "A rear view")
     assert abs(along) < 0.1, offset
     assert np.hypot(*offset) < 0.3, offset

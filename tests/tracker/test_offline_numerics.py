@@ -112,25 +112,24 @@ def test_gauss_newton_blocks_match_finite_differences_of_the_residuals():
 
 
 def _naive_region(world: np.ndarray, points_ego: np.ndarray, box: Box, params: OfflineParams, config) -> np.ndarray:
-    sweep = params.ground == "tracker" and config.ground_scope == "sweep"
+    sweep = params.ground == "tracker" and config.ground.remover == "sweep"
     if sweep:  # the tracker's ground: the whole sweep's one plane, on the sensor-frame points
-        world = world[~sweep_ground_mask(points_ego, config.gpf_lpr_count, config.gpf_seed_threshold,
-                                         config.gpf_distance_threshold, config.gpf_iterations)]
+        world = world[~sweep_ground_mask(points_ego, *config.ground.sweep_args())]
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     local = world[(np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)]
     local = local[np.all(np.isfinite(local), axis=1)]
     if not sweep:
-        local = local[~ground_mask(local, config.ground_params())]
+        local = local[~ground_mask(local, config.ground.params())]
     return local[points_in_box(local, box, params.region_scale)]
 
 
-# the tracker's ground: a whole-sweep plane (full) or local planes (full_v2); local planes on request
-@pytest.mark.parametrize("preset, ground", [("full", "local"), ("full", "tracker"), ("full_v2", "tracker")])
+# the tracker's ground: a whole-sweep plane (full) or local planes (ground.remover "local"); local planes on request
+@pytest.mark.parametrize("remover, ground", [("sweep", "local"), ("sweep", "tracker"), ("local", "tracker")])
 @pytest.mark.parametrize("deskew", [False, True])
-def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deskew, preset, ground):
+def test_region_points_from_the_cropped_sweep_are_those_of_the_whole_sweep(deskew, remover, ground):
     seq = make_sequence(n_frames=3, seed=4, nan_frames=(2,))
     rng = np.random.default_rng(3)
-    config = get_preset(preset, deskew=deskew)
+    config = get_preset("full", deskew=deskew, **{"ground.remover": remover})
     params = OfflineParams(ground=ground)
     previous = (seq.frames[0].timestamp_ns, make_transform(rotation_z(-0.15), np.array([-2.0, -0.5, 1.0])))
     for k in (1, 2):
@@ -201,7 +200,7 @@ def test_the_online_steps_crop_gives_the_regions_points():
         np.testing.assert_array_equal(frame_region_points(frame, far, config, params, crop=crop),
                                       frame_region_points(frame, far, config, params))
     assert used >= 3   # the region usually fits in the searched crop
-    other = get_preset("full_v2")   # local ground planes in the step: never reused
+    other = get_preset("full", **{"ground.remover": "local"})   # local ground planes in the step: never reused
     tracker = Tracker(other)
     tracker.start(seq.lidar_frame(0), seq.boxes[0])
     est = tracker.step(seq.lidar_frame(1))

@@ -50,7 +50,7 @@ def _iou(result, truth: list[Box]) -> np.ndarray:
 
 def test_an_empty_start_is_held_then_reacquired_when_the_points_appear():
     frames, truth = _sequence()
-    config = get_preset("full", seed=0, reacquire=True)
+    config = get_preset("full", seed=0, **{"first_frame.reacquire": True})
     result = track(_Source(frames), truth[0], 0, len(frames) - 1, config)
     flags = [e.flags for e in result.estimates]
     assert all("waiting" in f for f in flags[1:HIDDEN])
@@ -74,6 +74,6 @@ def test_a_start_with_points_is_tracked_as_before():
     frames, truth = frames[HIDDEN:], truth[HIDDEN:]
     frames = [LidarFrame(index=i, timestamp_ns=f.timestamp_ns, points_ego=f.points_ego,
                          world_from_ego=f.world_from_ego) for i, f in enumerate(frames)]
-    on = track(_Source(frames), truth[0], 0, len(frames) - 1, get_preset("full", seed=0, reacquire=True))
+    on = track(_Source(frames), truth[0], 0, len(frames) - 1, get_preset("full", seed=0, **{"first_frame.reacquire": True}))
     off = track(_Source(frames), truth[0], 0, len(frames) - 1, get_preset("full", seed=0))
     assert np.array_equal([e.box.to_array() for e in on.estimates], [e.box.to_array() for e in off.estimates])

@@ -213,20 +213,22 @@ def test_turn_prior_has_no_lag_in_a_steady_turn_and_ignores_the_box_heading():
 def test_config_presets_and_round_trip():
     full = get_preset("full")
     assert TrackerConfig.from_dict(full.to_dict()) == full
-    assert (full.weight_icp, full.weight_shape, full.weight_mc, full.weight_mp) == (1.0, 1.0, 0.1, 0.1)
-    assert (full.search_scale, full.first_search_scale, full.crop_scale) == (1.5, 3.0, 1.1)
-    assert not get_preset("icp_mp").use_shape and get_preset("icp_mp").weight_mc == 0
-    assert not get_preset("icp_mp_s1").shape_update
-    assert not get_preset("no_ground_removal").ground_removal
-    assert not get_preset("no_ransac").use_ransac
-    assert not get_preset("no_subshape").use_subshape
-    assert get_preset("faithful").outer_iterations == 20 and get_preset("faithful").first_icp_iterations == 50
-    assert {"icp_mp", "icp_mp_s1", "icp_mp_sall", "full", "no_ground_removal", "no_ransac", "no_subshape",
-            "faithful"} <= set(PRESETS)
+    assert (full.registration.icp_weight, full.shape.weight, full.motion.consistency_weight,
+            full.motion.prior_weight) == (1.0, 1.0, 0.1, 0.1)
+    assert (full.search.scale, full.first_frame.scale, full.search.crop_scale) == (1.5, 3.0, 1.1)
+    assert not get_preset("icp_mp").shape.enabled and get_preset("icp_mp").motion.consistency_weight == 0
+    assert not get_preset("icp_mp_s1").shape.aggregate
+    assert get_preset("no_ground_removal").ground.remover == "none"
+    assert get_preset("no_ransac").shape.ransac.mode == "none"
+    assert not get_preset("no_subshape").shape.subshape
+    faithful = get_preset("faithful")
+    assert faithful.registration.outer_iterations == 20 and faithful.first_frame.icp_iterations == 50
+    assert set(PRESETS) == {"full", "faithful", "icp_mp", "icp_mp_s1", "icp_mp_sall", "no_ground_removal",
+                            "no_ransac", "no_subshape", "det_sot", "det"}
     assert get_preset("full", seed=5).seed == 5
     with pytest.raises(ValueError):
         get_preset("nope")
     with pytest.raises(ValueError):
-        TrackerConfig.from_dict({"weight_icp": 1.0, "bogus": 2})
+        TrackerConfig.from_dict({"registration": {"icp_weight": 1.0, "bogus": 2}})
     with pytest.raises(Exception):
         full.seed = 3  # frozen

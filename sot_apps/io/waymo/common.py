@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from fractions import Fraction
 import os
 from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
@@ -36,8 +37,9 @@ def micros_to_ns(micros: int) -> int:
 
 
 def seconds_to_ns(seconds: float) -> int:
-    """Seconds since the epoch (double) to integer ns, rounded to the microsecond a double resolves."""
-    return int(round(float(seconds) * 1e6)) * 1000
+    """Seconds since the epoch (a double, as Waymo stores image times) to the nearest integer ns of its exact
+    value (``seconds * 1e9`` in floating point would be off by up to ~128 ns at today's epoch times)."""
+    return round(Fraction(float(seconds)) * 1_000_000_000)
 
 
 def transform_4x4(values, path: Path, what: str) -> np.ndarray:
@@ -63,14 +65,15 @@ def transform_4x4(values, path: Path, what: str) -> np.ndarray:
 def box_annotation(track_id: str, type_code: int, center: tuple[float, float, float], length: float, width: float,
                    height: float, heading: float, world_from_ego: np.ndarray, path: Path, where: str,
                    num_points: int | None = None) -> BoxAnnotation:
-    """A Waymo box (vehicle frame of the frame pose; length along the heading) as a WORLD-frame annotation."""
+    """A Waymo box (vehicle frame of the frame pose; length along the heading; level in the vehicle frame) as a
+    WORLD-frame annotation: its roll and pitch in the world are those of the vehicle pose."""
     values = (*center, length, width, height, heading)
     if not all(math.isfinite(v) for v in values):
         raise InputError(path, f"{where}: box {track_id!r} has a non-finite value")
     if min(length, width, height) <= 0:
         raise InputError(path, f"{where}: box {track_id!r} has a non-positive size {length}x{width}x{height}")
     box = Box(float(center[0]), float(center[1]), float(center[2]), float(heading), float(length), float(width),
-              float(height)).transformed(world_from_ego)
+              float(height)).transformed(world_from_ego, keep_tilt=True)
     return BoxAnnotation(track_id=track_id, label=LABEL_TYPES.get(int(type_code), "Unknown"), box=box,
                          num_points=None if num_points is None else int(num_points))
 

@@ -14,8 +14,8 @@ Conversions to the project's conventions:
   (world) and back with ``Frame.pose``^-1; the other lidars' points are already in that frame;
   ``intensity`` = range image channel 1; Waymo v1 has no per-point times (``time_offset_ns`` None);
 - boxes: ``Label.id`` is the track id; ``Label.Box`` centre/heading are in the vehicle frame of
-  ``Frame.pose`` with length along the heading (already our convention) -> WORLD with
-  ``world_from_ego``; classes Vehicle / Pedestrian / Sign / Cyclist / Unknown;
+  ``Frame.pose`` with length along the heading (already our convention), level in the vehicle frame
+  -> WORLD with ``world_from_ego`` (the box takes the vehicle's roll and pitch); classes Vehicle / Pedestrian / Sign / Cyclist / Unknown;
 - cameras: intrinsic [f_u, f_v, c_u, c_v, k1, k2, p1, p2, k3] -> K + OpenCV distortion
   (k1, k2, p1, p2, k3); extrinsic (camera -> vehicle, camera x forward) -> ``ego_from_camera`` with
   OpenCV axes; an image's time is its ``pose_timestamp`` and its ``world_from_camera`` uses the

@@ -1,0 +1,125 @@
+"""The multi-object pass (sot_apps.tracking.track_objects) gives every object the result of tracking it alone,
+bit for bit, online, with fixed-lag and offline refinement, while reading each sweep once."""
+
+from __future__ import annotations
+
+
+import numpy as np
+import pytest
+
+from tracker import Box, get_preset, track
+
+from sot_apps.io import open_sequence
+from sot_apps.tracking import (ObjectRequest, TrackingFailed, first_box_with_points, refine_track_fixed_lag,
+                               refine_track_offline, track_objects)
+
+
+def _alone(seq, request: ObjectRequest, config, mode: str, lag: int):
+    """The per-object path (sot-apps track / the former per-object pipeline task)."""
+    if request.annotated:
+        start, box = first_box_with_points(seq, request.annotated, config)
+    else:
+        start, box = request.start, request.init_box
+    end = request.end if request.max_frames is None else min(request.end, start + request.max_frames)
+    result = track(seq, box, start, end, config)
+    if mode == "lag":
+        result = refine_track_fixed_lag(seq, result, lag)
+    elif mode == "offline":
+        result = refine_track_offline(seq, result)
+    return result
+
+
+def _assert_identical(seq, requests, mode: str, lag: int = 3) -> None:
+    config = get_preset("full")
+    reads: list[int] = []
+    loader = seq.load_sweep
+    seq.load_sweep = lambda k: reads.append(k) or loader(k)
+    seq.cache_size = 1   # no sweep comes back from the sequence's own cache: every read is counted
+    tracks, times = track_objects(seq, requests, config, mode=mode, lag=lag)
+    assert len(reads) == len(set(reads)) == times.sweeps   # each sweep read once
+    seq.load_sweep = loader
+    seq.cache_size = 4
+    for request, got in zip(requests, tracks):
+        assert got.error is None, got.error
+        want = _alone(seq, request, config, mode, lag)
+        assert got.result.mode == want.mode and got.result.frames == want.frames
+        assert np.array_equal([e.box.to_array() for e in got.result.estimates],
+                              [e.box.to_array() for e in want.estimates])
+        assert [e.num_points for e in got.result.estimates] == [e.num_points for e in want.estimates]
+        assert [e.flags for e in got.result.estimates] == [e.flags for e in want.estimates]
+        assert np.array_equal(got.result.shape, want.shape)
+
+
+def _requests(seq, ids, starts, end, max_frames=None):
+    tracks = seq.tracks()
+    out = []
+    for tid, start in zip(ids, starts):
+        t = tracks[tid]
+        frames = [k for k in t.frames if start <= k <= end]
+        if start == 0:   # annotated: starts at its first box with enough points
+            out.append(ObjectRequest(tid, t.box_at(frames[0]), frames[0], frames[-1],
+                                     tuple((k, t.box_at(k)) for k in frames), max_frames))
+        else:            # a given box at a later frame
+            out.append(ObjectRequest(tid, t.box_at(start), start, frames[-1], max_frames=max_frames))
+    return out
+
+
+@pytest.mark.parametrize("mode", ["online", "lag", "offline"])
+def test_synthetic_objects_in_one_pass_equal_each_tracked_alone(tiny_worlds, mode):
+    seq = open_sequence(tiny_worlds[0])
+    requests = _requests(seq, ["veh_000", "veh_001", "veh_002"], [0, 2, 1], 5, max_frames=None)
+    _assert_identical(seq, requests, mode, lag=2)
+
+
+@pytest.mark.parametrize("mode", ["online", "lag", "offline"])
+def test_pandaset_dev_objects_in_one_pass_equal_each_tracked_alone(mode, pandaset_root):
+    seq = open_sequence(pandaset_root)
+    ids = {t[:8]: t for t in seq.tracks()}
+    # three dev vehicles starting at frames 0, 2 and 4 (annotated, given boxes); one capped by max_frames
+    requests = _requests(seq, [ids["8ac00bad"], ids["91aa5b5c"], ids["71a404f3"]], [0, 2, 4], 9)
+    requests[0] = ObjectRequest(**{**requests[0].__dict__, "max_frames": 6})
+    _assert_identical(seq, requests, mode, lag=3)
+
+
+def test_an_object_without_points_fails_alone(tiny_worlds):
+    seq = open_sequence(tiny_worlds[0])
+    good = _requests(seq, ["veh_000"], [0], 5)[0]
+    empty = ObjectRequest("empty", Box(150.0, -150.0, 1.0, 0.0, 4.5, 1.9, 1.6), 0, 5)
+    far = seq.tracks()["veh_001"]
+    never = ObjectRequest("never", far.box_at(0), 0, 5,
+                          tuple((k, Box(150.0, -150.0, 1.0, 0.0, 4.5, 1.9, 1.6)) for k in range(6)))
+    tracks, _ = track_objects(seq, [empty, good, never], get_preset("full"), mode="online")
+    assert [t.error is None for t in tracks] == [False, True, False]
+    assert tracks[0].lacks_points and "0 LiDAR points in the initial box" in tracks[0].error
+    with pytest.raises(TrackingFailed) as alone:
+        first_box_with_points(seq, never.annotated, get_preset("full"))
+    assert tracks[2].lacks_points and tracks[2].error == str(alone.value)
+    want = track(seq, good.init_box, 0, 5, get_preset("full"))
+    assert np.array_equal([e.box.to_array() for e in tracks[1].result.estimates],
+                          [e.box.to_array() for e in want.estimates])
+
+
+def test_ground_masks_stored_in_the_sweep_cache_give_the_same_tracks(tiny_worlds, tmp_path):
+    """A pass over a sequence read through the sweep cache stores each sweep's ground mask there; a later pass
+    (another process, another chunk) takes the masks from it, and both give the per-object results."""
+    from sot_apps.io.sweep_cache import SweepCache, with_sweep_cache
+
+    plain = open_sequence(tiny_worlds[0])
+    requests = _requests(plain, ["veh_000", "veh_002"], [0, 1], 5)
+    config = get_preset("full")
+    want = [_alone(plain, r, config, "online", 0) for r in requests]
+    for run in range(2):
+        seq = with_sweep_cache(open_sequence(tiny_worlds[0]), tmp_path / "cache")
+        tracks, _ = track_objects(seq, requests, config)
+        for got, alone in zip(tracks, want):
+            assert np.array_equal([e.box.to_array() for e in got.result.estimates],
+                                  [e.box.to_array() for e in alone.estimates])
+        cache = SweepCache.of(seq)
+        stored = [p for k in range(6) for p in cache.entry(k).glob("ground-*.npz")]
+        assert len(stored) == 6
+    from tracker.sweep_ground import sweep_ground_mask
+
+    name = stored[0].name[:-4]
+    for k in range(6):
+        assert np.array_equal(cache.load_mask(k, name),
+                              sweep_ground_mask(plain.lidar_frame(k).points_ego, *config.ground.sweep_args()))

@@ -1,0 +1,78 @@
+"""The golden boxes of the tracker refactor: every frame's box and flags of the 9 dev tracks of PandaSet 002
+(the tracks ``sot-apps eval ../shared/data/pandaset_002 --all-moving`` selects), tracked online with the presets
+``full`` and ``faithful`` and seeds 0, 1, 2.
+
+``python tests/tracker/golden_boxes.py`` writes tests/tracker/golden/dev_tracks_boxes.npz (made with the code
+before the configuration was nested; tests/tracker/test_golden_boxes.py checks that today's code gives the same
+boxes). The file holds, per (preset, seed, track): the (K, 7) float64 boxes x, y, z, heading, l, w, h, and the
+flags of each frame joined by ',' (a fixed-width unicode array).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+GOLDEN = REPO / "tests" / "tracker" / "golden" / "dev_tracks_boxes.npz"
+PRESETS = ("full", "faithful")
+SEEDS = (0, 1, 2)
+
+
+def dev_tracks(sequence) -> list[tuple[str, int, int, object]]:
+    """(track id, start frame, end frame, start box) of the evaluated moving vehicles, sorted by id."""
+    from sot_apps.evaluation.tracker import CachedSource, select_moving_vehicle_tracks
+    from sot_apps.objects.selection import annotated_span
+
+    source = CachedSource(sequence)
+    tracks = sequence.tracks()
+    out = []
+    for tid in select_moving_vehicle_tracks(sequence, source=source):
+        start, end = annotated_span(tracks[tid].frames)
+        out.append((tid, start, end, tracks[tid].box_at(start)))
+    return out
+
+
+def key(preset: str, seed: int, track_id: str) -> str:
+    return f"{preset}/{seed}/{track_id}"
+
+
+def track_boxes(source, tracks, preset: str, seed: int, track_ids=None) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{key: (boxes (K, 7), flags (K,))} of ``preset`` with ``seed`` on ``tracks`` (only ``track_ids`` if given)."""
+    from tracker import get_preset, track
+
+    out = {}
+    for tid, start, end, box in tracks:
+        if track_ids is not None and tid not in track_ids:
+            continue
+        result = track(source, box, start, end, get_preset(preset, seed=seed))
+        boxes = np.array([e.box.to_array()[:7] for e in result.estimates], dtype=np.float64)
+        flags = np.array([",".join(e.flags) for e in result.estimates])
+        out[key(preset, seed, tid)] = (boxes, flags)
+    return out
+
+
+def main() -> int:
+    from sot_apps.evaluation.tracker import CachedSource
+    from sot_apps.io import open_sequence
+
+    sequence = open_sequence(REPO.parent / "shared" / "data" / "pandaset_002")
+    source = CachedSource(sequence)
+    tracks = dev_tracks(sequence)
+    arrays: dict[str, np.ndarray] = {"track_ids": np.array([t[0] for t in tracks])}
+    for preset in PRESETS:
+        for seed in SEEDS:
+            for k, (boxes, flags) in track_boxes(source, tracks, preset, seed).items():
+                arrays[k + "/boxes"] = boxes
+                arrays[k + "/flags"] = flags
+            print(preset, seed, "done", file=sys.stderr)
+    GOLDEN.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(GOLDEN, **arrays)
+    print(f"{GOLDEN}: {len(tracks)} tracks", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

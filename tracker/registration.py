@@ -1,0 +1,157 @@
+"""The per-frame registration (the paper's Algorithm 2): the outer loop of correspondences and loss minimisation.
+
+Each outer iteration crops the local points with the box moved by the current motion and scaled ``scale``,
+pairs the ICP source (previous-frame object points + sub-shape) and the shape with the crop (the association
+strategy), keeps the shape pairs the inlier strategy accepts, and minimises the loss over [dx, dy, dz, dtheta]
+(Levenberg–Marquardt, analytic Jacobians) with the motion terms (MC, MP towards the reference strategy's
+reference, Detection); it stops when the update is below ``convergence_tolerance``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import TrackerConfig
+from .geometry import Box, points_in_box, wrap_angle
+from .shape import to_world_frame
+from .solver import solve
+from .strategies.association import Association
+from .strategies.inliers import ShapeInliers
+from .strategies.loss import Consistency, DataFreeFrames, IterationReference, PriorReference
+from .strategies.metric import FrameTarget, Metric
+from .terms import PairMoments, ResidualBlock, detection_block, motion_prior_block, point_pair_block
+
+__all__ = ["Anderson", "Registration", "box_moved"]
+
+
+def box_moved(box: Box, x: np.ndarray) -> Box:
+    """``box`` moved by the motion [dx, dy, dz, dtheta]."""
+    return Box(box.x + x[0], box.y + x[1], box.z + x[2], float(wrap_angle(box.heading + x[3])),
+               box.length, box.width, box.height)
+
+
+class Anderson:
+    """Anderson acceleration of the outer (ICP-style) fixed-point iteration x <- F(x) (AA-ICP).
+
+    ``step(x, F(x) - x)`` returns the next iterate: the plain step while the history is short or the
+    extrapolation jumps implausibly far from the plain step (0.5 m, 0.15 rad), else the Anderson mix.
+    """
+
+    def __init__(self, depth: int) -> None:
+        self.depth = depth
+        self.xs: list[np.ndarray] = []
+        self.fs: list[np.ndarray] = []
+
+    def step(self, x: np.ndarray, f: np.ndarray) -> np.ndarray:
+        self.xs.append(x.copy())
+        self.fs.append(f.copy())
+        self.xs, self.fs = self.xs[-(self.depth + 1):], self.fs[-(self.depth + 1):]
+        plain = x + f
+        if len(self.xs) < 2:
+            return plain
+        dx = np.diff(np.array(self.xs), axis=0).T   # (4, m)
+        df = np.diff(np.array(self.fs), axis=0).T
+        gamma, *_ = np.linalg.lstsq(df, f, rcond=None)
+        mixed = plain - (dx + df) @ gamma
+        jump = np.abs(mixed - plain)
+        if not np.isfinite(mixed).all() or np.any(jump > np.array([0.5, 0.5, 0.3, 0.15])):
+            return plain
+        return mixed
+
+
+@dataclass
+class Registration:
+    """The outer loop with its strategies (chosen once by the tracker)."""
+
+    config: TrackerConfig
+    association: Association
+    inliers: ShapeInliers
+    metric: Metric
+    reference: PriorReference | IterationReference
+    consistency: Consistency
+    data_free: DataFreeFrames
+
+    def estimate(self, prev: Box, source: np.ndarray, shape: np.ndarray, target: FrameTarget, x0: np.ndarray,
+                 scale: float, outer: int, icp_only: bool, mp_reference: np.ndarray | None, flags: list[str],
+                 rng: np.random.Generator, det_target: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+        """Outer loop from motion ``x0``; returns the motion and diagnostics. ``source``: the ICP source (world),
+        ``shape``: the shape model (object frame, placed at ``prev``); ``icp_only``: no shape or motion terms."""
+        c = self.config
+        reg, assoc = c.registration, self.association
+        pivot = prev.center
+        local = target.nn.target
+        source = assoc.per_frame(source, rng)
+        with_shape = not icp_only and c.shape.enabled and c.shape.weight > 0
+        shape_src = assoc.per_frame(to_world_frame(shape, prev), rng) if with_shape else np.zeros((0, 3))
+        x = np.asarray(x0, dtype=np.float64).copy()
+        reference = None if mp_reference is None else mp_reference.copy()
+        info = {"crop": 0, "icp_pairs": 0, "shape_inliers": 0, "iterations": 0}
+        ransac_seed = int(rng.integers(2**62))
+        accel = Anderson(reg.anderson_depth)
+        motion_terms_only = self.data_free.solves_without_data and not icp_only
+        for it in range(outer):
+            info["iterations"] = it + 1
+            mask = points_in_box(local, box_moved(prev, x), scale)
+            info["crop"] = int(mask.sum())
+            enough = info["crop"] >= c.search.min_target_points  # too few points to register against: no data terms
+            info["icp_pairs"] = info["shape_inliers"] = 0
+            if not enough and not motion_terms_only:
+                break
+            fixed: list = []  # (name, source, target, normals, weight, normaliser floor)
+            crop = assoc.crop(local, mask, rng) if enough else None
+            if enough and reg.icp_weight > 0 and len(source) >= reg.min_points:
+                src, idx, dist, _, tgt = assoc.pairs(x, source, pivot, target.nn, mask, crop, rng)
+                if reg.max_pair_distance > 0:
+                    keep = dist <= reg.max_pair_distance
+                    src, idx, tgt = src[keep], idx[keep], tgt[keep]
+                if len(src) >= reg.min_points:
+                    fixed.append(("icp", src, tgt, self.metric.normals(target, idx), reg.icp_weight, reg.data_norm_min))
+                    info["icp_pairs"] = len(src)
+            if enough and len(shape_src) >= reg.min_points:
+                src, idx, _, moved, tgt = assoc.pairs(x, shape_src, pivot, target.nn, mask, crop, rng)
+                src, idx, tgt = self.inliers.select(src, idx, tgt, moved, ransac_seed, rng)
+                if len(src) >= reg.min_points:
+                    fixed.append(("shape", src, tgt, self.metric.normals(target, idx), c.shape.weight,
+                                  reg.data_norm_min))
+                    info["shape_inliers"] = len(src)
+            if not fixed and not motion_terms_only:
+                break
+            blocks_at = self._loss(fixed, pivot, prev.heading, None if icp_only else reference, icp_only, det_target)
+            # the LM stops on a step below a tenth of the outer tolerance (at least 1e-8: never a fixed 50 steps)
+            result = solve(blocks_at, x, max_iterations=reg.solver_iterations,
+                           tolerance=max(0.1 * reg.convergence_tolerance, 1e-8))
+            residual = result.x - x
+            change = float(np.max(np.abs(residual)))
+            x = accel.step(x, residual) if reg.anderson_depth > 0 and not icp_only else result.x
+            reference = self.reference.next(reference, x)
+            if change < reg.convergence_tolerance:
+                break
+        if with_shape and info["shape_inliers"] == 0:
+            flags.append("no_shape_inliers")
+        return x, info
+
+    def _loss(self, fixed: list, pivot: np.ndarray, heading: float, reference: np.ndarray | None, icp_only: bool,
+              det_target: np.ndarray | None):
+        """The loss's residual blocks as a function of the motion (data terms fixed, motion terms unless icp_only)."""
+        c = self.config
+        # point-to-point pairs as sums, so each LM trial costs O(1) in the pairs (PairMoments)
+        moments = [(name, PairMoments.of(s, t, pivot), w, norm) for name, s, t, n, w, norm in fixed if n is None]
+        planes = [entry for entry in fixed if entry[3] is not None]
+        plane_point_weight = c.registration.plane_point_weight
+
+        def blocks_at(xx: np.ndarray) -> list[ResidualBlock]:
+            blocks = [m.block(name, xx, w, norm) for name, m, w, norm in moments]
+            blocks += [point_pair_block(name, xx, s, t, pivot, w, n, plane_point_weight, norm)
+                       for name, s, t, n, w, norm in planes]
+            if icp_only:
+                return blocks
+            blocks += self.consistency.blocks(xx, heading)
+            if c.motion.prior_weight > 0 and reference is not None:
+                blocks.append(motion_prior_block(xx, reference, c.motion.prior_weight))
+            if det_target is not None:
+                blocks.append(detection_block(xx, det_target, c.detection.weight))
+            return blocks
+
+        return blocks_at

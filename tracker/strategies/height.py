@@ -1,0 +1,103 @@
+"""Height strategies (``height.model``): how the box's dz is set after the registration.
+
+:class:`IcpHeight`: dz from the loss like dx, dy. :class:`FixedHeight`: dz = 0. :class:`GroundHeight`: the box keeps
+its start height above the road under it. :class:`FilterHeight`: a slow filter of the registration's z with the
+road as a prior (tracker/motion_filter.py). The road is a plane through the road points around the box.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from ..config import HeightConfig
+from ..geometry import Box
+from ..motion_filter import HeightFilter
+
+__all__ = ["HeightModel", "IcpHeight", "FixedHeight", "GroundHeight", "FilterHeight", "road_height",
+           "choose_height"]
+
+
+def road_height(ground: np.ndarray, centre_xy: np.ndarray, box: Box, min_points: int = 20) -> float | None:
+    """Height of the road under ``centre_xy``: a plane z = a x + b y + c through the ground points around the
+    box (outside its footprint, within 3 m), refitted without outliers; None with too few points."""
+    if len(ground) < min_points:
+        return None
+    d = ground[:, :2] - centre_xy
+    ca, sa = np.cos(box.heading), np.sin(box.heading)
+    u = np.abs(d @ np.array([ca, sa])) - 0.5 * box.length
+    v = np.abs(d @ np.array([-sa, ca])) - 0.5 * box.width
+    near = ground[(u <= 3.0) & (v <= 3.0)]
+    if len(near) < min_points:
+        return None
+    keep = np.abs(near[:, 2] - np.median(near[:, 2])) < 0.5  # sub-ground noise is classified ground too
+    for _ in range(2):
+        if keep.sum() < min_points:
+            return None
+        a = np.column_stack([near[keep, 0] - centre_xy[0], near[keep, 1] - centre_xy[1], np.ones(keep.sum())])
+        coef, *_ = np.linalg.lstsq(a, near[keep, 2], rcond=None)
+        residual = near[:, 0:2] - centre_xy
+        pred = residual @ coef[:2] + coef[2]
+        keep = np.abs(near[:, 2] - pred) < 0.15
+    return float(coef[2])
+
+
+class HeightModel(Protocol):
+    def start(self, box: Box, road: np.ndarray) -> None:
+        """Begin at the start ``box`` with the road points around it."""
+
+    def motion(self, x: np.ndarray, prev: Box, road: np.ndarray, fit: bool) -> np.ndarray:
+        """A copy of the motion ``x`` from ``prev`` with dz set (``fit``: x[2] is a registration's)."""
+
+
+class IcpHeight:
+    def start(self, box: Box, road: np.ndarray) -> None:
+        pass
+
+    def motion(self, x: np.ndarray, prev: Box, road: np.ndarray, fit: bool) -> np.ndarray:
+        return x.copy()
+
+
+class FixedHeight(IcpHeight):
+    def motion(self, x: np.ndarray, prev: Box, road: np.ndarray, fit: bool) -> np.ndarray:
+        x = x.copy()
+        x[2] = 0.0
+        return x
+
+
+class GroundHeight(IcpHeight):
+    offset: float | None = None
+
+    def start(self, box: Box, road: np.ndarray) -> None:
+        height = road_height(road, box.center[:2], box)
+        self.offset = None if height is None else box.z - height
+
+    def motion(self, x: np.ndarray, prev: Box, road: np.ndarray, fit: bool) -> np.ndarray:
+        x = x.copy()
+        if self.offset is not None:
+            height = road_height(road, prev.center[:2] + x[:2], prev)
+            if height is not None:
+                x[2] = height + self.offset - prev.z
+        return x
+
+
+class FilterHeight:
+    def __init__(self, params: HeightConfig) -> None:
+        self.params = params
+
+    def start(self, box: Box, road: np.ndarray) -> None:
+        p = self.params
+        self.filter = HeightFilter(box.z, road_height(road, box.center[:2], box), p.drift_sigma, p.fit_sigma,
+                                   p.road_sigma, p.offset_gain)
+
+    def motion(self, x: np.ndarray, prev: Box, road: np.ndarray, fit: bool) -> np.ndarray:
+        x = x.copy()
+        height = road_height(road, prev.center[:2] + x[:2], prev)
+        x[2] = self.filter.update(prev.z + x[2] if fit else None, height) - prev.z
+        return x
+
+
+def choose_height(params: HeightConfig) -> HeightModel:
+    models: dict[str, type] = {"icp": IcpHeight, "fixed": FixedHeight, "ground": GroundHeight}
+    return FilterHeight(params) if params.model == "filter" else models[params.model]()
