@@ -1,32 +1,45 @@
 """SOTracker core: model-free single-object tracking of vehicles in LiDAR sequences.
 
-numpy and scipy only; this package never imports ``sot_apps``.
+numpy and scipy only; this package never imports ``sot_apps``. The names below are imported from their
+submodules on first use (``from tracker import Tracker`` works as usual; ``import tracker`` alone loads nothing).
 """
 
-from .association import NearestNeighbors, RansacResult, fit_rigid_2d, ransac_rigid_2d
-from .config import DETECTION_PRESETS, PRESETS, TrackerConfig, get_preset, parse_overrides, preset_names
-from .det_baseline import ConstantVelocityFilter
-from .detection import Detections, FrameDetections, align_heading
-from .fixed_lag import FixedLagSmoother, FixedLagTracker, refine_fixed_lag, track_fixed_lag
-from .frames import FrameSource, LidarFrame
-from .geometry import Box, State, invert_transform, make_transform, points_in_box, rotation_z, transform_points, wrap_angle
-from .ground import GroundParams, fit_plane, ground_mask, remove_ground
-from .metrics import (DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
-                      PooledMetrics, TrackletScores, accuracy, centre_errors_batch, iou_bev_batch, chamfer_distance, difficulty, iou_3d_batch,
-                      pool_metrics, robustness, score_tracklet, tracklet_metrics, voxel_downsample_centres)
-from .motion import MotionPrior
-from .offline import frame_region_points, refine_offline
-from .pseudo_gt import mean_points_in_boxes, pseudo_gt_shape
-from .shape import ShapeModel, SubShape, voxel_downsample
-from .solver import SolverResult, solve
-from .sotracker import FrameEstimate, Tracker, TrackResult, deskew_points, track
-from .sweep_ground import cached_sweep_ground_mask, remember_sweep_ground_mask, sweep_ground_mask
-from .geometry import rotation_zyx
+from __future__ import annotations
+
+_EXPORTS = {  # name -> submodule: imported on first use, so `import tracker` stays cheap (CLI start-up)
+    "NearestNeighbors": "association", "RansacResult": "association", "fit_rigid_2d": "association",
+    "ransac_rigid_2d": "association",
+    "DETECTION_PRESETS": "config", "PRESETS": "config", "TrackerConfig": "config", "get_preset": "config",
+    "preset_names": "config", "parse_overrides": "config",
+    "ConstantVelocityFilter": "det_baseline",
+    "Detections": "detection", "FrameDetections": "detection", "align_heading": "detection",
+    "FixedLagSmoother": "fixed_lag", "FixedLagTracker": "fixed_lag", "refine_fixed_lag": "fixed_lag", "track_fixed_lag": "fixed_lag",
+    "FrameSource": "frames", "LidarFrame": "frames",
+    "Box": "geometry", "State": "geometry", "invert_transform": "geometry", "make_transform": "geometry",
+    "points_in_box": "geometry", "rotation_z": "geometry", "rotation_zyx": "geometry", "transform_points": "geometry", "wrap_angle": "geometry",
+    "GroundParams": "ground", "fit_plane": "ground", "ground_mask": "ground", "remove_ground": "ground",
+    "DIFFICULTIES": "metrics", "DIFFICULTY_THRESHOLDS": "metrics", "PRECISION_THRESHOLDS": "metrics",
+    "PooledMetrics": "metrics", "ROB_THRESHOLDS": "metrics", "SUCCESS_THRESHOLDS": "metrics",
+    "TrackletScores": "metrics", "accuracy": "metrics", "centre_errors_batch": "metrics",
+    "chamfer_distance": "metrics", "difficulty": "metrics", "iou_3d_batch": "metrics", "iou_bev_batch": "metrics",
+    "pool_metrics": "metrics", "robustness": "metrics", "score_tracklet": "metrics", "tracklet_metrics": "metrics",
+    "voxel_downsample_centres": "metrics",
+    "MotionPrior": "motion",
+    "refine_offline": "offline", "frame_region_points": "offline",
+    "mean_points_in_boxes": "pseudo_gt", "pseudo_gt_shape": "pseudo_gt",
+    "ShapeModel": "shape", "SubShape": "shape", "voxel_downsample": "shape",
+    "SolverResult": "solver", "solve": "solver",
+    "FrameEstimate": "sotracker", "TrackResult": "sotracker", "Tracker": "sotracker", "deskew_points": "sotracker",
+    "track": "sotracker",
+    "cached_sweep_ground_mask": "sweep_ground", "sweep_ground_mask": "sweep_ground",
+    "remember_sweep_ground_mask": "sweep_ground",
+}
+
 
 __all__ = [
     "Box", "State", "LidarFrame", "FrameSource", "points_in_box", "transform_points", "wrap_angle",
     "invert_transform", "make_transform", "rotation_z",
-    "TrackerConfig", "PRESETS", "get_preset", "parse_overrides", "preset_names",
+    "TrackerConfig", "PRESETS", "get_preset", "preset_names",
     "Tracker", "FrameEstimate", "TrackResult", "track", "deskew_points",
     "GroundParams", "ground_mask", "remove_ground", "fit_plane", "sweep_ground_mask", "cached_sweep_ground_mask",
     "NearestNeighbors", "RansacResult", "fit_rigid_2d", "ransac_rigid_2d",
@@ -37,7 +50,22 @@ __all__ = [
     "score_tracklet", "tracklet_metrics", "accuracy", "robustness",
     "DETECTION_PRESETS", "Detections", "FrameDetections", "align_heading", "ConstantVelocityFilter", "iou_bev_batch",
     "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag",
-    "rotation_zyx",
+    "rotation_zyx", "parse_overrides",
     # the multi-object pass of sot_apps.tracking feeds the refinements from the sweeps it reads
     "FixedLagSmoother", "frame_region_points", "remember_sweep_ground_mask",
 ]
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'tracker' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -14,6 +14,7 @@ class FlowConfig:
     mode: str = "dense"
     max_pairs: int | None = None             # pairs 0..max_pairs (None = all)
     use_lidar: bool = True
+    vis: bool = False                        # also write vis/ pictures (colour wheel PNG, overlay JPEG)
 
 
 class FlowApp(AppBase):
@@ -57,7 +58,7 @@ class FlowApp(AppBase):
                 previous = None
             if previous != [o.object_id for o in objects]:
                 shutil.rmtree(cam_root)
-        options = FlowOptions(mode=config.mode, use_lidar=config.use_lidar)
+        options = FlowOptions(mode=config.mode, use_lidar=config.use_lidar, write_vis=config.vis)
         doc = annotate_camera(seq, camera, objects, flow_root, pairs=pairs, options=options, progress=False,
                               source="pipeline tracks")
         files = sorted(p for p in cam_root.rglob("*") if p.is_file())

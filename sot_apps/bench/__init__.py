@@ -18,7 +18,8 @@ import sys
 from dataclasses import dataclass, field
 from typing import Callable
 
-__all__ = ["Benchmark", "BenchRegistry", "discover", "machine_description", "format_machine", "pin_one_core"]
+__all__ = ["Benchmark", "BenchRegistry", "discover", "machine_description", "format_machine", "pin_one_core",
+           "module_docstring"]
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,15 @@ def discover() -> BenchRegistry:
             register(registry)
     registry._module = ""
     return registry
+
+
+def module_docstring(name: str) -> str | None:
+    """A module's docstring without importing it (a bench's description must not import scipy: CLI start-up)."""
+    import ast
+    import importlib.util
+
+    with open(importlib.util.find_spec(name).origin, encoding="utf-8") as handle:
+        return ast.get_docstring(ast.parse(handle.read()), clean=False)
 
 
 def pin_one_core() -> str:

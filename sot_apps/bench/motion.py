@@ -7,8 +7,6 @@ import argparse
 
 from ..errors import InputError
 from ..evaluation import DEV_TRACKS
-from ..evaluation.motion import evaluate_motion, find_track_dirs, format_table, plot_accuracy
-from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER
 
 __all__ = ["register"]
 
@@ -27,9 +25,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..evaluation.motion import evaluate_motion, find_track_dirs, format_table, plot_accuracy
     from ..io import open_sequence
     from ..io.atomic import write_json
     from ..motion_export.sources import tracks_from_annotations, tracks_from_dirs
+    from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER
 
     sequence = open_sequence(args.sequence, format=getattr(args, "format", None))
     if args.horizon < 1:
@@ -53,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
 
 def register(registry) -> None:
     """Hook for the ``sot-apps bench`` registry (sot_apps/cli/bench.py)."""
-    from ..evaluation import motion
+    from . import module_docstring
 
     registry.add("motion", help="accuracy of the motion export against ground truth (centre, velocity, yaw rate)",
-                 add_arguments=add_arguments, run=run, description=motion.__doc__)
+                 add_arguments=add_arguments, run=run,
+                 description=module_docstring("sot_apps.evaluation.motion"))

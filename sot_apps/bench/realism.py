@@ -7,7 +7,6 @@ import argparse
 import time
 
 from ..evaluation import DEV_TRACKS
-from ..evaluation.realism import evaluate_realism, format_tables
 
 __all__ = ["register"]
 
@@ -32,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
+    from ..evaluation.realism import evaluate_realism, format_tables
     from ..io import open_sequence
     from ..io.atomic import write_json
 
@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
 
 def register(registry) -> None:
     """Hook for the ``sot-apps bench`` registry (sot_apps/cli/bench.py)."""
-    from ..evaluation import realism
+    from . import module_docstring
 
     registry.add("realism", help="simulated vs real vehicle scans on PandaSet (Chamfer, point-count ratio)",
-                 add_arguments=add_arguments, run=run, description=realism.__doc__)
+                 add_arguments=add_arguments, run=run, description=module_docstring("sot_apps.evaluation.realism"))

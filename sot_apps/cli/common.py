@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
-from ..io import FORMATS, open_sequence
-from ..io.sequence import Sequence
+from ..io import FORMATS
+
+if TYPE_CHECKING:
+    from ..io.sequence import Sequence
 
 
 def add_sequence_argument(parser: argparse.ArgumentParser) -> None:
@@ -14,6 +17,8 @@ def add_sequence_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def load_sequence(args: argparse.Namespace) -> Sequence:
+    from ..io import open_sequence
+
     return open_sequence(args.sequence, format=getattr(args, "format", None))
 
 

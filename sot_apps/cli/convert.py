@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..io.canonical import write_sequence
 from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
 
 
@@ -34,6 +33,8 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..io.canonical import write_sequence
+
     print(f"reading {args.sequence} ...", flush=True)
     seq = load_sequence(args)
     if args.labels:

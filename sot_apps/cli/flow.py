@@ -54,7 +54,11 @@ def register(subparsers) -> argparse.ArgumentParser:
                              "(removes per-frame box jitter; see docs/flow.md)")
     parser.add_argument("--no-lidar-occlusion", action="store_true", help="ignore LiDAR points as occluders")
     parser.add_argument("--dilate-px", type=int, default=7, help="min-filter size densifying LiDAR depth (default 7)")
-    parser.add_argument("--no-vis", action="store_true", help="do not write vis/ pictures")
+    vis = parser.add_mutually_exclusive_group()
+    vis.add_argument("--vis", action="store_true",
+                     help="also write vis/ pictures (flow colour wheel PNG, overlay JPEG on the camera image); "
+                          "off by default: they cost more than the flow files")
+    vis.add_argument("--no-vis", action="store_true", help=argparse.SUPPRESS)   # the default; kept for old scripts
     parser.add_argument("--out", required=True, metavar="OUT", help="output directory (OUT/<camera>/...)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
@@ -91,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
 
         objects = smoothed(objects, source)
     options = FlowOptions(mode=args.mode, occlusion=OcclusionParams(dilate_px=args.dilate_px),
-                          use_lidar=not args.no_lidar_occlusion, write_vis=not args.no_vis)
+                          use_lidar=not args.no_lidar_occlusion, write_vis=args.vis)
     stats = annotate_camera(seq, args.camera, objects, args.out, args.pairs, options, progress=not args.quiet,
                             source=source)
     pairs = stats["pairs"]

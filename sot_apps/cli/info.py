@@ -5,12 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import TYPE_CHECKING
 
 from ..errors import InputError
-from ..io import FORMATS, open_sequence
+from ..io import FORMATS
 from ..objects.selection import DEFAULT_SELECTION
-from ..summary import SequenceSummary, summarize_sequence
 from .common import add_subcommand
+
+if TYPE_CHECKING:
+    from ..summary import SequenceSummary
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -35,6 +38,9 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..io import open_sequence
+    from ..summary import summarize_sequence
+
     if args.tiny == bool(args.sequence):
         raise InputError(None, "info: give either a SEQUENCE directory or --tiny")
     if args.tiny:

@@ -83,7 +83,36 @@ def _subcommand_modules() -> list[str]:
     return sorted(n for n in names if not n.startswith("_"))
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _invoked_command(argv: Seq[str]) -> str | None:
+    """The subcommand named in ``argv`` (its first token that is not a top-level option), if any."""
+    for token in argv:
+        if token == "--":
+            return None
+        if not token.startswith("-"):
+            return token
+    return None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``sot-apps`` parser. With ``command`` (the subcommand about to run) only that subcommand's module is
+    imported and registered, when one is named after it (``motion-export`` -> ``motion_export.py``): start-up
+    then costs one module, not all of them. Anything else (no command, a typo) builds every subcommand."""
+    modules = _subcommand_modules()
+    if command is not None and command.replace("-", "_") in modules:
+        parser = _build_parser([command.replace("-", "_")])
+        if command in _subcommand_choices(parser):
+            return parser
+    return _build_parser(modules)
+
+
+def _subcommand_choices(parser: argparse.ArgumentParser) -> dict:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return action.choices
+    return {}
+
+
+def _build_parser(modules: list[str]) -> argparse.ArgumentParser:
     parser = OneLineParser(
         prog="sot-apps",
         description="Model-free vehicle tracking (SOTracker) and data generation from LiDAR sequences.",
@@ -93,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
     parser.add_argument("--version", action="version", version=f"sot-apps {_version()}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
-    for name in _subcommand_modules():
+    for name in modules:
         module = importlib.import_module(f"sot_apps.cli.{name}")
         register = getattr(module, "register", None)
         if register is not None:
@@ -139,7 +168,7 @@ def main(argv: Seq[str] | None = None) -> int:
     argv = _join_negative_values(list(sys.argv[1:] if argv is None else argv))
     debug = "--debug" in argv or os.environ.get("SOT_APPS_DEBUG") == "1"
     try:
-        parser = build_parser()
+        parser = build_parser(_invoked_command(argv))
         args = parser.parse_args(argv)
         if not getattr(args, "command", None):
             parser.print_help()

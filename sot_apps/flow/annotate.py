@@ -2,9 +2,12 @@
 
 Output layout (docs/flow.md), under ``OUT/<camera>/``, files named by k as six digits:
 ``flow_occ/``, ``flow_noc/`` (KITTI PNG), ``flo/`` (Middlebury, flow_occ), ``instances/`` (16-bit
-PNG, 0 = none, object index + 1; mapping in ``instances.json``), ``vis/`` (``*_flow.png`` colour
-wheel, ``*_overlay.jpg``), ``pairs/`` (per-pair stats, written last: a pair with its json is
-finished and skipped on a rerun) and ``stats.json`` (all pairs, data_schema/flow_stats.schema.json).
+PNG, 0 = none, object index + 1; mapping in ``instances.json``), ``vis/`` only when asked for
+(``*_flow.png`` colour wheel, ``*_overlay.jpg``), ``pairs/`` (per-pair stats, written last: a pair with its
+json is finished and skipped on a rerun) and ``stats.json`` (all pairs, data_schema/flow_stats.schema.json).
+
+A pair's files are encoded and written on a small thread pool (:class:`PairWriter`) while the next pair is
+computed; its ``pairs/`` record follows once all of them are in place.
 """
 
 from __future__ import annotations
@@ -12,8 +15,11 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -28,6 +34,7 @@ from .camera import CameraModel
 from .dense import RayCache, dense_flow
 from .flo_io import write_flo
 from .kitti_io import write_kitti_flow
+from .png import encode_png
 from .objects import TrackedObject
 from .occlusion import ProjectedPoints, project_lidar
 from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup
@@ -36,7 +43,7 @@ from ..objects.trajectory import interpolate_pose
 from .visualize import flow_to_color, overlay
 
 __all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "write_pair_outputs",
-           "STATS_VERSION"]
+           "pair_output_jobs", "PairWriter", "STATS_VERSION"]
 
 STATS_VERSION = 1
 SUBDIRS = ("flow_occ", "flow_noc", "flo", "instances", "vis", "pairs")
@@ -47,8 +54,9 @@ class FlowOptions:
     mode: str = "dense"
     occlusion: OcclusionParams = field(default_factory=OcclusionParams)
     use_lidar: bool = True
-    write_vis: bool = True
+    write_vis: bool = False        # vis/ pictures (colour wheel PNG, overlay JPEG): off unless asked for
     exclusion_margin: float = 0.4
+    writer_threads: int = 2        # threads encoding and writing finished pairs while the next one is computed
 
 
 def camera_pose_at(seq: Sequence, camera: Camera, k: int) -> np.ndarray:
@@ -134,32 +142,97 @@ def compute_pair(setup: PairSetup, flow_objects: list[FlowObject], mode: str, ra
     raise ValueError(f"unknown mode {mode!r}")
 
 
-def _write_png(path: Path, image: np.ndarray) -> None:
+def _write_encoded(path: Path, image: np.ndarray) -> None:
+    """An image through ``cv2.imencode`` (format from the suffix) and a Python file write: any path works."""
     ok, data = cv2.imencode(path.suffix, image)
     if not ok:
         raise RuntimeError(f"cannot encode {path}")
     write_bytes(path, data.tobytes())
 
 
+def _read_image(path: Path) -> np.ndarray | None:
+    try:
+        with open(path, "rb") as handle:   # not cv2.imread: any path the OS takes (non-UTF-8 names too)
+            data = handle.read()
+    except OSError:
+        return None
+    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+
+
+def _write_vis(root: Path, name: str, result: PairFlow, image_path: Path) -> None:
+    colour = flow_to_color(result.flow, result.valid_occ)   # RGB, black where there is no flow
+    write_bytes(root / "vis" / f"{name}_flow.png", encode_png(colour, 0, result.valid_occ))
+    image = _read_image(image_path)
+    if image is None or image.shape[:2] != result.instance.shape:
+        problem = ("cannot decode the camera image" if image is None else
+                   f"camera image is {image.shape[1]}x{image.shape[0]}, the camera model says "
+                   f"{result.instance.shape[1]}x{result.instance.shape[0]}")
+        sys.stderr.write(f"warning: {image_path}: {problem}; vis/{name}_overlay.jpg not written (the flow itself "
+                         "does not use the image)\n")
+    else:
+        _write_encoded(root / "vis" / f"{name}_overlay.jpg", overlay(image, result.flow, result.valid_occ, result.instance))
+
+
+def pair_output_jobs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> list[Callable[[], None]]:
+    """The independent file writes of pair k (each one atomic), to run in any order or in parallel."""
+    name = f"{k:06d}"
+    jobs = [lambda: write_kitti_flow(root / "flow_occ" / f"{name}.png", result.flow, result.valid_occ),
+            lambda: write_kitti_flow(root / "flow_noc" / f"{name}.png", result.flow, result.valid_noc),
+            lambda: write_flo(root / "flo" / f"{name}.flo", result.flow, result.valid_occ),
+            lambda: write_bytes(root / "instances" / f"{name}.png", encode_png(result.instance, 0))]
+    if write_vis:
+        jobs.append(lambda: _write_vis(root, name, result, image_path))
+    return jobs
+
+
 def write_pair_outputs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> None:
     """The files of pair k under ``root``: KITTI flow_occ / flow_noc PNGs, .flo, the instance PNG, vis/."""
-    name = f"{k:06d}"
-    write_kitti_flow(root / "flow_occ" / f"{name}.png", result.flow, result.valid_occ)
-    write_kitti_flow(root / "flow_noc" / f"{name}.png", result.flow, result.valid_noc)
-    write_flo(root / "flo" / f"{name}.flo", result.flow, result.valid_occ)
-    _write_png(root / "instances" / f"{name}.png", result.instance)
-    if write_vis:
-        colour = cv2.cvtColor(flow_to_color(result.flow, result.valid_occ), cv2.COLOR_RGB2BGR)
-        _write_png(root / "vis" / f"{name}_flow.png", colour)
-        image = cv2.imread(str(image_path), cv2.IMREAD_COLOR)
-        if image is None or image.shape[:2] != result.instance.shape:
-            problem = ("cannot decode the camera image" if image is None else
-                       f"camera image is {image.shape[1]}x{image.shape[0]}, the camera model says "
-                       f"{result.instance.shape[1]}x{result.instance.shape[0]}")
-            sys.stderr.write(f"warning: {image_path}: {problem}; vis/{name}_overlay.jpg not written (the flow itself "
-                             "does not use the image)\n")
+    for job in pair_output_jobs(root, k, result, image_path, write_vis):
+        job()
+
+
+class PairWriter:
+    """Writes pairs' files on ``workers`` threads while the caller computes the next pair.
+
+    zlib, numpy's copies and the file writes release the GIL (the PNG encoder's row loop does not). At most ``max_pending`` pairs wait (each holds
+    its flow arrays, ~25 MB at 1080p). A pair's ``on_done`` (its ``pairs/`` record) runs in the caller's thread,
+    in submission order, once all its files are in place. On an error or Ctrl-C, files not started are dropped
+    and no record is written for an unfinished pair (each file is atomic, so nothing half-written remains).
+    """
+
+    def __init__(self, workers: int = 2, max_pending: int = 2):
+        self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="flow-writer")
+        self._pending: deque[tuple[list[Future], Callable[[], None]]] = deque()
+        self._max_pending = max_pending
+
+    def submit(self, jobs: list[Callable[[], None]], on_done: Callable[[], None]) -> None:
+        self._pending.append(([self._pool.submit(job) for job in jobs], on_done))
+        self._finish(block_until=self._max_pending)
+
+    def _finish(self, block_until: int) -> None:
+        while self._pending and (len(self._pending) > block_until or all(f.done() for f in self._pending[0][0])):
+            futures, on_done = self._pending.popleft()
+            wait(futures)
+            for future in futures:
+                future.result()   # the first error propagates
+            on_done()
+
+    def close(self) -> None:
+        """Wait for every pair and run its ``on_done``."""
+        self._finish(block_until=0)
+
+    def __enter__(self) -> "PairWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            try:
+                self.close()
+            finally:
+                self._pool.shutdown(wait=True)
         else:
-            _write_png(root / "vis" / f"{name}_overlay.jpg", overlay(image, result.flow, result.valid_occ, result.instance))
+            self._pending.clear()
+            self._pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _pair_record(k: int, camera: Camera, result: PairFlow, elapsed_ms: float) -> dict:
@@ -205,20 +278,21 @@ def annotate_camera(seq: Sequence, camera_name: str, objects: list[TrackedObject
                for i, o in enumerate(objects)]
     _check_instances(root, mapping)
     ray_cache, lidar_cache = RayCache(), {}
-    for k in tqdm(range(a, b), desc=f"flow {camera_name}", unit="pair", disable=not progress):
-        record_path = root / "pairs" / f"{k:06d}.json"
-        if record_path.is_file():
-            continue
-        start = time.perf_counter()
-        setup, flow_objects = build_pair(seq, camera, k, objects, options, lidar_cache)
-        result = compute_pair(setup, flow_objects, options.mode, ray_cache)
-        elapsed = (time.perf_counter() - start) * 1e3
-        write_pair_outputs(root, k, result, camera.frames[k].image_path, options.write_vis)
-        record = _pair_record(k, camera, result, elapsed)
-        missing = [j for j in (k, k + 1) if j < len(seq.frames) and not seq.frames[j].has_sweep]
-        if missing:  # no sweep: no lidar occluders at that frame (the flow itself comes from the object states)
-            record["no_lidar_sweep"] = missing
-        write_json(record_path, record)
+    with PairWriter(workers=options.writer_threads) as writer:
+        for k in tqdm(range(a, b), desc=f"flow {camera_name}", unit="pair", disable=not progress):
+            record_path = root / "pairs" / f"{k:06d}.json"
+            if record_path.is_file():
+                continue
+            start = time.perf_counter()
+            setup, flow_objects = build_pair(seq, camera, k, objects, options, lidar_cache)
+            result = compute_pair(setup, flow_objects, options.mode, ray_cache)
+            elapsed = (time.perf_counter() - start) * 1e3
+            record = _pair_record(k, camera, result, elapsed)
+            missing = [j for j in (k, k + 1) if j < len(seq.frames) and not seq.frames[j].has_sweep]
+            if missing:  # no sweep: no lidar occluders at that frame (the flow itself comes from the object states)
+                record["no_lidar_sweep"] = missing
+            writer.submit(pair_output_jobs(root, k, result, camera.frames[k].image_path, options.write_vis),
+                          lambda path=record_path, record=record: write_json(path, record))
     return write_stats(root, seq.id, camera_name, options.mode, source, mapping)
 
 

@@ -14,8 +14,16 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.atomic import write_bytes
+from .png import encode_rows_png
 
-__all__ = ["encode_kitti_flow", "decode_kitti_flow", "write_kitti_flow", "read_kitti_flow"]
+__all__ = ["encode_kitti_flow", "decode_kitti_flow", "kitti_flow_png", "write_kitti_flow", "read_kitti_flow"]
+
+_INVALID_RGB = (2 ** 15, 2 ** 15, 0)   # an invalid pixel in PNG channel order (u, v, valid)
+
+
+def _kitti_values(flow: np.ndarray) -> np.ndarray:
+    """(..., 2) flow -> (..., 2) uint16 u, v as stored (1/64 px, offset 2**15, clipped)."""
+    return np.clip(np.rint(flow.astype(np.float64) * 64.0 + 2.0 ** 15), 0, 65535).astype(np.uint16)
 
 
 def encode_kitti_flow(flow: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -24,11 +32,9 @@ def encode_kitti_flow(flow: np.ndarray, valid: np.ndarray) -> np.ndarray:
     valid = np.asarray(valid, dtype=bool)
     out = np.zeros(flow.shape[:2] + (3,), dtype=np.uint16)
     out[..., 1:] = 2 ** 15
-    values = flow[valid].astype(np.float64)
-    finite = np.isfinite(values).all(axis=1)
+    valid = valid & np.isfinite(flow).all(axis=-1)
     vs, us = np.nonzero(valid)
-    vs, us, values = vs[finite], us[finite], values[finite]
-    scaled = np.clip(np.rint(values * 64.0 + 2.0 ** 15), 0, 65535).astype(np.uint16)
+    scaled = _kitti_values(flow[vs, us])
     out[vs, us, 0] = 1
     out[vs, us, 1] = scaled[:, 1]
     out[vs, us, 2] = scaled[:, 0]
@@ -44,15 +50,33 @@ def decode_kitti_flow(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return flow, valid
 
 
+def kitti_flow_png(flow: np.ndarray, valid: np.ndarray) -> bytes:
+    """The KITTI flow PNG's bytes (decoded: exactly :func:`encode_kitti_flow`). Only the rows that hold valid
+    pixels are encoded (:mod:`.png`), so the cost follows the object pixels, not the image size."""
+    flow = np.asarray(flow)
+    valid = np.asarray(valid, dtype=bool)
+    rows = np.flatnonzero(valid.any(axis=1))
+    candidates = np.flatnonzero(valid[rows])           # flat indices into the (len(rows), W) block
+    values = flow[rows].reshape(-1, 2)[candidates]
+    finite = np.isfinite(values).all(axis=1)
+    candidates, values = candidates[finite], values[finite]
+    pixels = np.empty((len(rows), flow.shape[1], 3), dtype=np.uint16)
+    pixels[:] = _INVALID_RGB                            # invalid pixels: u = v = 0 px, valid = 0
+    flat = pixels.reshape(-1, 3)
+    flat[candidates, :2] = _kitti_values(values)
+    flat[candidates, 2] = 1
+    row_valid = np.zeros(pixels.shape[:2], dtype=bool)
+    row_valid.reshape(-1)[candidates] = True
+    return encode_rows_png(pixels, rows, flow.shape[0], _INVALID_RGB, row_valid)
+
+
 def write_kitti_flow(path: str | Path, flow: np.ndarray, valid: np.ndarray) -> None:
-    ok, data = cv2.imencode(".png", encode_kitti_flow(flow, valid))
-    if not ok:
-        raise RuntimeError(f"cannot encode {path}")
-    write_bytes(path, data.tobytes())
+    write_bytes(path, kitti_flow_png(flow, valid))
 
 
 def read_kitti_flow(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    with open(path, "rb") as handle:   # not cv2.imread: any path the OS takes (non-UTF-8 names too)
+        image = cv2.imdecode(np.frombuffer(handle.read(), np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None or image.dtype != np.uint16 or image.ndim != 3 or image.shape[2] != 3:
         raise InputError(path, "not a 16-bit 3-channel KITTI flow PNG")
     return decode_kitti_flow(image)

@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import InputError
-from .sequence import AnnotatedTrack, BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
+
+if TYPE_CHECKING:
+    from .sequence import Sequence
+
+_SEQUENCE_NAMES = ("AnnotatedTrack", "BoxAnnotation", "Camera", "CameraFrame", "FrameInfo", "Sequence", "Sweep")
 
 __all__ = ["open_sequence", "detect_format", "FORMATS", "Sequence", "Sweep", "FrameInfo", "Camera",
            "CameraFrame", "BoxAnnotation", "AnnotatedTrack"]
@@ -99,3 +104,12 @@ def _open_sequence(path: Path, format: str | None) -> Sequence:
     if fmt in DATASET_READERS:
         return DATASET_READERS[fmt](path)
     raise InputError(path, f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")
+
+
+def __getattr__(name: str):
+    """The records of :mod:`.sequence`, imported on first use (``sot-apps --help`` needs FORMATS, not numpy)."""
+    if name in _SEQUENCE_NAMES:
+        from . import sequence
+
+        return getattr(sequence, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -150,9 +150,10 @@ def write_json(path: str | Path, data: Any, indent: int | None = 1) -> None:
     write_text(path, text + "\n")
 
 
-def write_npz(path: str | Path, compressed: bool = True, **arrays: np.ndarray) -> None:
+def write_npz(path: str | Path, compressed: bool = True, level: int | None = None, **arrays: np.ndarray) -> None:
     """Write an .npz atomically; the same arrays give the same bytes (the zip entries carry a fixed date,
-    where ``numpy.savez`` stamps the current time; deflate at zlib's default level, as ``savez_compressed``)."""
+    where ``numpy.savez`` stamps the current time; deflate at zlib's default level, as ``savez_compressed``,
+    unless ``level`` (1 = fastest) says otherwise)."""
     import zipfile
 
     buffer = io.BytesIO()
@@ -161,6 +162,8 @@ def write_npz(path: str | Path, compressed: bool = True, **arrays: np.ndarray) -
         for name, value in arrays.items():
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
             info.compress_type = method
+            if compressed and level is not None:   # an entry made here takes its level from itself, not the archive
+                setattr(info, "compress_level" if hasattr(info, "compress_level") else "_compresslevel", level)
             with archive.open(info, "w", force_zip64=True) as handle:
                 np.lib.format.write_array(handle, np.asanyarray(value), allow_pickle=False)
     write_bytes(path, buffer.getvalue())

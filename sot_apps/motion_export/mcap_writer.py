@@ -269,6 +269,14 @@ class _FirstErrorSink:
             raise self.error
 
 
+def _write_options():
+    """zstd level 1 on this thread: half the CPU of the default (level 3 on a thread per core) for ~12 % more bytes
+    with the LiDAR points; no extra threads competing with pipeline workers."""
+    from foxglove.mcap import MCAPWriteOptions
+
+    return MCAPWriteOptions(compression_level=1, compression_threads=0)
+
+
 def write_motion_mcap(path: str | Path, sequence: Sequence, kinematics: list[Kinematics], metadata: dict[str, Any],
                       with_points: bool = False, progress: bool = True) -> McapSummary:
     """Write the MCAP atomically (temporary file, then rename); returns per-topic message counts.
@@ -294,7 +302,7 @@ def write_motion_mcap(path: str | Path, sequence: Sequence, kinematics: list[Kin
     with atomic_path(path) as tmp, open(tmp, "wb", buffering=0) as handle:   # the writer buffers
         sink = _FirstErrorSink(handle)
         ctx = foxglove.Context()
-        writer = foxglove.open_mcap(sink, context=ctx)
+        writer = foxglove.open_mcap(sink, context=ctx, writer_options=_write_options())
         try:
             state = _Writer(ctx, m, channels, kinematics, sequence)
             for frame in tqdm(frames, desc="mcap", unit="frame", disable=not progress, leave=False):

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Realism", "incidence_cosine", "apply_range_noise", "drop_mask", "lambertian_intensity"]
+__all__ = ["Realism", "incidence_cosine", "apply_range_noise", "drop_mask", "grazing_drop_probability",
+           "lambertian_intensity"]
 
 
 @dataclass(frozen=True)
@@ -74,16 +75,20 @@ def drop_mask(cos_incidence: np.ndarray, realism: Realism, rng: np.random.Genera
     if realism.drop_random > 0:
         dropped |= u < realism.drop_random
     if realism.drop_grazing:
-        start = realism.grazing_start_deg
-        # only grazing returns (incidence beyond the start angle) can drop: arccos just for those
-        grazing = np.flatnonzero(cos_incidence < np.cos(np.radians(start)))
-        p = np.zeros(len(cos_incidence))
-        theta = np.degrees(np.arccos(cos_incidence[grazing]))
-        p[grazing] = np.clip((theta - start) / max(90.0 - start, 1e-6), 0.0, 1.0) ** 2
-        dropped |= draw() < p
+        dropped |= draw() < grazing_drop_probability(cos_incidence, realism.grazing_start_deg)
     if range_drop is not None:
         dropped |= draw() < range_drop
     return dropped
+
+
+def grazing_drop_probability(cos_incidence: np.ndarray, start_deg: float) -> np.ndarray:
+    """((theta - start) / (90 - start))^2, clipped to [0, 1], for incidence angles theta beyond ``start_deg``."""
+    # only grazing returns (incidence beyond the start angle) can drop: arccos just for those
+    grazing = np.flatnonzero(cos_incidence < np.cos(np.radians(start_deg)))
+    p = np.zeros(len(cos_incidence))
+    theta = np.degrees(np.arccos(cos_incidence[grazing]))
+    p[grazing] = np.clip((theta - start_deg) / max(90.0 - start_deg, 1e-6), 0.0, 1.0) ** 2
+    return p
 
 
 def lambertian_intensity(cos_incidence: np.ndarray, reflectivity: np.ndarray, distance: np.ndarray,

@@ -22,8 +22,9 @@ import numpy as np
 from tracker import invert_transform
 
 from ..objects.trajectory import Trajectory, world_from_object
-from .noise import Realism, apply_range_noise, drop_mask, incidence_cosine, lambertian_intensity
+from .noise import Realism, grazing_drop_probability, incidence_cosine, lambertian_intensity
 from ..raycast import RaycastScene, RayHits
+from ..raycast.compiled import SweepReturns, compiled_sweep_returns
 from .model import Sensor
 
 __all__ = ["SimObject", "Scan", "simulate_scan", "range_image", "build_static_scene"]
@@ -132,9 +133,9 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
         static_scene = build_static_scene(objects)
     hits = static_scene.cast(origins, dirs)
     obj_of_geom = np.array(static_idx + [-1], dtype=np.int32)
-    object_index = np.where(hits.hit, obj_of_geom[np.where(hits.hit, hits.geom_id, -1)], -1).astype(np.int32)
-    dist = hits.distance.copy()
-    normal = hits.normal.copy()
+    object_index = obj_of_geom[hits.geom_id]   # a miss (geom -1) picks the last entry, -1
+    # moving objects overwrite the nearer hits below; without any, the cast's arrays are only read
+    dist, normal = (hits.distance.copy(), hits.normal.copy()) if moving_idx else (hits.distance, hits.normal)
 
     for i in moving_idx:
         o = objects[i]
@@ -156,38 +157,62 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
         normal[sel] = np.einsum("nij,nj->ni", world_from_object_rot, h.normal[closer])
         object_index[sel] = i
 
+    sensor_from_world = invert_transform(world_from_sensor_frame)
+    reflect = np.array([o.reflectivity for o in objects] + [0.0], dtype=np.float64)
+    # the random draws: every ray of the sweep gets one per effect, in this order, so a seed gives the same scan
+    # whatever the scene (and whichever implementation below runs)
+    n = len(dist)
+    noise = (rng.normal(0.0, sensor.range_noise_sigma, size=n)
+             if realism.range_noise and sensor.range_noise_sigma > 0 else None)
+    range_on = realism.drop_range and sensor.has_range_drop
+    u_random = u_grazing = u_range = None
+    if realism.drop_random > 0 or realism.drop_grazing or range_on:
+        u_random = rng.random(n)
+        u_grazing = rng.random(n) if realism.drop_grazing else None
+        u_range = rng.random(n) if range_on else None
+    returns = compiled_sweep_returns(
+        dist, normal, dirs, origins, object_index, reflect[:-1], sensor.min_range, sensor.max_range, noise,
+        u_random if realism.drop_random > 0 else None, realism.drop_random, u_grazing, realism.grazing_start_deg,
+        u_range, sensor.drop_at_zero_range, sensor.drop_per_m, realism.intensity, realism.attenuation_per_m,
+        sensor_from_world)
+    if returns is None:   # the compiled loop is not built: the same models in numpy
+        returns = _sweep_returns_numpy(sensor, realism, dist, normal, dirs, origins, object_index, reflect, noise,
+                                       u_random, u_grazing, u_range, sensor_from_world)
+    keep, measured, intensity, xyz = returns.keep, returns.measured, returns.intensity, returns.xyz
+    inst_of_obj = np.array([o.instance for o in objects] + [-1], dtype=np.int32)
+    return Scan(xyz=xyz, instance=inst_of_obj[object_index[keep]], intensity=intensity,
+                time_offset_ns=col_t[column[keep]].astype(np.int64), beam=beam[keep], column=column[keep],
+                distance=measured.astype(np.float32), object_index=object_index[keep],
+                num_beams=sensor.beams, num_columns=sensor.columns)
+
+
+def _sweep_returns_numpy(sensor: Sensor, realism: Realism, dist: np.ndarray, normal: np.ndarray, dirs: np.ndarray,
+                        origins: np.ndarray, object_index: np.ndarray, reflect: np.ndarray, noise: np.ndarray | None,
+                        u_random: np.ndarray | None, u_grazing: np.ndarray | None, u_range: np.ndarray | None,
+                        sensor_from_world: np.ndarray) -> SweepReturns:
+    """numpy twin of the compiled ``sot_rt_returns`` (the fallback when it is not built; tests compare the two)."""
     valid = np.isfinite(dist) & (dist >= sensor.min_range) & (dist <= sensor.max_range)
-    # the per-return models run on the candidate returns only; the random draws still cover every ray, so a
-    # seed gives the same scan whatever the scene
     cand = np.flatnonzero(valid)
     cos_cand = incidence_cosine(np.take(dirs, cand, axis=0), np.take(normal, cand, axis=0))  # take: 3x faster
-    measured = dist.copy()
-    if realism.range_noise and sensor.range_noise_sigma > 0:
-        measured = apply_range_noise(measured, sensor.range_noise_sigma, rng)
-    range_drop = (sensor.range_drop_probability(dist[cand]) if realism.drop_range and sensor.has_range_drop else None)
-    if realism.drop_random > 0 or realism.drop_grazing or range_drop is not None:
-        valid[cand] &= ~drop_mask(cos_cand, realism, rng, num_rays=len(dist), index=cand, range_drop=range_drop)
-    keep_in_cand = valid[cand]
-    keep = cand[keep_in_cand]
+    measured = dist if noise is None else dist + noise
+    dropped = np.zeros(len(cand), dtype=bool)
+    if u_random is not None:
+        dropped |= u_random[cand] < realism.drop_random
+    if u_grazing is not None:
+        dropped |= u_grazing[cand] < grazing_drop_probability(cos_cand, realism.grazing_start_deg)
+    if u_range is not None:
+        dropped |= u_range[cand] < sensor.range_drop_probability(dist[cand])
+    keep = cand[~dropped]
     if realism.intensity:
-        reflect = np.array([o.reflectivity for o in objects] + [0.0], dtype=np.float64)
-        intensity = lambertian_intensity(cos_cand[keep_in_cand], reflect[object_index[keep]], measured[keep],
+        intensity = lambertian_intensity(cos_cand[~dropped], reflect[object_index[keep]], measured[keep],
                                          realism.attenuation_per_m)
     else:
         intensity = np.zeros(len(keep))
     single_origin = origins.ndim == 2 and origins.strides[0] == 0
     pts_world = (origins[0] if single_origin else np.take(origins, keep, axis=0)) + \
         np.take(dirs, keep, axis=0) * measured[keep, None]
-    sensor_from_world = invert_transform(world_from_sensor_frame)
-    if np.array_equal(sensor_from_world, np.eye(4)):
-        xyz = pts_world.astype(np.float32)
-    else:
-        xyz = (rotate(sensor_from_world[:3, :3], pts_world) + sensor_from_world[:3, 3]).astype(np.float32)
-    inst_of_obj = np.array([o.instance for o in objects] + [-1], dtype=np.int32)
-    return Scan(xyz=xyz, instance=inst_of_obj[object_index[keep]], intensity=intensity.astype(np.float32),
-                time_offset_ns=col_t[column[keep]].astype(np.int64), beam=beam[keep], column=column[keep],
-                distance=measured[keep].astype(np.float32), object_index=object_index[keep],
-                num_beams=sensor.beams, num_columns=sensor.columns)
+    xyz = (rotate(sensor_from_world[:3, :3], pts_world) + sensor_from_world[:3, 3]).astype(np.float32)
+    return SweepReturns(keep, measured[keep], intensity.astype(np.float32), xyz)
 
 
 def build_static_scene(objects: list[SimObject]) -> RaycastScene:

@@ -49,7 +49,7 @@ parser = argparse.ArgumentParser()
 parser.add_argument("command")
 parser.add_argument("redeliver")
 parser.set_defaults(func=command)
-cli.build_parser = lambda: parser
+cli.build_parser = lambda command=None: parser
 cli._CAN_REDELIVER = sys.argv[2] == "yes"
 sys.exit(cli.main(sys.argv[1:]))
 """

@@ -17,7 +17,7 @@ from sot_apps.schemas import validate
 def test_flow_from_annotations_on_pandaset_pair(pandaset_root, pandaset, tmp_path):
     out = tmp_path / "flow"
     args = [str(pandaset_root), "--from-annotations", "--track-id", "8ac00bad", "--camera", "front_camera",
-            "--pairs", "4:5", "--shape-frames", "0:10", "--out", str(out), "--quiet"]
+            "--pairs", "4:5", "--shape-frames", "0:10", "--out", str(out), "--quiet", "--vis"]
     assert main(["flow", *args]) == 0
     root = out / "front_camera"
     instance = cv2.imread(str(root / "instances" / "000004.png"), cv2.IMREAD_UNCHANGED)

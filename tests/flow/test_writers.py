@@ -1,0 +1,163 @@
+"""The flow writers: decoded values are exactly the arrays written (OpenCV reads them back), any output path the
+OS takes works (a directory named with a non-UTF-8 byte), and a pair's files are written in the background."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from sot_apps.flow.annotate import PairWriter
+from sot_apps.flow.flo_io import UNKNOWN_FLOW, read_flo, write_flo
+from sot_apps.flow.kitti_io import encode_kitti_flow, read_kitti_flow, write_kitti_flow
+from sot_apps.flow.png import encode_png, encode_rows_png
+
+REPO = Path(__file__).resolve().parents[2]
+NON_UTF8 = os.fsdecode(b"out\xff\xfe")   # how Python hands a non-UTF-8 name over (surrogate escapes)
+
+
+def _decode(data: bytes) -> np.ndarray:
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    return image[..., ::-1] if image.ndim == 3 else image   # OpenCV gives BGR; encode_png takes RGB
+
+
+def _blobs(rng, shape, dtype, density):
+    """Sparse rectangles and scattered pixels of random values over a constant background."""
+    image = np.full(shape, 7, dtype=dtype)
+    high = np.iinfo(dtype).max
+    for _ in range(3):
+        r0, c0 = rng.integers(0, shape[0]), rng.integers(0, shape[1])
+        image[r0:r0 + rng.integers(1, 9), c0:c0 + rng.integers(1, 12)] = rng.integers(0, high, size=shape[2:] or None)
+    scattered = rng.random(shape[:2]) < density
+    image[scattered] = rng.integers(0, high, size=(int(scattered.sum()),) + shape[2:])
+    return image
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_png_decodes_to_the_array(dtype, channels):
+    rng = np.random.default_rng(channels + 8 * np.dtype(dtype).itemsize)
+    for shape2d in [(1, 1), (5, 1), (1, 7), (23, 41), (64, 300)]:
+        shape = shape2d if channels == 1 else shape2d + (3,)
+        background = 7 if channels == 1 else (7, 7, 7)
+        for density in (0.0, 0.01, 0.3, 1.0):
+            image = _blobs(rng, shape, dtype, density)
+            np.testing.assert_array_equal(_decode(encode_png(image, background)), image)
+            # with the caller's mask: a superset of the non-background pixels
+            differs = (image != 7) if channels == 1 else (image != 7).any(axis=2)
+            mask = differs | (rng.random(shape2d) < 0.2)
+            np.testing.assert_array_equal(_decode(encode_png(image, background, mask)), image)
+        # every pixel differs from the given background (the content spans run to both edges)
+        image = rng.integers(0, np.iinfo(dtype).max, size=shape, dtype=dtype)
+        np.testing.assert_array_equal(_decode(encode_png(image, 0)), image)
+
+
+def test_png_rows_form_equals_the_full_image():
+    rng = np.random.default_rng(5)
+    image = np.zeros((50, 30, 3), np.uint16)
+    rows = np.array([0, 3, 4, 30, 49])
+    image[rows] = rng.integers(0, 65535, size=(len(rows), 30, 3))
+    data = encode_rows_png(image[rows], rows, 50, (0, 0, 0))
+    np.testing.assert_array_equal(_decode(data), image)
+    assert data == encode_png(image, (0, 0, 0))
+
+
+def _flow_1080p(rng):
+    """A 1080p flow map with a few object-sized regions, values on and off the 1/64 grid, NaN and out-of-range."""
+    flow = np.zeros((1080, 1920, 2), np.float32)
+    valid = np.zeros((1080, 1920), bool)
+    for r0, c0, h, w in [(400, 300, 200, 350), (500, 1500, 120, 200), (900, 0, 180, 90), (0, 1800, 60, 120)]:
+        flow[r0:r0 + h, c0:c0 + w] = rng.uniform(-40, 40, size=(h, w, 2))
+        valid[r0:r0 + h, c0:c0 + w] = rng.random((h, w)) < 0.97
+    flow[450, 400] = (np.nan, 1.0)
+    flow[460, 400] = (900.0, -900.0)   # clipped to the PNG's range
+    return flow, valid
+
+
+def test_kitti_png_and_flo_read_back_by_opencv_bit_identical(tmp_path):
+    flow, valid = _flow_1080p(np.random.default_rng(0))
+    write_kitti_flow(tmp_path / "f.png", flow, valid)
+    written = cv2.imread(str(tmp_path / "f.png"), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(written, encode_kitti_flow(flow, valid))   # the array the format defines
+    assert written[450, 400, 0] == 0 and written[460, 400].tolist() == [1, 0, 65535]   # NaN invalid, clipped
+    write_flo(tmp_path / "f.flo", flow, valid)
+    back = cv2.readOpticalFlow(str(tmp_path / "f.flo"))
+    expected = np.where(valid[..., None], flow, UNKNOWN_FLOW)
+    assert back.dtype == np.float32 and back.tobytes() == expected.tobytes()   # bit for bit, NaN included
+    # and our reader reads what OpenCV writes
+    cv2.writeOpticalFlow(str(tmp_path / "cv.flo"), expected)
+    ours, known = read_flo(tmp_path / "cv.flo")
+    np.testing.assert_array_equal(known, (np.abs(expected) < 1e9).all(axis=-1))
+
+
+def test_writers_take_a_non_utf8_directory(tmp_path):
+    out = tmp_path / NON_UTF8
+    flow, valid = _flow_1080p(np.random.default_rng(1))
+    write_kitti_flow(out / "f.png", flow, valid)
+    write_flo(out / "f.flo", flow, valid)
+    back, back_valid = read_kitti_flow(out / "f.png")
+    np.testing.assert_array_equal(back_valid, valid & np.isfinite(flow).all(axis=-1))
+    flo, known = read_flo(out / "f.flo")
+    np.testing.assert_array_equal(known, back_valid)   # NaN is not a known flow in .flo either
+    np.testing.assert_array_equal(flo[known], flow[known])
+    assert sorted(os.listdir(os.fsencode(out))) == [b"f.flo", b"f.png"]   # no temporaries left
+
+
+def test_flow_command_into_a_non_utf8_directory(tiny_dir, tmp_path):
+    """Issue 26 item 8: this segfaulted (exit 139) in cv2.writeOpticalFlow and left temporary files."""
+    out = os.fsencode(tmp_path) + b"/flow\xff"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    command = [sys.executable, "-m", "sot_apps.cli.main", "flow", os.fsencode(tiny_dir), "--from-annotations",
+               "--camera", "front_camera", "--pairs", "0:3", "--vis", "--out", out, "--quiet"]
+    done = subprocess.run(command, env=env, capture_output=True, timeout=120)
+    assert done.returncode == 0, done.stderr.decode(errors="replace")
+    root = out + b"/front_camera"
+    names = {d: sorted(os.listdir(root + b"/" + d)) for d in (b"flow_occ", b"flow_noc", b"flo", b"instances", b"pairs")}
+    assert all(len(v) == 3 for v in names.values()), names
+    assert len(os.listdir(root + b"/vis")) == 6
+    leftovers = [f for _, _, files in os.walk(out) for f in files if f.endswith(b".tmp")]
+    assert leftovers == []
+    flow, valid = read_kitti_flow(os.fsdecode(root + b"/flow_occ/000000.png"))
+    flo, known = read_flo(os.fsdecode(root + b"/flo/000000.flo"))
+    np.testing.assert_array_equal(known, valid)
+    assert np.abs(flo[valid] - flow[valid]).max() <= 0.5 / 64 + 1e-6
+
+
+def test_vis_is_written_only_when_asked(tiny_dir, tmp_path):
+    from sot_apps.cli.main import main
+
+    args = [str(tiny_dir), "--from-annotations", "--camera", "front_camera", "--pairs", "0:2", "--quiet"]
+    assert main(["flow", *args, "--out", str(tmp_path / "a")]) == 0
+    assert not (tmp_path / "a" / "front_camera" / "vis").exists()
+    assert main(["flow", *args, "--out", str(tmp_path / "b"), "--vis"]) == 0
+    assert sorted(p.name for p in (tmp_path / "b" / "front_camera" / "vis").iterdir()) == [
+        "000000_flow.png", "000000_overlay.jpg", "000001_flow.png", "000001_overlay.jpg"]
+
+
+def test_pair_writer_records_follow_their_files_and_errors_propagate(tmp_path):
+    order = []
+
+    def job(name):
+        return lambda: order.append(name)
+
+    with PairWriter(workers=2, max_pending=1) as writer:
+        for k in range(4):
+            writer.submit([job(f"file{k}a"), job(f"file{k}b")], lambda k=k: order.append(f"record{k}"))
+    records = [n for n in order if n.startswith("record")]
+    assert records == [f"record{k}" for k in range(4)]
+    for k in range(4):   # a record comes after both files of its pair
+        assert order.index(f"record{k}") > max(order.index(f"file{k}a"), order.index(f"file{k}b"))
+
+    def fail():
+        raise OSError("disk on fire")
+
+    written = []
+    with pytest.raises(OSError, match="disk on fire"):
+        with PairWriter(workers=1, max_pending=0) as writer:
+            writer.submit([fail], lambda: written.append("record"))
+    assert written == []   # no record for a pair whose files failed
