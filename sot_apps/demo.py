@@ -68,7 +68,8 @@ def demo_config(out: Path, sequence: Path, synthetic: bool, scan_sensor: str = "
     if not synthetic:
         flow_pairs = 10 if flow_pairs is None else flow_pairs
         cameras = cameras or ("front_camera",)
-    stages = Stages(track=TrackStage(), flow=FlowConfig(cameras=cameras, max_pairs=flow_pairs, vis=True),   # the report shows the overlays
+    # the report shows the flow overlays (vis)
+    stages = Stages(track=TrackStage(), flow=FlowConfig(cameras=cameras, max_pairs=flow_pairs, vis=True),
                     scans=ScanConfig(sensor=scan_sensor, max_entries=1))
     return PipelineConfig(str(out), (SequenceConfig(str(sequence), objects=ObjectSource("annotations")),),
                           stages, "sot-apps demo")

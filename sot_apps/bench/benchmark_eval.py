@@ -1,13 +1,13 @@
-"""Tracker presets on a benchmark's tracklet list (run here, scored by :mod:`sot_apps.evaluation.tracker`) (``sot-apps eval --benchmark LIST``): paper-style tables per difficulty
-and per motion profile.
+"""Tracker presets on a benchmark's tracklet list (``sot-apps eval --benchmark LIST``), run here and scored by
+:mod:`sot_apps.evaluation.tracker`: paper-style tables per difficulty and per motion profile.
 
 Each tracklet is tracked from its first frame's ground-truth box to its last frame (LiDAR-SOT's protocol) with
 every preset and seed; scores are those of ``sot-apps eval`` (:mod:`tracker.metrics`: Acc, Rob, Success,
 Precision over frames 1..n-1; Shape = Chamfer to the pseudo-ground-truth shape). A group's figures pool its
 tracklets' frames; with several seeds each figure is the mean over seeds (± the spread of Acc).
-Groups of the hard profiles add their own figures (:mod:`.profile_scores`): the share re-locked within 3 frames
-of re-appearing (``hidden``), the share found at the first frame within 30 m (``far_approach``) and the median
-heading error at the last frame (``oblique``).
+Groups of the hard profiles add their own figures (:mod:`sot_apps.benchmark.profile_scores`): the share
+re-locked within 3 frames of re-appearing (``hidden``), the share found at the first frame within 30 m
+(``far_approach``) and the median heading error at the last frame (``oblique``).
 """
 
 from __future__ import annotations
@@ -20,18 +20,12 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 import numpy as np
 
 from ..errors import InputError
-<<<<<<< HEAD:sot_apps/bench/benchmark_eval.py
+from ..benchmark.profile_scores import pool_figures, tracklet_figures
 
 if TYPE_CHECKING:   # imported by `sot-apps bench --help` (module discovery): the libraries load when a run starts
     from ..benchmark.lists import SequenceResolver, Tracklet
     from ..evaluation.tracker import EvalConfig, TrackSpec
     from ..io.cached_source import CachedSource
-=======
-from ..io import open_sequence
-from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params, json_safe, refined_modes, score_result
-from .lists import SequenceResolver, Tracklet
-from .profile_scores import pool_figures, tracklet_figures
->>>>>>> main:sot_apps/benchmark/evaluate.py
 
 __all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
 
@@ -172,14 +166,10 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
     return BenchmarkRun(rows, seeds, records, levels, profiles, figures)
 
 
-<<<<<<< HEAD:sot_apps/bench/benchmark_eval.py
-=======
-
 _EXTRA_COLUMNS = (("relock_share", "ReLock3", 100.0, ".0f"), ("found_near_share", "Found30", 100.0, ".0f"),
                   ("heading_err_last_med_deg", "Hdg@last", 1.0, ".1f"))
 
 
->>>>>>> main:sot_apps/benchmark/evaluate.py
 def _fmt(v: float, spec: str) -> str:
     return "—" if v is None or not np.isfinite(v) else format(v, spec)
 

@@ -98,6 +98,22 @@ def test_sot_apps_apps_lists_the_installed_apps(capsys):
     assert set(BUILTIN_APPS) <= set(docs)
     assert docs["scans"]["needs"] == ["bank"] and docs["bank"]["runs_by_default"]
     assert not docs["autolabels"]["runs_by_default"]
-    assert {f["field"] for f in docs["flow"]["config"]} == {"cameras", "mode", "max_pairs", "use_lidar"}
+    assert {f["field"] for f in docs["flow"]["config"]} == {"cameras", "mode", "max_pairs", "use_lidar", "vis"}
     assert main(["apps"]) == 0
     assert "stages.motion:" in capsys.readouterr().out
+
+
+def test_listing_the_apps_loads_no_heavy_library():
+    """``sot-apps apps`` imports each app's module, which imports its libraries only when a unit runs."""
+    import os
+    import subprocess
+    import sys
+
+    probe = ("import json, sys\nfrom sot_apps.cli.main import main\nimport contextlib, io\n"
+             "with contextlib.redirect_stdout(io.StringIO()):\n    code = main(['apps'])\n"
+             "print(json.dumps([code, sorted({m.split('.')[0] for m in sys.modules})]))")
+    done = subprocess.run([sys.executable, "-c", probe], env={**os.environ, "PYTHONPATH": str(REPO)},
+                          capture_output=True, text=True, timeout=120)
+    code, modules = json.loads(done.stdout.splitlines()[-1])
+    assert code == 0
+    assert [m for m in ("scipy", "cv2", "trimesh", "pyarrow", "mcap", "embreex") if m in modules] == []
