@@ -11,7 +11,7 @@ Tracking is the core stage of a pipeline run; every later stage is an app. An ap
   :class:`Unit` (or a :class:`Skip` with the reason);
 - ``run(config, out, **unit.args)``: do one unit, write its files through ``sot_apps.io`` writers (atomic) and
   return a :class:`UnitOutput` (the files and a JSON-able summary);
-- ``finish(config, out, results)``: after all its units, e.g. an index over them (may do nothing).
+- ``finish(config, out, results)``: after all its units, e.g. an index over them (optional).
 
 The pipeline gives every app the same machinery: a unit whose completion marker is valid is skipped (resume),
 a failed unit is recorded in ``failures.json`` and the run goes on, and ``manifest.json`` lists each unit with
@@ -132,6 +132,14 @@ class AppBase:
 
     def finish(self, config: Any, out: Path, results: list[dict]) -> None:
         return None
+
+    def sequence_unit(self, s: SequenceTracks, **extra: Any) -> Unit:
+        """The usual unit of an app that works on a whole sequence: key ``<app>/<sequence>``, digested with the
+        sequence's track checksums and path, run with ``sequence, path, format, object_ids`` (+ ``extra``, which
+        are digested too)."""
+        return Unit(f"{self.name}/{s.name}", {"tracks": s.checksums, "seq": s.path, **extra},
+                    {"sequence": s.name, "path": s.path, "format": s.format, "object_ids": list(s.objects), **extra},
+                    s.name)
 
     def per_sequence(self, run: RunContext, make: Any) -> list[Unit | Skip]:
         """Helper: ``make(sequence)`` for every sequence with finished tracks; a :class:`Skip` for the others."""

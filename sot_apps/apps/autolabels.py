@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import AppBase, RunContext, SequenceTracks, Unit, UnitOutput, track_dir
+from . import AppBase, RunContext, UnitOutput, track_dir
 
 
 @dataclass(frozen=True)
@@ -27,11 +27,7 @@ class AutoLabelsApp(AppBase):
     outputs = ("<sequence>/labels/av2/{annotations,submission}.feather", "<sequence>/labels/kitti/{label_02,calib}/*.txt")
 
     def plan(self, config: AutoLabelsConfig, run: RunContext) -> list:
-        def units(s: SequenceTracks) -> list[Unit]:
-            return [Unit(f"autolabels/{s.name}", {"tracks": s.checksums, "seq": s.path},
-                         {"sequence": s.name, "path": s.path, "format": s.format, "object_ids": list(s.objects)},
-                         s.name)]
-        return self.per_sequence(run, units)
+        return self.per_sequence(run, lambda s: [self.sequence_unit(s)])
 
     def run(self, config: AutoLabelsConfig, out: Path, sequence: str, path: str, format: str | None,
             object_ids: list[str]) -> UnitOutput:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import AppBase, RunContext, SequenceTracks, Unit, UnitOutput, track_dir
+from . import AppBase, RunContext, UnitOutput, track_dir
 
 
 @dataclass(frozen=True)
@@ -22,11 +22,7 @@ class MotionApp(AppBase):
     outputs = ("<sequence>/motion.mcap", "<sequence>/motion.parquet", "<sequence>/motion.npz")
 
     def plan(self, config: MotionConfig, run: RunContext) -> list:
-        def units(s: SequenceTracks) -> list[Unit]:
-            return [Unit(f"motion/{s.name}", {"tracks": s.checksums, "seq": s.path},
-                         {"sequence": s.name, "path": s.path, "format": s.format, "object_ids": list(s.objects)},
-                         s.name)]
-        return self.per_sequence(run, units)
+        return self.per_sequence(run, lambda s: [self.sequence_unit(s)])
 
     def run(self, config: MotionConfig, out: Path, sequence: str, path: str, format: str | None,
             object_ids: list[str]) -> UnitOutput:

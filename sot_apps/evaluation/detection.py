@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from tracker import FrameDetections, iou_3d_batch, iou_bev_batch
 

@@ -1,17 +1,7 @@
-"""Scores of optical flow: end-point error and outliers against a true flow (:func:`flow_errors`), and the
-photometric error of a flow between two real images (:func:`warp_abs_difference`). The measurements that run the
-flow app, the tracker and the baselines (``sot-apps bench flow``) are in :mod:`sot_apps.bench.flow_quality`:
-
-(a) ``synthetic_quality``: a synthetic world with rendered camera images (``sot_apps.lidar_sim``).
-    The exact flow comes from the ground-truth meshes and 1 ms trajectories, with the static world
-    (walls, poles, ground) as occluders. Compared on vehicle pixels visible in both images: our
-    annotation from ground-truth boxes (10 Hz, shapes from the simulated LiDAR points), from tracker
-    states (SOTracker run from the first GT box), and OpenCV's DIS and Farneback flow on the rendered
-    image pairs. Metrics: EPE (mean end-point error, px) and Fl (share of pixels with EPE > 3 px AND
-    > 5 % of the true flow magnitude), plus coverage (share of the true object pixels that get a value).
-(b) ``photometric_quality``: real image pairs. Image k+1 is warped into k with a flow over the
-    annotated object pixels (cv2.remap); the mean absolute grey-level difference to image k is
-    reported for our flow, zero flow and DIS flow on the same pixels.
+"""Scores of optical flow: EPE (mean end-point error, px), Fl (share of pixels with EPE > 3 px and > 5 % of the
+true flow magnitude) and coverage against a true flow (:func:`flow_errors`), and the photometric error of a flow
+between two real images (:func:`warp_abs_difference`). The measurements that run the flow app, the tracker and
+the baselines to get flows to score (``sot-apps bench flow-quality``) are in :mod:`sot_apps.bench.flow_quality`.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..apps import V1_APPS
+from ..apps import V1_APPS, build_config, get_app
 from ..errors import InputError
 
 __all__ = ["ObjectSource", "SequenceConfig", "TrackStage", "Stages", "PipelineConfig", "load_config", "V1_APPS"]
@@ -105,8 +105,6 @@ class Stages:
     def __init__(self, track: TrackStage | None = None, apps: tuple[tuple[str, Any], ...] | None = None,
                  **sections: Any) -> None:
         if apps is None:
-            from ..apps import get_app
-
             chosen: dict[str, Any] = {}
             for name in V1_APPS:
                 config = sections.pop(name) if name in sections else get_app(name).config_type()
@@ -134,8 +132,6 @@ class Stages:
 
     @classmethod
     def from_json(cls, doc: dict, path: Any = None) -> "Stages":
-        from ..apps import build_config, get_app
-
         track_doc = dict(doc.get("track") or {})
         track = dataclasses.replace(build_config(TrackStage, track_doc, "stages.track", path),
                                     enabled=bool(track_doc.get("enabled", True)))
@@ -203,11 +199,6 @@ class PipelineConfig:
 
     def replace(self, **changes: Any) -> "PipelineConfig":
         return dataclasses.replace(self, **changes)
-
-    def with_track(self, **changes: Any) -> "PipelineConfig":
-        """This config with its tracking stage changed (e.g. ``with_track(mode="online")``)."""
-        stages = Stages(dataclasses.replace(self.stages.track, **changes), apps=self.stages.apps)
-        return dataclasses.replace(self, stages=stages)
 
 
 def _section_json(config: Any) -> dict:

@@ -219,11 +219,12 @@ def _app_batches(apps: tuple[tuple[str, Any], ...]) -> list[list[tuple[str, App,
     batches: list[list[tuple[str, App, Any]]] = []
     pending = [(name, get_app(name), cfg) for name, cfg in apps]
     while pending:
-        ready = [(n, a, c) for n, a, c in pending if all(d in level or d not in dict(apps) for d in a.needs)]
+        ready = [(n, a, c) for n, a, c in pending
+                 if all(d in level or d not in dict(apps) for d in getattr(a, "needs", ()))]
         if not ready:
             raise InputError(None, f"stages: the apps {', '.join(n for n, _, _ in pending)} need each other")
         for name, app, cfg in ready:
-            level[name] = 1 + max((level[d] for d in app.needs if d in level), default=-1)
+            level[name] = 1 + max((level[d] for d in getattr(app, "needs", ()) if d in level), default=-1)
             while len(batches) <= level[name]:
                 batches.append([])
             batches[level[name]].append((name, app, cfg))
@@ -251,14 +252,19 @@ def _run_apps(batch: list[tuple[str, App, Any]], context: RunContext, out: Path,
             units.append(_make_unit(out, name, item.key, item.sequence, item.object,
                                     {"app": name, "config": config_doc, "inputs": item.inputs}, st.run_app_unit,
                                     {"app": app, "config": cfg, "out": str(out), "key": item.key, "args": item.args}))
-    start = time.perf_counter()
     ran = _run_units(units, out, session, "/".join(name for name, _, _ in batch), progress)
-    elapsed = time.perf_counter() - start
-    seconds = {name: sum(r.seconds for r in ran if r.stage == name) if len(units) > 1 else elapsed
-               for name, _, _ in batch}
+    seconds = {name: sum(r.seconds for r in ran if r.stage == name) for name, _, _ in batch}
     for name, app, cfg in batch:
         summaries = [r.result for r in ran if r.stage == name and r.status in ("done", "cached") and r.result]
-        app.finish(cfg, out, summaries)
+        finish = getattr(app, "finish", None)
+        try:
+            if finish is not None:
+                finish(cfg, out, summaries)
+        except OutputError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - recorded like a failed unit
+            records.append(UnitRecord(name, f"{name}/finish", None, None, "failed",
+                                      error=f"{type(exc).__name__}: {exc}"))
     return ran + records, seconds
 
 

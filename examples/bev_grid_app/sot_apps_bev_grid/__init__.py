@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sot_apps.apps import AppBase, RunContext, SequenceTracks, Unit, UnitOutput, track_dir
+from sot_apps.apps import AppBase, RunContext, UnitOutput, track_dir
 
 __all__ = ["BevGridConfig", "BevGridApp", "bev_grids"]
 
@@ -36,11 +36,7 @@ class BevGridApp(AppBase):
     outputs = (f"<sequence>/{FILE_NAME}",)
 
     def plan(self, config: BevGridConfig, run: RunContext) -> list:
-        def units(s: SequenceTracks) -> list[Unit]:
-            return [Unit(f"bev_grid/{s.name}", {"tracks": s.checksums, "seq": s.path, "frames": list(s.frames)},
-                         {"sequence": s.name, "path": s.path, "format": s.format, "frames": list(s.frames),
-                          "object_ids": list(s.objects)}, s.name)]
-        return self.per_sequence(run, units)
+        return self.per_sequence(run, lambda s: [self.sequence_unit(s, frames=list(s.frames))])
 
     def run(self, config: BevGridConfig, out: Path, sequence: str, path: str, format: str | None,
             frames: list[int], object_ids: list[str]) -> UnitOutput:
