@@ -67,10 +67,8 @@ def test_installed_example_app_runs_through_sot_apps_run(tmp_path, tiny_world):
     run = subprocess.run([sys.executable, "-m", "sot_apps.cli.main", "run", str(pipeline), "--quiet"], env=env,
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stdout + run.stderr
-    grids = np.load(out / "world" / "bev_grid.npz") if (out / "world").is_dir() else None
-    if grids is None:
-        [path] = list(out.glob("*/bev_grid.npz"))
-        grids = np.load(path)
+    [path] = list(out.glob("*/bev_grid.npz"))
+    grids = np.load(path)
     assert list(grids["object_ids"]) == ["veh_000", "veh_001", "veh_002"]
     assert grids["occupancy"].shape == (6, 120, 120)
 
