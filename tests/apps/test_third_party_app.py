@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -49,9 +50,10 @@ def test_bev_grid_of_one_box_seen_from_a_turned_ego():
 
 
 def test_installed_example_app_runs_through_sot_apps_run(tmp_path, tiny_world):
+    source = shutil.copytree(EXAMPLE, tmp_path / "bev_grid_app")   # the build leaves build/ and egg-info beside it
     target = tmp_path / "site"
     pip = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target),
-                          str(EXAMPLE)], capture_output=True, text=True, timeout=180)
+                          str(source)], capture_output=True, text=True, timeout=180)
     assert pip.returncode == 0, pip.stderr[-2000:]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(target), str(REPO)])}
     listing = subprocess.run([sys.executable, "-m", "sot_apps.cli.main", "apps", "--json"], env=env,
