@@ -70,9 +70,6 @@ class SequenceTracks:
     checksums: dict[str, dict[str, str]] = field(default_factory=dict)   # object -> its track outputs' sha256
     detections: str | None = None      # the sequence's per-frame detections file, if the pipeline file gives one
 
-    def track_dirs(self, out: str | Path) -> list[Path]:
-        return [track_dir(out, self.name, o) for o in self.objects]
-
 
 @dataclass(frozen=True)
 class RunContext:

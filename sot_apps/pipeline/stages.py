@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..apps import track_dir
 from ..tracking import ObjectRequest, ObjectTrack, TrackingFailed, write_shape_growth, write_track_result
 from ..tracking import track_objects as track_objects_pass
-from ..apps import track_dir
 from .config import TrackStage
 from .manifest import DoneMarker
 from .plan import ObjectPlan, open_cached
@@ -126,5 +126,6 @@ def score_motion(out: str, sequence: str, path: str, format: str | None, object_
         accuracy = evaluate_motion(seq, tracks, horizon=horizon, source="pipeline tracks")
         outputs.append(Path(out) / sequence / MOTION_EVAL_FILE)
         write_text(outputs[0], json.dumps(accuracy.to_json()))
-    DoneMarker(Path(out), f"motion_eval/{sequence}").mark(digest, outputs, extra={"summary": {"tracks": len(tracks)}})
-    return {"sequence": sequence, "tracks": len(tracks)}
+    summary = {"sequence": sequence, "tracks": len(tracks)}
+    DoneMarker(Path(out), f"motion_eval/{sequence}").mark(digest, outputs, extra={"summary": summary})
+    return summary
