@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import add_subcommand, declare_outputs
+from .common import add_subcommand, declare_outputs, positive_int
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -28,7 +28,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--sequence", metavar="PATH", help="run on this sequence instead of a synthetic world")
     parser.add_argument("--quick", action="store_true",
                         help="a smaller synthetic world (6 frames, 16-beam LiDAR, 320x240 camera) for smoke tests")
-    parser.add_argument("--flow-pairs", type=int, metavar="N", default=None,
+    parser.add_argument("--flow-pairs", type=positive_int, metavar="N", default=None,
                         help="optical flow on the first N image pairs (default: all for the synthetic world, 10 for "
                              "--sequence)")
     add_executor_arguments(parser)

@@ -29,7 +29,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--3d", dest="three_d", action="store_true", help="with --evaluate: also 3D AP")
     parser.add_argument("--json", metavar="FILE", help="with --evaluate: write the AP rows as JSON")
     add_detections_arguments(parser)
-    declare_outputs(parser, files=("out", "json"))
+    declare_outputs(parser, files=("out", "json"), inputs=("sequence", "detections", "kitti_calib"))
     parser.set_defaults(func=run)
     return parser
 

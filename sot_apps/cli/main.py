@@ -144,10 +144,11 @@ def main(argv: Seq[str] | None = None) -> int:
         if not getattr(args, "command", None):
             parser.print_help()
             return 2
-        from .common import check_outputs
+        from .common import check_outputs, output_locks
 
         check_outputs(args)
-        result = args.func(args)
+        with output_locks(args):
+            result = args.func(args)
         if _INTERRUPT_PENDING:   # swallowed, and the command ended before the re-delivery
             raise KeyboardInterrupt
         return int(result or 0)
@@ -201,8 +202,11 @@ def _unexpected(exc: BaseException, debug: bool) -> int:
         return 130
     if debug:
         traceback.print_exc()
-    message = " ".join(str(exc).split()) or type(exc).__name__
-    sys.stderr.write(f"error: {type(exc).__name__}: {message} (rerun with --debug for the traceback)\n")
+    name = type(exc).__name__
+    if name == "error":   # e.g. cv2.error: "error: error: ..." would say nothing
+        name = f"{type(exc).__module__}.{name}"
+    message = " ".join(str(exc).split()) or name
+    sys.stderr.write(f"error: {name}: {message} (rerun with --debug for the traceback)\n")
     return 1
 
 

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .common import add_action, add_sequence_argument, add_subcommand, declare_outputs, load_sequence
+from .common import (add_action, add_sequence_argument, add_subcommand, coordinate, declare_outputs, load_sequence,
+                     nonnegative_float, positive_float)
 
 MAX_PLAUSIBLE_BEAMS = 128   # the most beams of any spinning LiDAR on sale (e.g. Hesai OT128, Ouster OS-128)
 
@@ -34,10 +35,10 @@ def register(subparsers) -> argparse.ArgumentParser:
     fit.add_argument("--frames", default="0,10,20", help="comma-separated frames to use (default 0,10,20)")
     fit.add_argument("--out", required=True, metavar="SENSOR.json", help="output sensor JSON")
     fit.add_argument("--name", default=None, help="sensor name (default: fitted_<sequence id>)")
-    fit.add_argument("--min-range", type=float, default=2.0, help="ignore points closer than this (m)")
-    fit.add_argument("--min-separation", type=float, default=0.09,
+    fit.add_argument("--min-range", type=nonnegative_float, default=2.0, help="ignore points closer than this (m)")
+    fit.add_argument("--min-separation", type=positive_float, default=0.09,
                      help="minimum angle between two beams in degrees (default 0.09)")
-    fit.add_argument("--origin-z", type=float, default=0.0,
+    fit.add_argument("--origin-z", type=coordinate, default=0.0,
                      help="height of the optical centre above the LiDAR frame origin (m, default 0; the PandaSet "
                           "reader already puts the LiDAR frame at the measured optical centre); --align searches the "
                           "full offset (docs/lidar_sim.md)")

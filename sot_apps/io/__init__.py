@@ -70,8 +70,16 @@ def _detect_waymo(path: Path) -> str | None:
 
 
 def open_sequence(path: str | Path, format: str | None = None) -> Sequence:
-    """Open a sequence; ``format`` forces a reader (one of FORMATS)."""
-    path = Path(path)
+    """Open a sequence; ``format`` forces a reader (one of FORMATS). Boxes and poses beyond the coordinate bound
+    (``sot_apps.io.bounds``) are an InputError."""
+    from .bounds import check_sequence_coordinates
+
+    sequence = _read_sequence(Path(path), format)
+    check_sequence_coordinates(sequence)
+    return sequence
+
+
+def _read_sequence(path: Path, format: str | None) -> Sequence:
     fmt = format or detect_format(path)
     if fmt == "pandaset":
         from .pandaset import read_pandaset
