@@ -18,7 +18,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "(tracking, vehicle bank, motion export to MCAP, optical flow, simulated scans at 20 m and 40 m) "
                     "and write OUT/report/index.html with the figures. With --sequence: the same on a real sequence "
                     "(objects = its moving vehicles; flow on the front camera, first 10 pairs). A rerun resumes. "
-                    f"Exit code: as sot-apps run. {EXIT_RULE}",
+                    f"{EXIT_RULE}",
         examples=[
             "sot-apps demo --out demo_out   # then open demo_out/report/index.html",
             "sot-apps demo --out demo_pandaset --sequence ../shared/data/pandaset_002 --workers 2",

@@ -51,7 +51,8 @@ def _redeliver_swallowed_interrupt(unraisable) -> None:
 
 # As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles
 # it, exits quietly instead of printing a traceback
-_AS_PROGRAM = __name__ == "__main__" or sys.argv[0].endswith("sot-apps")
+# (a spawned worker process imports the console script as "__mp_main__", with the parent's sys.argv: not the program)
+_AS_PROGRAM = __name__ == "__main__" or (sys.argv[0].endswith("sot-apps") and "__mp_main__" not in sys.modules)
 if _AS_PROGRAM:
     signal.signal(signal.SIGINT, _interrupted_while_starting)
 

@@ -23,6 +23,7 @@ from tracker import invert_transform, transform_points
 
 from ..errors import InputError
 from ..io.atomic import write_bytes, write_json
+from ..io.images import read_color_image
 from ..io.sequence import Camera, Sequence
 from .camera import CameraModel
 from .dense import RayCache, dense_flow
@@ -144,6 +145,7 @@ def _write_png(path: Path, image: np.ndarray) -> None:
 def write_pair_outputs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> None:
     """The files of pair k under ``root``: KITTI flow_occ / flow_noc PNGs, .flo, the instance PNG, vis/."""
     name = f"{k:06d}"
+    image = read_color_image(image_path) if write_vis else None   # a damaged image is an error, never drawn
     write_kitti_flow(root / "flow_occ" / f"{name}.png", result.flow, result.valid_occ)
     write_kitti_flow(root / "flow_noc" / f"{name}.png", result.flow, result.valid_noc)
     write_flo(root / "flo" / f"{name}.flo", result.flow, result.valid_occ)
@@ -151,10 +153,8 @@ def write_pair_outputs(root: Path, k: int, result: PairFlow, image_path: Path, w
     if write_vis:
         colour = cv2.cvtColor(flow_to_color(result.flow, result.valid_occ), cv2.COLOR_RGB2BGR)
         _write_png(root / "vis" / f"{name}_flow.png", colour)
-        image = cv2.imread(str(image_path), cv2.IMREAD_COLOR)
-        if image is None or image.shape[:2] != result.instance.shape:
-            problem = ("cannot decode the camera image" if image is None else
-                       f"camera image is {image.shape[1]}x{image.shape[0]}, the camera model says "
+        if image.shape[:2] != result.instance.shape:
+            problem = (f"camera image is {image.shape[1]}x{image.shape[0]}, the camera model says "
                        f"{result.instance.shape[1]}x{result.instance.shape[0]}")
             sys.stderr.write(f"warning: {image_path}: {problem}; vis/{name}_overlay.jpg not written (the flow itself "
                              "does not use the image)\n")

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["MAX_COORDINATE_M", "MAX_SIZE_M", "check_box_values", "check_sequence_coordinates"]
+__all__ = ["MAX_COORDINATE_M", "MAX_SIZE_M", "check_box_values", "check_coordinates", "check_sequence_coordinates"]
 
 MAX_COORDINATE_M = 1.0e6   # |x|, |y|, |z| of a box centre or a pose translation, metres
 MAX_SIZE_M = 1.0e3         # length, width, height of a box, metres
@@ -48,6 +48,18 @@ def check_box_values(values, where: str | Path | None, what: str = "box") -> Non
         i, problem = bad
         label = what if len(array) == 1 else f"{what} #{i}"
         raise InputError(where, f"{label} {_numbers(array[i])}: {problem}")
+
+
+def check_coordinates(values, where: str | Path | None, what: str) -> None:
+    """``values``: (N, K) numbers that are coordinates in metres (or angles): every one finite and within
+    ``MAX_COORDINATE_M``, else InputError naming ``where`` and the row (``what`` #i)."""
+    array = np.asarray(values, dtype=np.float64)
+    array = array.reshape(len(array), -1) if array.ndim else array.reshape(1, 1)
+    bad = ~(np.abs(array) <= MAX_COORDINATE_M).all(axis=1)   # NaN counts as bad
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise InputError(where, f"{what} #{i} {_numbers(array[i])}: values must be finite and within the "
+                                f"coordinate bound (|value| <= {MAX_COORDINATE_M:g} m)")
 
 
 def check_sequence_coordinates(sequence) -> None:
