@@ -69,6 +69,7 @@ def _single_threaded_env() -> None:
 
 _task_running = False   # in a worker process: whether a task is running (see _worker_sigint)
 _stop_event = None      # in a worker process: set by the parent after Ctrl-C (see _worker_init)
+_interrupted = False    # in a worker process: it received a Ctrl-C (see _worker_sigint)
 _task_threads: set[int] = set()   # in a worker: the threads running a task (see _interrupt_running_tasks)
 
 
@@ -76,8 +77,8 @@ def _call(task: Task) -> TaskOutcome:
     """Run a task, turning any exception into a failed outcome (runs in the worker)."""
     global _task_running
     start = time.perf_counter()
-    if _stop_event is not None and _stop_event.is_set():
-        raise KeyboardInterrupt   # queued before the Ctrl-C (whose signal this worker may have missed): not run
+    if _interrupted or (_stop_event is not None and _stop_event.is_set()):
+        raise KeyboardInterrupt   # handed to this worker before the Ctrl-C (or its signal was missed): not run
     try:
         _task_running = True
         _task_threads.add(threading.get_ident())
@@ -104,7 +105,10 @@ def _call(task: Task) -> TaskOutcome:
 
 def _worker_sigint(signum, frame) -> None:
     """Ctrl-C in a worker process: stop the running task (its atomic writes clean up; the pool hands the
-    KeyboardInterrupt back to the parent, which reports the interrupt once); an idle worker ignores it."""
+    KeyboardInterrupt back to the parent, which reports the interrupt once); an idle worker only remembers it and
+    starts no task any more (the parent is stopping)."""
+    global _interrupted
+    _interrupted = True
     if _task_running:
         raise KeyboardInterrupt
 
