@@ -51,8 +51,11 @@ def _redeliver_swallowed_interrupt(unraisable) -> None:
 
 # As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles
 # it, exits quietly instead of printing a traceback
-# (a spawned worker process imports the console script as "__mp_main__", with the parent's sys.argv: not the program)
-_AS_PROGRAM = __name__ == "__main__" or (sys.argv[0].endswith("sot-apps") and "__mp_main__" not in sys.modules)
+# (a worker process spawned by it runs the console script again as "__mp_main__", with the parent's sys.argv: that
+# is not the program; multiprocessing itself makes "__mp_main__" an alias of "__main__" in every process)
+_AS_PROGRAM = __name__ == "__main__" or (sys.argv[0].endswith("sot-apps")
+                                         and sys.modules.get("__mp_main__", sys.modules["__main__"])
+                                         is sys.modules["__main__"])
 if _AS_PROGRAM:
     signal.signal(signal.SIGINT, _interrupted_while_starting)
 
