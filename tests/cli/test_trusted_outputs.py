@@ -203,5 +203,5 @@ def test_a_finished_or_rejected_command_leaves_no_lock(tiny_dir, tmp_path, capsy
     pipeline.write_text('{"version": 1, "out": "%s", "sequences": [{"path": "%s", "objects": {"from": "annotations", '
                         '"track_ids": ["no_such_track"]}}]}' % (tmp_path / "run_out", tiny_dir))
     assert main(["run", str(pipeline), "--quiet"]) == 2
-    assert not (tmp_path / "run_out" / ".sot-apps.lock").exists()
+    assert not (tmp_path / "run_out").exists()   # neither a lock file (of any name) nor the directory it needed
     capsys.readouterr()
