@@ -167,26 +167,26 @@ def coordinate(text: str) -> float:
     return value
 
 
+def _require(value, ok: bool, requirement: str, text: str):
+    if not ok:
+        raise argparse.ArgumentTypeError(f"must be {requirement}, got {text}")
+    return value
+
+
 def positive_float(text: str) -> float:
     value = finite_float(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return value
+    return _require(value, value > 0, "> 0", text)
 
 
 def nonnegative_float(text: str) -> float:
     value = finite_float(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
-    return value
+    return _require(value, value >= 0, ">= 0", text)
 
 
 def probability(text: str) -> float:
     """A probability in [0, 1)."""
     value = finite_float(text)
-    if not 0 <= value < 1:
-        raise argparse.ArgumentTypeError(f"must be a probability in [0, 1), got {text}")
-    return value
+    return _require(value, 0 <= value < 1, "a probability in [0, 1)", text)
 
 
 def _integer(text: str) -> int:
@@ -198,13 +198,9 @@ def _integer(text: str) -> int:
 
 def nonnegative_int(text: str) -> int:
     value = _integer(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
-    return value
+    return _require(value, value >= 0, ">= 0", text)
 
 
 def positive_int(text: str) -> int:
     value = _integer(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
-    return value
+    return _require(value, value >= 1, ">= 1", text)

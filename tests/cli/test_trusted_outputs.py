@@ -21,6 +21,30 @@ CLI = [sys.executable, "-m", "sot_apps.cli.main"]
 ROOT = Path(__file__).resolve().parents[2]   # the CLI subprocesses run this checkout's code
 
 
+# Never replace a real device node or /dev/stdout, whatever the code under test does: a rename onto anything under
+# /dev or /proc fails the test instead (the tests run as root; an atomic replace of /dev/null would break the machine)
+_GUARD = """
+import os
+def _guarded(rename):
+    def call(src, dst, *args, **kwargs):
+        if os.path.abspath(dst).startswith(("/dev/", "/proc/")):
+            raise AssertionError(f"refusing to rename onto {dst}")
+        return rename(src, dst, *args, **kwargs)
+    return call
+os.replace, os.rename = _guarded(os.replace), _guarded(os.rename)
+"""
+
+
+@pytest.fixture(autouse=True)
+def no_rename_into_dev(monkeypatch):
+    original = os.replace, os.rename
+    exec(_GUARD, {})   # wraps os.replace and os.rename in place: hand them to monkeypatch, which undoes it
+    guarded = os.replace, os.rename
+    os.replace, os.rename = original
+    monkeypatch.setattr(os, "replace", guarded[0])
+    monkeypatch.setattr(os, "rename", guarded[1])
+
+
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
@@ -109,7 +133,7 @@ def test_a_fifo_output_is_written_through(tmp_path):
     fifo = tmp_path / "pipe"
     os.mkfifo(fifo)
     received: list[bytes] = []
-    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()))
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()), daemon=True)
     reader.start()
     write_json(fifo, {"frames": [1, 2]})
     reader.join(10)
@@ -121,7 +145,7 @@ def test_cli_output_into_a_fifo(tiny_dir, tmp_path):
     fifo = tmp_path / "dets.fifo"
     os.mkfifo(fifo)
     received: list[bytes] = []
-    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()))
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()), daemon=True)
     reader.start()
     done = subprocess.run([*CLI, "detect", str(tiny_dir), "--simulate", "clean", "--out", str(fifo)],
                           capture_output=True, text=True, timeout=120, cwd=ROOT)
@@ -133,8 +157,8 @@ def test_cli_output_into_a_fifo(tiny_dir, tmp_path):
 
 def test_dev_stdout_continues_the_redirected_file(tmp_path):
     out = tmp_path / "out.txt"
-    script = ("from sot_apps.io.atomic import write_text\nprint('before')\nwrite_text('/dev/stdout', 'middle\\n')\n"
-              "print('after')\n")
+    script = _GUARD + ("from sot_apps.io.atomic import write_text\nprint('before')\n"
+                       "write_text('/dev/stdout', 'middle\\n')\nprint('after')\n")
     with open(out, "w") as handle:
         subprocess.run([sys.executable, "-c", script], stdout=handle, check=True, timeout=60, cwd=ROOT)
     assert out.read_text() == "before\nmiddle\nafter\n"
