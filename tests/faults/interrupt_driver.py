@@ -105,13 +105,15 @@ def _run(argv: list, delay: float | None, timeout: float) -> tuple[int, str, flo
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGINT)
                 signalled = time.perf_counter()
-        _, stderr = proc.communicate(timeout=timeout)
+        stdout, stderr = proc.communicate(timeout=timeout)
         ended = time.perf_counter()
     except BaseException:
         with __import__("contextlib").suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
         raise
+    if proc.returncode not in (0, 130, -signal.SIGINT):   # e.g. a failed unit: its FAILED line is on stdout
+        stderr += f"\n[stdout]\n{stdout[-1500:]}"
     return proc.returncode, stderr, ended - start, None if signalled is None else ended - signalled
 
 
