@@ -23,3 +23,18 @@ class OutputError(InputError):
     Printed like :class:`InputError` (``error: <final output path>: cannot write: <cause>``, exit code 2);
     the path is the file the user asked for, never a temporary sibling.
     """
+
+
+def not_a_file(path: str | Path, what: str = "file", report_as: str | Path | None = None) -> InputError:
+    """The error for an input ``path`` that should be a readable file but is not: it is a directory, something
+    else (a FIFO, a device), or missing. Reported under ``report_as`` (default: ``path`` itself)."""
+    path = Path(path)
+    if path.is_dir():
+        problem = f"{what} is a directory, not a file"
+    elif path.exists():
+        problem = f"{what} is not a regular file"
+    else:
+        problem = f"{what} is missing"
+    if report_as is not None:
+        return InputError(report_as, f"{problem} ({path})")
+    return InputError(path, problem)

@@ -375,10 +375,22 @@ def make_benchmark(config: MakeConfig, progress: bool = True) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     summaries: list[dict] = []
     if config.workers > 1:
-        with ProcessPoolExecutor(config.workers) as pool:
+        from ..interrupts import ignore_sigint, sigint_ignored_in_children
+
+        with sigint_ignored_in_children():   # Ctrl-C is the parent's: the workers neither print nor go on
+            pool = ProcessPoolExecutor(config.workers, initializer=ignore_sigint)
             futures = [pool.submit(_simulate_copy, config, p) for p in plans]
+        try:
             for f in tqdm(futures, desc="copies", unit="copy", disable=not progress):
                 summaries.append(f.result())
+        except BaseException:   # Ctrl-C: exit promptly (the caller holds OUT's lock: the leftovers are ours)
+            from ..interrupts import stop_process_pool
+            from ..io.atomic import remove_stale_temporaries
+
+            stop_process_pool(pool)
+            remove_stale_temporaries(out)
+            raise
+        pool.shutdown()
     else:
         bar = tqdm(plans, desc="copies", unit="copy", disable=not progress)
         for p in bar:

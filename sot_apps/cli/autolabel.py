@@ -32,7 +32,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--evaluate", action="store_true", help="print label quality against the annotations")
     parser.add_argument("--json", metavar="FILE", help="with --evaluate: write the quality rows as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
-    declare_outputs(parser, files=("json",), dirs=("out",))
+    declare_outputs(parser, files=("json",), dirs=("out",), inputs=("sequence", "detections", "kitti_calib"))
     parser.set_defaults(func=run)
     return parser
 

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .common import add_action, add_subcommand, declare_outputs
+from .common import add_action, add_subcommand, declare_outputs, nonnegative_int
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -34,11 +34,11 @@ def register(subparsers) -> argparse.ArgumentParser:
     build.add_argument("--track-id", action="append", default=[], metavar="PREFIX",
                        help="annotated track id (or unique prefix); repeatable")
     build.add_argument("--all", action="store_true", help="every annotated vehicle track (sot_apps.objects.selection; with --from-annotations)")
-    build.add_argument("--min-points", type=int, default=200,
+    build.add_argument("--min-points", type=nonnegative_int, default=200,
                        help="skip annotated tracks with fewer aggregated points (default 200)")
     build.add_argument("--mirror", action="store_true", help="mirror-complete about the length axis (y -> -y)")
     build.set_defaults(func=run_build)
-    declare_outputs(build, dirs=("out",))
+    declare_outputs(build, dirs=("out",), inputs=("inputs", "from_annotations"))
     lst = add_action(sub, "list", help="print the entries of a bank", description="Print the entries of BANK.",
                      examples=["sot-apps bank list bank"])
     lst.add_argument("bank", metavar="BANK")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from typing import TYPE_CHECKING
 
 from ..io import FORMATS
@@ -17,9 +18,16 @@ def add_sequence_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def load_sequence(args: argparse.Namespace) -> Sequence:
+    """The sequence of ``args.sequence``; the outputs are checked once more against the directory the reader
+    actually reads (a KITTI label file or a Waymo component names a file; the reader reads its dataset root)."""
     from ..io import open_sequence
 
-    return open_sequence(args.sequence, format=getattr(args, "format", None))
+    sequence = open_sequence(args.sequence, format=getattr(args, "format", None))
+    if getattr(args, "output_files", None) is not None:
+        from ..io.outputs import PathArg, check_no_clobber
+
+        check_no_clobber([PathArg("SEQUENCE", sequence.root)], _declared_outputs(args))
+    return sequence
 
 
 def example_epilog(*examples: str) -> str:
@@ -75,19 +83,129 @@ def simulated_detections(sequence: Sequence, profile: str, seed: int, progress=N
     return simulate_detections(sequence, profile, seed, DEFAULT_SELECTION.vehicle_labels(sequence), progress)
 
 
-def declare_outputs(parser: argparse.ArgumentParser, files: tuple[str, ...] = (), dirs: tuple[str, ...] = ()) -> None:
-    """Name the options (argparse dests) that are output files or directories: ``main`` checks that each given
-    one is writable before the command starts its work (:func:`check_outputs`)."""
-    parser.set_defaults(output_files=tuple(files), output_dirs=tuple(dirs))
+def _option_names(parser: argparse.ArgumentParser, dests: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
+    """``(dest, how the user wrote it)`` pairs: ``("json", "--json")``, ``("sequence", "SEQUENCE")``."""
+    names = {}
+    for action in parser._actions:
+        if action.dest in dests:
+            names[action.dest] = action.option_strings[-1] if action.option_strings else \
+                (action.metavar if isinstance(action.metavar, str) else action.dest.upper())
+    return tuple((d, names.get(d, f"--{d.replace('_', '-')}")) for d in dests)
+
+
+def declare_outputs(parser: argparse.ArgumentParser, files: tuple[str, ...] = (), dirs: tuple[str, ...] = (),
+                    inputs: tuple[str, ...] = ("sequence",)) -> None:
+    """Name the options (argparse dests) that are output files or directories, and those that name inputs (files
+    or directories; a list option names several). Before the command starts its work, ``main`` checks that each
+    given output is writable, is not an input and is not another output (:func:`check_outputs`), and locks each
+    output directory (:func:`output_locks`)."""
+    parser.set_defaults(output_files=_option_names(parser, tuple(files)), output_dirs=_option_names(parser, tuple(dirs)),
+                        input_paths=_option_names(parser, tuple(inputs)))
+
+
+def _values(args: argparse.Namespace, dest: str) -> list[str]:
+    value = getattr(args, dest, None)
+    if value is None or value is False:
+        return []
+    return [str(v) for v in value] if isinstance(value, (list, tuple)) else [str(value)]
+
+
+def _declared_outputs(args: argparse.Namespace) -> list:
+    from pathlib import Path
+
+    from ..io.outputs import PathArg
+
+    return ([PathArg(option, Path(v)) for dest, option in getattr(args, "output_files", ()) for v in _values(args, dest)]
+            + [PathArg(option, Path(v), is_dir=True) for dest, option in getattr(args, "output_dirs", ())
+               for v in _values(args, dest)])
 
 
 def check_outputs(args: argparse.Namespace) -> None:
-    """Fail early (one line, exit code 2) when an output declared with :func:`declare_outputs` is not writable."""
+    """Fail early (one line, exit code 2) when an output declared with :func:`declare_outputs` is not writable, is
+    one of the command's inputs (or would replace a file inside an input directory), or is another output."""
     from ..io.atomic import ensure_writable
+    from ..io.outputs import PathArg, check_no_clobber, input_path
 
-    for name in getattr(args, "output_files", ()):
-        if getattr(args, name, None):
-            ensure_writable(getattr(args, name))
-    for name in getattr(args, "output_dirs", ()):
-        if getattr(args, name, None):
-            ensure_writable(getattr(args, name), directory=True)
+    outputs = _declared_outputs(args)
+    for out in outputs:
+        ensure_writable(out.path, directory=out.is_dir)
+    inputs = [PathArg(option, input_path(v)) for dest, option in getattr(args, "input_paths", ())
+              for v in _values(args, dest)]
+    check_no_clobber(inputs, outputs)
+
+
+def output_locks(args: argparse.Namespace):
+    """A context that holds the lock (:class:`sot_apps.io.lock.OutputLock`) of every declared output directory."""
+    import contextlib
+
+    from ..io.lock import OutputLock
+
+    stack = contextlib.ExitStack()
+    for out in _declared_outputs(args):
+        if out.is_dir:
+            stack.enter_context(OutputLock(out.path))
+    return stack
+
+
+# ------------------------------------------------------------------ numbers
+# Every numeric option goes through one of these: a non-finite or out-of-range value is a usage error naming the
+# option (exit code 2), before any work.
+
+def finite_float(text: str) -> float:
+    """A finite number (``nan``, ``inf`` refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def coordinate(text: str) -> float:
+    """A finite coordinate in metres within the documented bound (|value| <= MAX_COORDINATE_M)."""
+    from ..io.bounds import MAX_COORDINATE_M
+
+    value = finite_float(text)
+    if abs(value) > MAX_COORDINATE_M:
+        raise argparse.ArgumentTypeError(f"{text} m is beyond the coordinate bound (|value| <= {MAX_COORDINATE_M:g} m)")
+    return value
+
+
+def _require(value, ok: bool, requirement: str, text: str):
+    if not ok:
+        raise argparse.ArgumentTypeError(f"must be {requirement}, got {text}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    value = finite_float(text)
+    return _require(value, value > 0, "> 0", text)
+
+
+def nonnegative_float(text: str) -> float:
+    value = finite_float(text)
+    return _require(value, value >= 0, ">= 0", text)
+
+
+def probability(text: str) -> float:
+    """A probability in [0, 1)."""
+    value = finite_float(text)
+    return _require(value, 0 <= value < 1, "a probability in [0, 1)", text)
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def nonnegative_int(text: str) -> int:
+    value = _integer(text)
+    return _require(value, value >= 0, ">= 0", text)
+
+
+def positive_int(text: str) -> int:
+    value = _integer(text)
+    return _require(value, value >= 1, ">= 1", text)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import add_subcommand, declare_outputs
+from .common import add_subcommand, declare_outputs, positive_int
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -18,7 +18,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "(tracking, vehicle bank, motion export to MCAP, optical flow, simulated scans at 20 m and 40 m) "
                     "and write OUT/report/index.html with the figures. With --sequence: the same on a real sequence "
                     "(objects = its moving vehicles; flow on the front camera, first 10 pairs). A rerun resumes. "
-                    f"Exit code: as sot-apps run. {EXIT_RULE}",
+                    f"{EXIT_RULE}",
         examples=[
             "sot-apps demo --out demo_out   # then open demo_out/report/index.html",
             "sot-apps demo --out demo_pandaset --sequence ../shared/data/pandaset_002 --workers 2",
@@ -28,7 +28,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--sequence", metavar="PATH", help="run on this sequence instead of a synthetic world")
     parser.add_argument("--quick", action="store_true",
                         help="a smaller synthetic world (6 frames, 16-beam LiDAR, 320x240 camera) for smoke tests")
-    parser.add_argument("--flow-pairs", type=int, metavar="N", default=None,
+    parser.add_argument("--flow-pairs", type=positive_int, metavar="N", default=None,
                         help="optical flow on the first N image pairs (default: all for the synthetic world, 10 for "
                              "--sequence)")
     add_executor_arguments(parser)

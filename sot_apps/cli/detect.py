@@ -17,7 +17,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                     "Default: the model-free detector (ground removal, BEV clustering, L-shape boxes, size gates; no "
                     "learned weights). --simulate PROFILE: ground truth with a detector's errors (docs/detection.md). "
                     "--evaluate prints BEV AP at IoU 0.5 / 0.7 by range band against the annotations (vehicles); "
-                    "with --detections FILE it scores that file instead of detecting.",
+                    "with --detections FILE it scores that file instead of detecting, and --out writes it in our "
+                    "JSON format (e.g. KITTI or nuScenes detections converted).",
         examples=["sot-apps detect ../shared/data/pandaset_002 --out dets.json --evaluate",
                   "sot-apps detect ../shared/data/pandaset_002 --simulate learned --seed 1 --out sim.json",
                   "sot-apps detect ../shared/data/pandaset_002 --detections dets.json --evaluate --3d"])
@@ -29,7 +30,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--3d", dest="three_d", action="store_true", help="with --evaluate: also 3D AP")
     parser.add_argument("--json", metavar="FILE", help="with --evaluate: write the AP rows as JSON")
     add_detections_arguments(parser)
-    declare_outputs(parser, files=("out", "json"))
+    declare_outputs(parser, files=("out", "json"), inputs=("sequence", "detections", "kitti_calib"))
     parser.set_defaults(func=run)
     return parser
 
@@ -54,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
         detections = detect_sequence(sequence, progress=progress)
     if args.out:
         path = write_detections(args.out, detections, sequence.id)
-        print(f"wrote {path}: {sum(len(d) for d in detections.values())} boxes in {len(detections)} frames")
+        source = f" (read from --detections {args.detections}, written in our JSON format)" if args.detections else ""
+        print(f"wrote {path}: {sum(len(d) for d in detections.values())} boxes in {len(detections)} frames{source}")
     if args.evaluate:
         from ..evaluation.detection import ap_table, format_ap_table, ground_truth_frames, rows_for_json
 

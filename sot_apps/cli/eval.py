@@ -7,7 +7,7 @@ import sys
 
 from ..io import FORMATS
 from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, declare_outputs, load_detections,
-                     load_sequence, check_profile, simulated_detections)
+                     load_sequence, check_profile, nonnegative_int, positive_int, simulated_detections)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -35,7 +35,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="evaluate a tracklet list instead: a list file (benchmark.json of `benchmark make`, "
                              "bench_list.json of `benchmark build`) or folder, or 'lidar-sot' with --lists and "
                              "SEQUENCE = the Waymo data directory; tables per difficulty and per motion profile")
-    parser.add_argument("--first", type=int, metavar="N", help="with --benchmark: only the list's first N tracklets "
+    parser.add_argument("--first", type=positive_int, metavar="N", help="with --benchmark: only the list's first N tracklets "
                                                                  "(a generated list is ordered copy by copy)")
     parser.add_argument("--lists", metavar="DIR", help="with --benchmark lidar-sot: LiDAR-SOT's list folder "
                                                        "(bench_list.json, easy/medium/hard.json)")
@@ -45,10 +45,10 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--preset", nargs="+", action="extend", metavar="NAME",
                         help="tracker presets, one row each (default: full; 'all' = every preset)")
     parser.add_argument("--offline", action="store_true", help="add a row with offline refinement for each preset")
-    parser.add_argument("--lag", type=int, nargs="+", default=[], metavar="N",
+    parser.add_argument("--lag", type=positive_int, nargs="+", default=[], metavar="N",
                         help="add a fixed-lag row (each state final N frames later) for each preset and N")
-    parser.add_argument("--seeds", type=int, default=1, metavar="N", help="run seeds 0..N-1 and average (default 1)")
-    parser.add_argument("--end-frame", type=int, metavar="K", help="stop every track at frame K (default: span end)")
+    parser.add_argument("--seeds", type=positive_int, default=1, metavar="N", help="run seeds 0..N-1 and average (default 1)")
+    parser.add_argument("--end-frame", type=nonnegative_int, metavar="K", help="stop every track at frame K (default: span end)")
     parser.add_argument("--no-per-track", action="store_true", help="omit the per-track table")
     parser.add_argument("--json", metavar="FILE", help="also write the full report as JSON (atomically)")
     add_detections_arguments(parser)
@@ -59,7 +59,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="replace a tracker setting (a dotted TrackerConfig path, e.g. detection.weight=0.1 or "
                              "motion.alpha=0.6) in every preset; repeatable; the value is read as the field's type")
     parser.set_defaults(func=run)
-    declare_outputs(parser, files=("json",))
+    declare_outputs(parser, files=("json",), inputs=("sequence", "benchmark", "lists", "detections", "kitti_calib"))
     return parser
 
 

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..errors import InputError
-from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
+from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence, positive_int
 
 
 def _pairs(text: str) -> tuple[int, int]:
@@ -53,7 +53,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="smooth the states with the motion export's CTRV smoother before interpolating "
                              "(removes per-frame box jitter; see docs/flow.md)")
     parser.add_argument("--no-lidar-occlusion", action="store_true", help="ignore LiDAR points as occluders")
-    parser.add_argument("--dilate-px", type=int, default=7, help="min-filter size densifying LiDAR depth (default 7)")
+    parser.add_argument("--dilate-px", type=positive_int, default=7,
+                        help="min-filter size densifying LiDAR depth in pixels (default 7; 1 = no densifying)")
     vis = parser.add_mutually_exclusive_group()
     vis.add_argument("--vis", action="store_true",
                      help="also write vis/ pictures (flow colour wheel PNG, overlay JPEG on the camera image); "
@@ -62,7 +63,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--out", required=True, metavar="OUT", help="output directory (OUT/<camera>/...)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
-    declare_outputs(parser, dirs=("out",))
+    declare_outputs(parser, dirs=("out",), inputs=("sequence", "tracks"))
     return parser
 
 
@@ -78,7 +79,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(seq.root, f"no camera {args.camera!r}; cameras: {', '.join(seq.cameras) or 'none'}")
     if args.from_annotations:
         if args.shape_frames:
-            shape_frames = range(*args.shape_frames)
+            a, b = args.shape_frames
+            if not 0 <= a < b <= len(seq.frames):
+                raise InputError(seq.root, f"--shape-frames {a}:{b} is out of range: the sequence has frames "
+                                           f"0..{len(seq.frames) - 1} (A:B takes sweeps A <= k < B, A < B)")
+            shape_frames = range(a, b)
         else:
             a, b = args.pairs or (0, len(seq.frames) - 1)
             shape_frames = range(max(a - 10, 0), min(b + 11, len(seq.frames)))

@@ -51,7 +51,11 @@ def _redeliver_swallowed_interrupt(unraisable) -> None:
 
 # As the program (not imported by a test or a library): Ctrl-C during the imports below, before main() handles
 # it, exits quietly instead of printing a traceback
-_AS_PROGRAM = __name__ == "__main__" or sys.argv[0].endswith("sot-apps")
+# (a worker process spawned by it runs the console script again as "__mp_main__", with the parent's sys.argv: that
+# is not the program; multiprocessing itself makes "__mp_main__" an alias of "__main__" in every process)
+_AS_PROGRAM = __name__ == "__main__" or (sys.argv[0].endswith("sot-apps")
+                                         and sys.modules.get("__mp_main__", sys.modules["__main__"])
+                                         is sys.modules["__main__"])
 if _AS_PROGRAM:
     signal.signal(signal.SIGINT, _interrupted_while_starting)
 
@@ -173,10 +177,11 @@ def main(argv: Seq[str] | None = None) -> int:
         if not getattr(args, "command", None):
             parser.print_help()
             return 2
-        from .common import check_outputs
+        from .common import check_outputs, output_locks
 
         check_outputs(args)
-        result = args.func(args)
+        with output_locks(args):
+            result = args.func(args)
         if _INTERRUPT_PENDING:   # swallowed, and the command ended before the re-delivery
             raise KeyboardInterrupt
         return int(result or 0)
@@ -230,8 +235,11 @@ def _unexpected(exc: BaseException, debug: bool) -> int:
         return 130
     if debug:
         traceback.print_exc()
-    message = " ".join(str(exc).split()) or type(exc).__name__
-    sys.stderr.write(f"error: {type(exc).__name__}: {message} (rerun with --debug for the traceback)\n")
+    name = type(exc).__name__
+    if name == "error":   # e.g. cv2.error: "error: error: ..." would say nothing
+        name = f"{type(exc).__module__}.{name}"
+    message = " ".join(str(exc).split()) or name
+    sys.stderr.write(f"error: {name}: {message} (rerun with --debug for the traceback)\n")
     return 1
 
 

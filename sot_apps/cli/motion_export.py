@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence
+from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence, nonnegative_int
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -41,11 +41,11 @@ def register(subparsers) -> argparse.ArgumentParser:
                              "the start frame is always valid")
     parser.add_argument("--focal-track", metavar="ID", default=None,
                         help="AV2 focal track (id or prefix; default: the first exported object)")
-    parser.add_argument("--observed-steps", type=int, default=None, metavar="N",
+    parser.add_argument("--observed-steps", type=nonnegative_int, default=None, metavar="N",
                         help="AV2 'observed' = valid and timestep < N (default: every valid timestep is observed)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
-    declare_outputs(parser, files=("out", "parquet", "npz", "csv"))
+    declare_outputs(parser, files=("out", "parquet", "npz", "csv"), inputs=("sequence", "tracks"))
     return parser
 
 

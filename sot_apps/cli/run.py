@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import add_subcommand
+from .common import add_subcommand, declare_outputs, positive_int
 
 
 EXIT_RULE = ("Exit code 1 when any unit failed, except annotated objects the tracker could not start or follow for "
@@ -14,10 +14,10 @@ EXIT_RULE = ("Exit code 1 when any unit failed, except annotated objects the tra
 
 def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--workers", type=int, default=None, metavar="N",
+    group.add_argument("--workers", type=positive_int, default=None, metavar="N",
                        help="local worker processes (default 1: run in this process)")
     group.add_argument("--dask", metavar="tcp://HOST:PORT", help="run the tasks on this Dask scheduler")
-    group.add_argument("--dask-local", type=int, metavar="N", help="run the tasks on a Dask LocalCluster of N workers")
+    group.add_argument("--dask-local", type=positive_int, metavar="N", help="run the tasks on a Dask LocalCluster of N workers")
 
 
 def executor_from_args(args: argparse.Namespace):
@@ -62,6 +62,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="also write OUT/report/index.html (figures of the first sequences, as `sot-apps demo`)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
+    declare_outputs(parser, dirs=("out",), inputs=("pipeline", "detections"))
     return parser
 
 

@@ -12,7 +12,8 @@ if TYPE_CHECKING:
     import numpy as np
 
 from ..errors import InputError
-from .common import add_action, add_sequence_argument, add_subcommand, declare_outputs, load_sequence
+from .common import (add_action, add_sequence_argument, add_subcommand, coordinate, declare_outputs, load_sequence,
+                     nonnegative_float, positive_float)
 
 MAX_PLAUSIBLE_BEAMS = 128   # the most beams of any spinning LiDAR on sale (e.g. Hesai OT128, Ouster OS-128)
 
@@ -28,18 +29,22 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "sot-apps sensor fit out/world --frames 0,5 --out fitted.json"])
     sub = parser.add_subparsers(dest="sensor_command", metavar="ACTION")
     fit = add_action(sub, "fit", help="fit beam elevations and azimuth resolution",
-                     description="Fit a sensor model to sweeps (points in the LiDAR frame).",
+                     description="Fit a sensor model to sweeps (points in the LiDAR frame) and print its summary "
+                                 "(beams, elevations, azimuth step, spin rate); with --out, also write it as a sensor "
+                                 "JSON for simulate-lidar, synth and benchmark make.",
                      examples=["sot-apps sensor fit ../shared/data/pandaset_002 --align --out pandar64_fit.json "
                                "--compare pandar64",
-                               "sot-apps sensor fit out/world --frames 0,5 --out fitted.json"])
+                               "sot-apps sensor fit out/world --frames 0,5 --out fitted.json",
+                               "sot-apps sensor fit ../shared/data/pandaset_002 --align   # print only"])
     add_sequence_argument(fit)
     fit.add_argument("--frames", default="0,10,20", help="comma-separated frames to use (default 0,10,20)")
-    fit.add_argument("--out", required=True, metavar="SENSOR.json", help="output sensor JSON")
+    fit.add_argument("--out", metavar="SENSOR.json",
+                     help="write the fitted sensor JSON here (default: only print the summary)")
     fit.add_argument("--name", default=None, help="sensor name (default: fitted_<sequence id>)")
-    fit.add_argument("--min-range", type=float, default=2.0, help="ignore points closer than this (m)")
-    fit.add_argument("--min-separation", type=float, default=0.09,
+    fit.add_argument("--min-range", type=nonnegative_float, default=2.0, help="ignore points closer than this (m)")
+    fit.add_argument("--min-separation", type=positive_float, default=0.09,
                      help="minimum angle between two beams in degrees (default 0.09)")
-    fit.add_argument("--origin-z", type=float, default=0.0,
+    fit.add_argument("--origin-z", type=coordinate, default=0.0,
                      help="height of the optical centre above the LiDAR frame origin (m, default 0; the PandaSet "
                           "reader already puts the LiDAR frame at the measured optical centre); --align searches the "
                           "full offset (docs/lidar_sim.md)")
@@ -101,7 +106,8 @@ def run_fit(args: argparse.Namespace) -> int:
         doc["fit"]["alignment"] = alignment
     if args.compare:
         doc["fit"]["comparison"] = compare_to_preset(result.sensor, preset(args.compare))
-    write_json(Path(args.out), doc)
+    if args.out:
+        write_json(Path(args.out), doc)
     s = result.sensor
     print(f"{s.beams} beams, elevations {max(s.elevations_deg):+.3f} ... {min(s.elevations_deg):+.3f} deg, "
           f"azimuth step {result.azimuth_step_deg:.4f} deg ({s.columns} columns), {s.rotation_hz:g} Hz, "
@@ -113,5 +119,5 @@ def run_fit(args: argparse.Namespace) -> int:
         reason = f"{args.compare} has {expected}" if expected is not None else f"no spinning LiDAR has more than {MAX_PLAUSIBLE_BEAMS}"
         sys.stderr.write(f"warning: fitted {s.beams} beams but {reason}: the sweeps are probably not in the sensor's "
                          f"optical-centre frame{'' if args.align else ' (try --align)'}\n")
-    print(f"wrote {args.out}")
+    print(f"wrote {args.out}" if args.out else "not written (give --out SENSOR.json to keep the fitted sensor)")
     return 0

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..errors import InputError
-from .common import add_subcommand, declare_outputs
+from .common import add_subcommand, coordinate, declare_outputs, nonnegative_int, positive_float, positive_int
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -23,19 +23,19 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "--frame 10 --out out/inserted"])
     parser.add_argument("--bank", required=True, metavar="BANK", help="vehicle bank directory (sot-apps bank build)")
     parser.add_argument("--scene", metavar="SCENE.json", help="scene file (schema scene)")
-    parser.add_argument("--random", type=int, metavar="N", help="sample a scene of N random bank vehicles instead")
+    parser.add_argument("--random", type=positive_int, metavar="N", help="sample a scene of N random bank vehicles instead")
     parser.add_argument("--seed", type=int, default=0, help="seed for --random and the noise (default 0)")
     parser.add_argument("--sensor", default=None,
                         help="sensor preset or JSON (with --random; overrides the scene's sensor). Default pandar64")
-    parser.add_argument("--ground-z", type=float, default=None,
+    parser.add_argument("--ground-z", type=coordinate, default=None,
                         help="ground height for --random without background (default -1.8)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--background", metavar="SEQUENCE", help="insert into a sweep of this sequence")
-    parser.add_argument("--frame", type=int, default=0, help="background frame (default 0)")
+    parser.add_argument("--frame", type=nonnegative_int, default=0, help="background frame (default 0)")
     parser.add_argument("--format", default="", help="extra point formats, comma-separated: bin,pcd,ply")
-    parser.add_argument("--extent", type=float, default=50.0, help="preview half-size in metres (default 50)")
+    parser.add_argument("--extent", type=positive_float, default=50.0, help="preview half-size in metres (default 50)")
     parser.set_defaults(func=run)
-    declare_outputs(parser, dirs=("out",))
+    declare_outputs(parser, dirs=("out",), inputs=("bank", "scene", "background", "sensor"))
     return parser
 
 

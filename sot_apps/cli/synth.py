@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..errors import InputError
-from .common import add_subcommand, declare_outputs
+from .common import add_subcommand, declare_outputs, nonnegative_int, positive_int
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -24,8 +24,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "sot-apps synth --out /tmp/world_cam --frames 10 --vehicles 4 --cameras --camera-size 640x360",
                   "sot-apps synth --out out/world_profiles --frames 40 --vehicles 7 --profiles"])
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    parser.add_argument("--frames", type=int, default=20, help="number of frames (default 20)")
-    parser.add_argument("--vehicles", type=int, default=3, help="number of moving vehicles (default 3)")
+    parser.add_argument("--frames", type=positive_int, default=20, help="number of frames (default 20)")
+    parser.add_argument("--vehicles", type=nonnegative_int, default=3, help="number of moving vehicles (default 3)")
     parser.add_argument("--sensor", default="pandar64", help="sensor preset or sensor JSON (default pandar64)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--cameras", action="store_true", help="also render a front pinhole camera (pyrender, EGL)")
@@ -38,7 +38,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                              "acceleration and jerk: constant speed, hard braking, strong acceleration, stop-and-go, "
                              "lane change, turn, U-turn) instead of random piecewise motion")
     parser.set_defaults(func=run)
-    declare_outputs(parser, dirs=("out",))
+    declare_outputs(parser, dirs=("out",), inputs=("sensor",))
     return parser
 
 

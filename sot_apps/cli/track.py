@@ -9,7 +9,7 @@ from tracker import DETECTION_PRESETS, get_preset, preset_names
 
 from ..errors import InputError
 from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, declare_outputs, load_detections,
-                     load_sequence)
+                     load_sequence, nonnegative_int, positive_int)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -32,9 +32,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--allow-any-size", action="store_true",
                         help="track an --init-box whose size no road vehicle has (default: refused; limits in "
                              "sot_apps.tracking.VEHICLE_SIZE_RANGE_M: length 0.5-30 m, width 0.3-5 m, height 0.3-6 m)")
-    parser.add_argument("--start-frame", type=int, default=None,
+    parser.add_argument("--start-frame", type=nonnegative_int, default=None,
                         help="first frame (default: 0, or the track's first annotated frame)")
-    parser.add_argument("--end-frame", type=int, default=None,
+    parser.add_argument("--end-frame", type=nonnegative_int, default=None,
                         help="last frame, inclusive (default: the last frame, or the track's last annotated frame)")
     parser.add_argument("--preset", default="full", choices=preset_names(), help="tracker preset (default: full)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (same seed, same output)")
@@ -44,22 +44,22 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--offline", action="store_true",
                         help="after the online pass, refine all states jointly against the final shape with a "
                              "smoothness prior, and rebuild the shape (docs/evaluation.md)")
-    parser.add_argument("--lag", type=int, metavar="N",
+    parser.add_argument("--lag", type=positive_int, metavar="N",
                         help="fixed-lag refinement: each state is re-optimised with the shape over a sliding window "
                              "and final N frames later (docs/tracker.md)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_detections_arguments(parser)
     parser.set_defaults(func=run)
-    declare_outputs(parser, dirs=("out",))
+    declare_outputs(parser, dirs=("out",), inputs=("sequence", "detections", "kitti_calib"))
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..io.bounds import check_box_values
     from ..tracking import (TrackingFailed, check_vehicle_size, first_box_with_points, init_points, parse_init_box,
-                            refine_track_fixed_lag, refine_track_offline, track_sequence, write_track_result)
+                            refine_track_fixed_lag, refine_track_offline, resolve_span, track_sequence,
+                            write_track_result)
 
-    if args.lag is not None and args.lag < 1:
-        raise InputError(None, f"--lag must be at least 1, not {args.lag}")
     if args.lag is not None and args.offline:
         raise InputError(None, "--lag and --offline are exclusive (offline refines with all frames)")
 
@@ -78,8 +78,7 @@ def run(args: argparse.Namespace) -> int:
         label = annotated.label
         start = annotated.frames[0] if args.start_frame is None else args.start_frame
         end = annotated.frames[-1] if args.end_frame is None else args.end_frame
-        if not 0 <= start < len(seq):
-            raise InputError(seq.root, f"start frame {start} is out of range: the sequence has frames 0..{len(seq) - 1}")
+        resolve_span(seq, start, end)   # both frames in range, start <= end
         if args.start_frame is None:   # the pipeline's rule: the first annotated box the tracker can start on
             boxes = [(k, annotated.box_at(k)) for k in annotated.frames if k <= end]
             try:
@@ -93,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         init_box = parse_init_box(args.init_box)
         warning = check_vehicle_size(init_box, "--init-box", args.allow_any_size)
+        check_box_values(init_box.to_array(), None, "--init-box")
         if warning:
             sys.stderr.write(warning + "\n")
         object_id = "custom"

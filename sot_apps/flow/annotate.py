@@ -29,6 +29,7 @@ from tracker import invert_transform, transform_points
 
 from ..errors import InputError
 from ..io.atomic import write_bytes, write_json
+from ..io.images import read_color_image
 from ..io.sequence import Camera, Sequence
 from .camera import CameraModel
 from .dense import RayCache, dense_flow
@@ -150,22 +151,11 @@ def _write_encoded(path: Path, image: np.ndarray) -> None:
     write_bytes(path, data.tobytes())
 
 
-def _read_image(path: Path) -> np.ndarray | None:
-    try:
-        with open(path, "rb") as handle:   # not cv2.imread: any path the OS takes (non-UTF-8 names too)
-            data = handle.read()
-    except OSError:
-        return None
-    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-
-
-def _write_vis(root: Path, name: str, result: PairFlow, image_path: Path) -> None:
+def _write_vis(root: Path, name: str, result: PairFlow, image: np.ndarray, image_path: Path) -> None:
     colour = flow_to_color(result.flow, result.valid_occ)   # RGB, black where there is no flow
     write_bytes(root / "vis" / f"{name}_flow.png", encode_png(colour, 0, result.valid_occ))
-    image = _read_image(image_path)
-    if image is None or image.shape[:2] != result.instance.shape:
-        problem = ("cannot decode the camera image" if image is None else
-                   f"camera image is {image.shape[1]}x{image.shape[0]}, the camera model says "
+    if image.shape[:2] != result.instance.shape:
+        problem = (f"camera image is {image.shape[1]}x{image.shape[0]}, the camera model says "
                    f"{result.instance.shape[1]}x{result.instance.shape[0]}")
         sys.stderr.write(f"warning: {image_path}: {problem}; vis/{name}_overlay.jpg not written (the flow itself "
                          "does not use the image)\n")
@@ -174,14 +164,17 @@ def _write_vis(root: Path, name: str, result: PairFlow, image_path: Path) -> Non
 
 
 def pair_output_jobs(root: Path, k: int, result: PairFlow, image_path: Path, write_vis: bool) -> list[Callable[[], None]]:
-    """The independent file writes of pair k (each one atomic), to run in any order or in parallel."""
+    """The independent file writes of pair k (each one atomic), to run in any order or in parallel. With
+    ``write_vis`` the camera image is decoded here, in the caller's thread: a damaged image is an error
+    (InputError naming it) before any file of the pair is written, never drawn."""
     name = f"{k:06d}"
+    image = read_color_image(image_path) if write_vis else None
     jobs = [lambda: write_kitti_flow(root / "flow_occ" / f"{name}.png", result.flow, result.valid_occ),
             lambda: write_kitti_flow(root / "flow_noc" / f"{name}.png", result.flow, result.valid_noc),
             lambda: write_flo(root / "flo" / f"{name}.flo", result.flow, result.valid_occ),
             lambda: write_bytes(root / "instances" / f"{name}.png", encode_png(result.instance, 0))]
     if write_vis:
-        jobs.append(lambda: _write_vis(root, name, result, image_path))
+        jobs.append(lambda: _write_vis(root, name, result, image, image_path))
     return jobs
 
 

@@ -75,17 +75,21 @@ def _detect_waymo(path: Path) -> str | None:
 
 
 def open_sequence(path: str | Path, format: str | None = None, cache: bool = False) -> Sequence:
-    """Open a sequence; ``format`` forces a reader (one of FORMATS). ``cache``: read the sweeps through the
-    one-time conversion cache (:mod:`sot_apps.io.sweep_cache`; bulk work such as the pipeline)."""
-    seq = _open_sequence(Path(path), format)
+    """Open a sequence; ``format`` forces a reader (one of FORMATS). Boxes and poses beyond the coordinate bound
+    (``sot_apps.io.bounds``) are an InputError. ``cache``: read the sweeps through the one-time conversion cache
+    (:mod:`sot_apps.io.sweep_cache`; bulk work such as the pipeline)."""
+    from .bounds import check_sequence_coordinates
+
+    sequence = _read_sequence(Path(path), format)
+    check_sequence_coordinates(sequence)
     if cache:
         from .sweep_cache import with_sweep_cache
 
-        with_sweep_cache(seq)
-    return seq
+        with_sweep_cache(sequence)
+    return sequence
 
 
-def _open_sequence(path: Path, format: str | None) -> Sequence:
+def _read_sequence(path: Path, format: str | None) -> Sequence:
     fmt = format or detect_format(path)
     if fmt == "pandaset":
         from .pandaset import read_pandaset

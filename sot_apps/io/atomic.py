@@ -1,6 +1,9 @@
 """Atomic writers: every file is written to a temporary sibling and renamed into place.
 
-A crash or Ctrl-C never leaves a half-written file under the final name. An environment failure while writing
+A crash or Ctrl-C never leaves a half-written file under the final name. A symbolic link is followed: its
+final target is replaced (the link stays). A special file (``/dev/null``, ``/dev/full``, ``/dev/stdout``, a FIFO)
+is written through instead: the data goes to a temporary file in the system's temporary directory first, then is
+copied into the special file, which is opened and written, never replaced (``sot_apps.io.outputs``). An environment failure while writing
 (no space, read-only, no permission, a directory or a file in the way) removes the temporary file and raises
 :class:`~sot_apps.errors.OutputError` naming the final path and the cause (the CLI prints it on one line, exit
 code 2). :func:`ensure_writable` checks an output location before long work starts.
@@ -14,6 +17,8 @@ import io
 import json
 import os
 import secrets
+import shutil
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any, Iterator
@@ -21,6 +26,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from ..errors import OutputError
+from .outputs import final_target, is_write_through, own_descriptor
 
 __all__ = ["atomic_path", "write_bytes", "write_text", "write_json", "write_npz", "ensure_writable",
            "is_environment_error", "output_error", "remove_stale_temporaries"]
@@ -54,6 +60,10 @@ def ensure_writable(path: str | Path, directory: bool = False) -> None:
     missing directories are not created). Raises :class:`OutputError` naming ``path`` and the cause.
     """
     path = Path(path)
+    if not directory and is_write_through(path):   # a device or FIFO: nothing is created next to it
+        if os.path.exists(path) and not os.access(path, os.W_OK):
+            raise OutputError(path, f"cannot write: {os.strerror(errno.EACCES)}")
+        return
     if path.is_dir() and not directory:
         raise OutputError(path, f"cannot write: {os.strerror(errno.EISDIR)}")
     existing = _nearest_existing(path if directory else path.parent)
@@ -77,9 +87,14 @@ def _umask() -> int:
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success it is renamed to ``path``.
 
-    On any exception the temporary file is removed and ``path`` is left untouched.
+    On any exception the temporary file is removed and ``path`` is left untouched. A symbolic link ``path`` is
+    followed (its target is replaced); a special file is written through (:func:`_written_through`).
     """
-    path = Path(path)
+    if is_write_through(path):
+        with _written_through(Path(path)) as tmp:
+            yield tmp
+        return
+    path = final_target(path)
     tmp: Path | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -104,6 +119,33 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         if is_environment_error(exc):
             raise output_error(path, exc) from exc   # type: ignore[arg-type]
         raise
+
+
+@contextlib.contextmanager
+def _written_through(path: Path) -> Iterator[Path]:
+    """Yield a temporary file in the system's temporary directory; on success copy it into ``path`` (opened for
+    writing: a device, a FIFO or a terminal is never replaced; ``/dev/stdout`` and the other names of this process's
+    descriptors are written into that descriptor, after this process's own buffered output) and remove it."""
+    fd, name = tempfile.mkstemp(prefix=".sot-apps-through.", suffix=".tmp")
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        descriptor = own_descriptor(path)
+        if descriptor is not None:
+            for stream in (sys.stdout, sys.stderr):
+                with contextlib.suppress(Exception):
+                    stream.flush()
+        with open(tmp, "rb") as source, (open(descriptor, "wb", closefd=False) if descriptor is not None
+                                         else open(path, "wb")) as target:
+            shutil.copyfileobj(source, target, 1 << 20)
+    except OSError as exc:
+        if is_environment_error(exc) or exc.errno == errno.ENXIO:
+            raise output_error(path, exc) from exc
+        raise
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
 
 
 def remove_stale_temporaries(root: str | Path) -> list[Path]:

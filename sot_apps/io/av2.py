@@ -30,7 +30,7 @@ import numpy as np
 
 from tracker.geometry import Box
 
-from ..errors import InputError
+from ..errors import InputError, not_a_file
 from .convert_util import box_from_transform, pose_at, quaternions_wxyz_to_matrices
 from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
@@ -49,7 +49,7 @@ def _read_feather(path: Path, columns: tuple[str, ...]) -> dict[str, np.ndarray]
     import pyarrow.feather as feather
 
     if not path.is_file():
-        raise InputError(path, "file is missing")
+        raise not_a_file(path)
     try:
         table = feather.read_table(path)
     except Exception as exc:  # noqa: BLE001 - any decoding problem is bad input

@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from tracker.geometry import Box
 
-from ..errors import InputError
+from ..errors import InputError, not_a_file
 from ..schemas import load_json_validated, validate
 from .atomic import atomic_path, write_json, write_npz
 from .npz import read_npz
@@ -57,7 +57,7 @@ def read_points_file(path: str | Path) -> Sweep:
     """Read and check one canonical point file (InputError naming the file on any problem)."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "point file is missing")
+        raise not_a_file(path, "point file")
     arrays = read_npz(path)
     unknown = sorted(set(arrays) - set(POINT_ARRAYS))
     if unknown:
@@ -84,7 +84,7 @@ def read_points_file(path: str | Path) -> Sweep:
 def _resolve(root: Path, rel: str, json_path: Path, where: str) -> Path:
     path = root / rel
     if not path.is_file():
-        raise InputError(json_path, f"{where}: file {rel!r} does not exist ({path})")
+        raise not_a_file(path, f"{where}: file {rel!r}", report_as=json_path)
     return path
 
 

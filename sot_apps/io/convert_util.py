@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from tracker.geometry import Box, make_transform, zyx_angles
 
-from ..errors import InputError
+from ..errors import InputError, not_a_file
 
 __all__ = ["quaternion_wxyz_to_matrix", "quaternions_wxyz_to_matrices", "transform_from_quaternion", "box_from_transform", "pose_at",
            "split_selector", "read_text_lines", "read_float32_records"]
@@ -92,7 +92,7 @@ def split_selector(path: str | Path) -> tuple[Path, str | None]:
 def read_text_lines(path: Path) -> list[str]:
     """The file's lines (InputError if it is missing or not text)."""
     if not path.is_file():
-        raise InputError(path, "file is missing")
+        raise not_a_file(path)
     try:
         return path.read_text(encoding="utf-8").splitlines()
     except UnicodeDecodeError as exc:
@@ -103,7 +103,7 @@ def read_float32_records(path: Path, columns: int) -> np.ndarray:
     """(N, columns) float32 of a headerless little-endian float32 point file (KITTI ``.bin``, nuScenes
     ``.pcd.bin``); InputError if it is missing, truncated or has non-finite x, y, z."""
     if not path.is_file():
-        raise InputError(path, "point file is missing")
+        raise not_a_file(path, "point file")
     size = path.stat().st_size
     if size % (4 * columns):
         raise InputError(path, f"size {size} bytes is not a multiple of {4 * columns} ({columns} float32 per point): "

@@ -36,14 +36,14 @@ import gzip
 import json
 import math
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle
 
-from ..errors import InputError
+from ..errors import InputError, not_a_file
 from .npz import read_npz
 from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
@@ -74,7 +74,7 @@ def seconds_to_ns(seconds: float) -> int:
 
 def _load_json(path: Path) -> Any:
     if not path.is_file():
-        raise InputError(path, "file is missing")
+        raise not_a_file(path)
     try:
         with open(path, encoding="utf-8") as handle:
             return json.load(handle)
@@ -97,13 +97,16 @@ def pose_to_matrix(pose: dict, path: Path, what: str) -> np.ndarray:
     return make_transform(Rotation.from_quat(q).as_matrix(), np.array(t))
 
 
-def _frame_files(directory: Path, suffixes: Iterable[str]) -> list[Path]:
-    files: list[Path] = []
-    for suffix in suffixes:
-        files = sorted(p for p in directory.glob(f"*{suffix}") if p.name[: -len(suffix)].isdigit())
-        if files:
-            return files
-    return files
+def _frame_files(directory: Path, suffixes: tuple[str, ...]) -> list[Path]:
+    """The ``NN<suffix>`` files of ``directory``, one per frame number, in frame order; where a frame has several,
+    the first suffix listed wins (so a frame that has only the native ``.pkl.gz`` among ``.npz`` copies is read)."""
+    chosen: dict[int, Path] = {}
+    for suffix in reversed(suffixes):
+        for p in directory.glob(f"*{suffix}"):
+            stem = p.name[: -len(suffix)]
+            if stem.isdigit():
+                chosen[int(stem)] = p
+    return [chosen[k] for k in sorted(chosen)]
 
 
 def is_pandaset(root: Path) -> bool:
@@ -124,7 +127,7 @@ def _read_native_pickle(path: Path) -> Any:
 
 def _load_lidar_columns(path: Path) -> dict[str, np.ndarray]:
     if not path.is_file():
-        raise InputError(path, "point file is missing")
+        raise not_a_file(path, "point file")
     if path.name.endswith(".npz"):
         return read_npz(path)
     frame = _read_native_pickle(path)

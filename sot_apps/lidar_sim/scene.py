@@ -90,6 +90,11 @@ def load_scene(path: str | Path) -> SceneSpec:
     objects = [SceneObject(o["bank_id"], float(o["x"]), float(o["y"]), None if o.get("z") is None else float(o["z"]),
                            float(o["heading"]), o.get("label"), float(o.get("reflectivity", 0.5)))
                for o in doc["objects"]]
+    from ..io.bounds import check_coordinates
+
+    check_coordinates([[o.x, o.y, 0.0 if o.z is None else o.z, o.heading] for o in objects], path, "object")
+    if doc.get("ground_z") is not None:
+        check_coordinates([doc["ground_z"]], path, "ground_z")
     return SceneSpec(sensor, doc.get("ground_z"), objects, realism)
 
 

@@ -20,6 +20,8 @@ from typing import Any, Callable, Iterable
 
 from tqdm import tqdm
 
+from ..interrupts import sigint_ignored_in_children
+
 __all__ = ["Task", "TaskOutcome", "ExecutorSpec", "ExecutorSession", "run_tasks"]
 
 
@@ -66,18 +68,25 @@ def _single_threaded_env() -> None:
 
 
 _task_running = False   # in a worker process: whether a task is running (see _worker_sigint)
+_stop_event = None      # in a worker process: set by the parent after Ctrl-C (see _worker_init)
+_interrupted = False    # in a worker process: it received a Ctrl-C (see _worker_sigint)
+_task_threads: set[int] = set()   # in a worker: the threads running a task (see _interrupt_running_tasks)
 
 
 def _call(task: Task) -> TaskOutcome:
     """Run a task, turning any exception into a failed outcome (runs in the worker)."""
     global _task_running
     start = time.perf_counter()
+    if _interrupted or (_stop_event is not None and _stop_event.is_set()):
+        raise KeyboardInterrupt   # handed to this worker before the Ctrl-C (or its signal was missed): not run
     try:
         _task_running = True
+        _task_threads.add(threading.get_ident())
         try:
             result = task.fn(*task.args, **task.kwargs)
         finally:
             _task_running = False
+            _task_threads.discard(threading.get_ident())
         return TaskOutcome(task.key, True, result=result, seconds=time.perf_counter() - start)
     except BaseException as exc:  # noqa: BLE001 - a worker must report, not die
         if isinstance(exc, KeyboardInterrupt):
@@ -96,30 +105,54 @@ def _call(task: Task) -> TaskOutcome:
 
 def _worker_sigint(signum, frame) -> None:
     """Ctrl-C in a worker process: stop the running task (its atomic writes clean up; the pool hands the
-    KeyboardInterrupt back to the parent, which reports the interrupt once); an idle worker ignores it."""
+    KeyboardInterrupt back to the parent, which reports the interrupt once); an idle worker only remembers it and
+    starts no task any more (the parent is stopping)."""
+    global _interrupted
+    _interrupted = True
     if _task_running:
         raise KeyboardInterrupt
 
 
-def _worker_init() -> None:
+class TaskInterrupted(Exception):
+    """Raised inside a Dask worker's running task after the client's Ctrl-C (an Exception, not a
+    KeyboardInterrupt: Dask logs a BaseException escaping a task as an unhandled error)."""
+
+
+def _interrupt_running_tasks() -> int:
+    """In a Dask worker (whose SIGINT is ignored), after the client's Ctrl-C: raise :class:`TaskInterrupted` in the
+    threads running a task, so that the task stops at once and its atomic writes clean up (Dask cannot stop a
+    running task; closing the cluster would wait for it, then kill the worker and leave its temporary files). The
+    worker's Dask log is quietened: the cancellations that follow are expected."""
+    import ctypes
+    import sys
+
+    _quieten_dask_logs()
+    other_hook = sys.unraisablehook
+
+    def hook(unraisable):   # landed in a finalizer or gc callback: dropped there; the caller sends it again
+        if unraisable.exc_type is None or not issubclass(unraisable.exc_type, TaskInterrupted):
+            other_hook(unraisable)
+
+    sys.unraisablehook = hook
+    for ident in list(_task_threads):
+        ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident), ctypes.py_object(TaskInterrupted))
+    return len(_task_threads)
+
+
+def _quieten_dask_logs() -> None:
+    """After Ctrl-C, Dask logs the cancellations and the closing connections it causes: expected, not news."""
+    import logging
+
+    for name in ["distributed", *logging.root.manager.loggerDict]:
+        if name.startswith("distributed"):
+            logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
+def _worker_init(stop_event=None) -> None:
+    global _stop_event
     _single_threaded_env()
+    _stop_event = stop_event
     signal.signal(signal.SIGINT, _worker_sigint)
-
-
-@contextlib.contextmanager
-def _sigint_ignored_in_children():
-    """Start worker processes with SIGINT ignored: an ignored signal stays ignored across exec (a blocked one does
-    not: the spawn resets the mask) and Python then installs no KeyboardInterrupt handler, so a Ctrl-C while a
-    worker starts cannot print its traceback; :func:`_worker_init` installs the worker's handler. Only for the
-    few milliseconds of process creation does this process ignore Ctrl-C as well."""
-    if threading.current_thread() is not threading.main_thread():   # only the main thread may set handlers
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def _progress(total: int, desc: str, enabled: bool) -> tqdm:
@@ -137,6 +170,7 @@ class ExecutorSession:
     def __init__(self, spec: ExecutorSpec = ExecutorSpec()) -> None:
         self.spec = spec
         self._pool: ProcessPoolExecutor | None = None
+        self._stop_event = None
         self._client = None
         self._cluster = None
 
@@ -147,16 +181,34 @@ class ExecutorSession:
         self.close(wait=exc_type is None)
 
     def close(self, wait: bool = True) -> None:
-        """Shut the pool down; ``wait=False`` (after Ctrl-C) cancels queued tasks and does not wait for running ones."""
+        """Shut the pool down; ``wait=False`` (after Ctrl-C) cancels queued tasks, tells the workers not to start the
+        ones already handed to them, and stops the workers (:func:`sot_apps.interrupts.stop_process_pool`)."""
         if self._pool is not None:
-            self._pool.shutdown(wait=wait, cancel_futures=True)
+            if wait:
+                self._pool.shutdown(wait=True, cancel_futures=True)
+            else:
+                from ..interrupts import stop_process_pool
+
+                if self._stop_event is not None:
+                    self._stop_event.set()
+                stop_process_pool(self._pool)
             self._pool = None
         if self._client is not None:
+            if not wait and self._cluster is not None:   # Ctrl-C: stop our own workers' running tasks, quietly
+                self._interrupt_dask_tasks()
             self._client.close()
             self._client = None
         if self._cluster is not None:
             self._cluster.close()
             self._cluster = None
+
+    def _interrupt_dask_tasks(self) -> None:
+        _quieten_dask_logs()
+        with contextlib.suppress(Exception):
+            for _ in range(20):   # again while a task still runs (the exception can land where it is dropped)
+                if not sum(self._client.run(_interrupt_running_tasks).values()):
+                    break
+                time.sleep(0.1)
 
     def run(self, tasks: Iterable[Task], desc: str = "tasks", progress: bool = True) -> list[TaskOutcome]:
         """Run ``tasks``; outcomes come back in the order of ``tasks``."""
@@ -201,8 +253,9 @@ class ExecutorSession:
             import multiprocessing
 
             context = multiprocessing.get_context("spawn")
+            self._stop_event = context.Event()
             self._pool = ProcessPoolExecutor(max_workers=self.spec.workers, mp_context=context,
-                                             initializer=_worker_init)
+                                             initializer=_worker_init, initargs=(self._stop_event,))
         return self._pool
 
     def _run_processes(self, tasks: list[Task], desc: str, progress: bool) -> list[TaskOutcome]:
@@ -211,7 +264,7 @@ class ExecutorSession:
         outcomes: dict[int, TaskOutcome] = {}
         broken = False
         try:
-            with _sigint_ignored_in_children():   # submit() starts the worker processes
+            with sigint_ignored_in_children():   # submit() starts the worker processes
                 pool = self._process_pool()
                 pending: dict[Future, int] = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
             with _progress(len(tasks), desc, progress) as bar:
@@ -245,8 +298,16 @@ class ExecutorSession:
             if self.spec.address:
                 self._client = Client(self.spec.address)
             else:
-                self._cluster = LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1,
-                                             processes=True, dashboard_address=None)
+                # the workers start with SIGINT ignored (and keep it so: asyncio installs no handler over an
+                # ignored signal): a Ctrl-C to the process group reaches only this process, which cancels the
+                # tasks and closes the cluster; without this each worker and nanny printed its own traceback
+                with sigint_ignored_in_children():
+                    self._cluster = LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1,
+                                                 processes=True, dashboard_address=None,
+                                                 worker_dashboard_address=None,
+                                                 # no dashboard; its HTTP server (health, metrics) on a free port
+                                                 # instead of 8787, which another cluster may hold (a warning)
+                                                 scheduler_kwargs={"dashboard_address": ":0"})
                 self._client = Client(self._cluster)
             self._client.run(_single_threaded_env)
         return self._client
@@ -268,8 +329,9 @@ class ExecutorSession:
                         outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
                     bar.update(1)
         except BaseException:
-            client.cancel(futures)
-            self.close()
+            with contextlib.suppress(Exception):
+                client.cancel(futures)
+            self.close(wait=False)
             raise
         return [o for o in outcomes if o is not None]
 

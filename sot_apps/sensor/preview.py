@@ -54,6 +54,8 @@ def bev_image(xyz: np.ndarray, instance: np.ndarray, boxes: list[Box], extent: f
     for i, box in enumerate(boxes):
         corners = box.bev_corners()
         c, r = to_px(corners[:, 0], corners[:, 1])
+        if not (np.abs(np.concatenate([c, r]) - size / 2.0) < 8 * size).all():
+            continue   # far outside the view (pixel coordinates would not even fit OpenCV's int32)
         pts = np.stack([c, r], axis=1).round().astype(np.int32)
         color = tuple(int(v) for v in _PALETTE[i % len(_PALETTE)])
         cv2.polylines(image, [pts], True, color, 1, cv2.LINE_AA)

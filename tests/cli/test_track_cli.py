@@ -61,8 +61,9 @@ def test_fixed_lag_mode_is_recorded(pandaset_root, tmp_path, capsys):
     track, _ = read_track(out)
     assert track.config["mode"] == "lag" and track.config["lag"] == 3 and track.config["refined"] is True
     assert [r.frame for r in track.frames] == list(range(7)) and all("lag3" in r.flags for r in track.frames[1:])
-    code = main(["track", str(pandaset_root), "--track-id", "91aa5b5c", "--lag", "0", "--out", str(tmp_path / "x")])
-    assert code == 2 and "--lag" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:   # a usage error: argparse's one line, exit code 2
+        main(["track", str(pandaset_root), "--track-id", "91aa5b5c", "--lag", "0", "--out", str(tmp_path / "x")])
+    assert usage.value.code == 2 and "--lag" in capsys.readouterr().err
 
 
 @pytest.mark.slow
