@@ -5,6 +5,9 @@ Each tracklet is tracked from its first frame's ground-truth box to its last fra
 every preset and seed; scores are those of ``sot-apps eval`` (:mod:`tracker.metrics`: Acc, Rob, Success,
 Precision over frames 1..n-1; Shape = Chamfer to the pseudo-ground-truth shape). A group's figures pool its
 tracklets' frames; with several seeds each figure is the mean over seeds (± the spread of Acc).
+Groups of the hard profiles add their own figures (:mod:`.profile_scores`): the share re-locked within 3 frames
+of re-appearing (``hidden``), the share found at the first frame within 30 m (``far_approach``) and the median
+heading error at the last frame (``oblique``).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from ..errors import InputError
 from ..io import open_sequence
 from .deps import CachedSource, EvalConfig, TrackSpec, eval_ground_params, json_safe, refined_modes, score_result
 from .lists import SequenceResolver, Tracklet
+from .profile_scores import pool_figures, tracklet_figures
 
 __all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
 
@@ -36,6 +40,7 @@ class BenchmarkRun:
     records: dict[tuple[str, int, str], tuple[Any, np.ndarray]]
     difficulty: dict[str, str]
     profile: dict[str, str | None]
+    figures: dict[tuple[str, int, str], dict[str, float]] = dataclasses.field(default_factory=dict)
 
     def groups(self) -> list[tuple[str, list[str]]]:
         keys = list(self.difficulty)
@@ -53,7 +58,9 @@ class BenchmarkRun:
             ms = np.concatenate([self.records[(preset, seed, k)][1] for k in keys])
             per_seed.append({"acc": pooled.acc, "rob": pooled.rob, "shape": pooled.shape, "success": pooled.success,
                              "precision": pooled.precision, "ms": float(np.mean(ms)) if ms.size else float("nan")})
-        mean = {k: _nan_mean([s[k] for s in per_seed]) for k in per_seed[0]}
+        for seed, row in zip(self.seeds, per_seed):
+            row.update(pool_figures(self.figures.get((preset, seed, k), {}) for k in keys))
+        mean = {k: _nan_mean([s.get(k, float("nan")) for s in per_seed]) for k in per_seed[0]}
         mean["acc_std"] = float(np.std([s["acc"] for s in per_seed]))
         mean["n"] = len(keys)
         return mean
@@ -115,6 +122,7 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
         by_sequence[str(resolve(t))].append(t)
     tick = progress(len(tracklets) * len(presets) * len(seeds)) if progress else (lambda: None)
     records: dict[tuple[str, int, str], tuple[Any, np.ndarray]] = {}
+    figures: dict[tuple[str, int, str], dict[str, float]] = {}
     levels: dict[str, str] = {}
     profiles: dict[str, str | None] = {}
     for path, group in by_sequence.items():
@@ -129,14 +137,20 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
                     result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1],
                                    get_preset(preset, seed=seed, **overrides), detections=per_seed.get(seed))
                     ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
-                    records[(preset, seed, t.key)] = (dataclasses.replace(score_result(spec, result, config),
-                                                                          track_id=t.key), ms)
-                    for suffix, refined, refined_ms in refined_modes(source, result, result.config, lags, offline):
-                        records[(preset + suffix, seed, t.key)] = (
-                            dataclasses.replace(score_result(spec, refined, config), track_id=t.key), refined_ms)
+                    modes = [("", result, ms)] + refined_modes(source, result, result.config, lags, offline)
+                    for suffix, mode_result, mode_ms in modes:
+                        scores = dataclasses.replace(score_result(spec, mode_result, config), track_id=t.key)
+                        records[(preset + suffix, seed, t.key)] = (scores, mode_ms)
+                        figures[(preset + suffix, seed, t.key)] = tracklet_figures(
+                            {**t.extra, "profile": t.profile}, scores.ious,
+                            [b.heading for b in mode_result.boxes], [b.heading for b in spec.boxes])
                     tick()
-    return BenchmarkRun(rows, seeds, records, levels, profiles)
+    return BenchmarkRun(rows, seeds, records, levels, profiles, figures)
 
+
+
+_EXTRA_COLUMNS = (("relock_share", "ReLock3", 100.0, ".0f"), ("found_near_share", "Found30", 100.0, ".0f"),
+                  ("heading_err_last_med_deg", "Hdg@last", 1.0, ".1f"))
 
 
 def _fmt(v: float, spec: str) -> str:
@@ -152,15 +166,23 @@ def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
                    + (": mean, Acc ± std over seeds)" if n_seeds > 1 else ")"))
         header = ["group", "n", "Acc", "Rob", "Shape(m)", "Success", "Prec", "ms/frame"]
         rows = []
-        for name, keys in run.groups():
-            m = run.summary(preset, keys)
+        summaries = [(name, run.summary(preset, keys)) for name, keys in run.groups()]
+        extra = [(k, title, scale, spec) for k, title, scale, spec in _EXTRA_COLUMNS
+                 if any(k in m for _, m in summaries)]
+        header += [title for _, title, _, _ in extra]
+        for name, m in summaries:
             acc = _fmt(100 * m["acc"], ".1f") + (f" ± {100 * m['acc_std']:.1f}" if n_seeds > 1 else "")
             rows.append([name, str(m["n"]), acc, _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f"),
-                         _fmt(m["success"], ".1f"), _fmt(m["precision"], ".1f"), _fmt(m["ms"], ".1f")])
+                         _fmt(m["success"], ".1f"), _fmt(m["precision"], ".1f"), _fmt(m["ms"], ".1f")]
+                        + [_fmt(scale * m[k], spec) if k in m else "" for k, _, scale, spec in extra])
         widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
         line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
                                        for i, (c, w) in enumerate(zip(cells, widths)))
         out += [line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows] + [""]
     out.append("Acc, Rob in %; Success, Precision: 100 x AUC; Shape: mean Chamfer to the pseudo-ground-truth shape; "
                "difficulty by mean GT-box points over the first 10 frames (hard < 38.2 <= medium < 808.3 <= easy).")
+    if any(k in run.summary(p, keys) for p in run.presets for _, keys in run.groups() for k, *_ in _EXTRA_COLUMNS):
+        out.append("ReLock3: % of hidden tracklets with IoU >= 0.3 within 3 frames of re-appearing; Found30: % of "
+                   "far approaches with IoU >= 0.3 at the first frame within 30 m; Hdg@last: median |heading error| "
+                   "at the last frame (deg, oblique).")
     return "\n".join(out)

@@ -18,6 +18,7 @@ where it stopped and the same seed gives the same bytes.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -36,12 +37,14 @@ from ..io import open_sequence
 from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
 from ..io.sequence import BoxAnnotation, FrameInfo, Sequence, Sweep
-from ..objects.motion_profiles import PROFILES, MotionSpec
+from ..objects.bank import split_entries
+from ..objects.motion_profiles import ALL_PROFILES, PROFILES, MotionSpec
 from ..objects.selection import annotated_span
 from ..schemas import validate
 from .background import boxes_array, build_ground_map, ego_from_sensor, fitted_sensor
 from .deps import Bank, Realism, load_sensor, read_bank
-from .insert import simulate_frame, vehicle_scenes
+from .hard_profiles import PROFILE_BANDS, hidden_frames, points_ok, tracklet_geometry
+from .insert import InsertedFrame, simulate_frame, vehicle_scenes
 from .placement import InsertedVehicle, PlacementContext, place_occluder, place_vehicle
 
 __all__ = ["MakeConfig", "plan_copies", "make_benchmark", "CopyPlan"]
@@ -65,6 +68,8 @@ class MakeConfig:
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)   # the optical centre in the LiDAR frame
     replicas: tuple[str, ...] = ()   # instead of profiles: copies of these real tracks (bank entries of theirs)
     band_edges_m: tuple[float, ...] = (17.0, 40.0)   # range bands filled in turn (pandar64: ~easy / medium / hard)
+    profiles: tuple[str, ...] = PROFILES   # tracklet i gets profiles[i mod len]
+    split: str = "all"                      # the part of the bank drawn from: choose, confirm or all
 
 
 @dataclass(frozen=True)
@@ -77,7 +82,7 @@ class CopyPlan:
         h = hashlib.sha256(json.dumps({k: v for k, v in asdict(config).items() if k not in ("workers", "out")},
                                       sort_keys=True).encode())
         for v in self.vehicles:
-            h.update(f"{v.id}|{v.bank_id}|{v.listed}".encode())
+            h.update(f"{v.id}|{v.bank_id}|{v.listed}|{v.hidden}".encode())
             h.update(np.ascontiguousarray(v.states).tobytes())
         return h.hexdigest()[:16]
 
@@ -114,9 +119,12 @@ def box_size(bank: Bank, entry, sigma: float) -> tuple[float, float, float]:
 
 def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, entry, profile: str,
                     band: tuple[float, float], entries, sizes: dict) -> list[InsertedVehicle] | None:
-    """The tracklet's vehicle (and, for ``occluded``, its occluder: up to 3 target places are tried)."""
+    """The tracklet's vehicle (and, for ``occluded``, its occluder: up to 3 target places are tried; for
+    ``hidden``, the frames whose points are removed)."""
     for _ in range(3 if profile == "occluded" else 1):
         vehicle = place_vehicle(ctx, rng, vid, entry.id, entry.label or "Car", sizes[entry.id], profile, band)
+        if vehicle is not None and profile == "hidden":
+            vehicle = dataclasses.replace(vehicle, hidden=hidden_frames(rng, len(ctx.frame_times_ns)))
         if vehicle is None or profile != "occluded":
             return None if vehicle is None else [vehicle]
         occ = entries[int(rng.integers(len(entries)))]
@@ -164,20 +172,30 @@ def _plan_replicas(seq: Sequence, bank: Bank, config: MakeConfig, frames: list[i
 def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = False) -> list[CopyPlan]:
     """Every copy's inserted vehicles (deterministic in ``config.seed``).
 
-    Tracklet i gets profile i mod 8 and range band (i div 8) mod bands, shuffled by the seed, so every profile
-    meets every band. A copy takes tracklets in turn until ``per_copy`` are placed; a (profile, band) that finds
-    no place in a copy is not tried again in that copy (its tracklets wait for the next copy). One that finds no
-    place even in an empty copy is widened to the whole range; a profile that fails so in 3 empty copies makes the
-    background unusable."""
+    Tracklet i gets profile i mod P (``config.profiles``) and range band (i div P) mod bands, shuffled by the
+    seed, so every profile meets every band; a profile of :data:`PROFILE_BANDS` starts in its own band instead.
+    Vehicles are drawn from the bank's ``config.split`` part. A copy takes tracklets in turn until ``per_copy``
+    are placed; a (profile, band) that finds no place in a copy is not tried again in that copy (its tracklets
+    wait for the next copy). One that finds no place even in an empty copy is widened to the whole range; a
+    profile that fails so in 3 empty copies makes the background unusable."""
     frames = _frames(seq, config.frames)
     if config.replicas:
         return _plan_replicas(seq, bank, config, frames)
     rng = np.random.default_rng(config.seed)
     bands = range_bands(config.range_m, config.band_edges_m)
-    cells = [(PROFILES[i % len(PROFILES)], bands[(i // len(PROFILES)) % len(bands)]) for i in range(config.tracklets)]
+    profiles = config.profiles
+    unknown = [p for p in profiles if p not in ALL_PROFILES]
+    if unknown or not profiles:
+        raise InputError(None, f"unknown motion profile {unknown[0] if unknown else '(none)'}; known: "
+                               f"{', '.join(ALL_PROFILES)}")
+    cells = [(profiles[i % len(profiles)], PROFILE_BANDS.get(profiles[i % len(profiles)],
+                                                              bands[(i // len(profiles)) % len(bands)]))
+             for i in range(config.tracklets)]
     queue = [cells[i] for i in rng.permutation(len(cells))]
     plans: list[CopyPlan] = []
-    entries = sorted(bank.entries, key=lambda e: e.id)
+    entries = sorted(split_entries(bank.entries, config.split), key=lambda e: e.id)
+    if not entries:
+        raise InputError(Path(config.bank) / "index.json", f"the bank has no entry in its {config.split!r} part")
     sigma = load_sensor(config.sensor).range_noise_sigma
     sizes = {e.id: box_size(bank, e, sigma) for e in entries}
     bar = tqdm(total=len(queue), desc="placing", unit="tracklet", disable=not progress, leave=False)
@@ -208,7 +226,8 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
                         hopeless[profile] = hopeless.get(profile, 0) + 1
                         if hopeless[profile] >= 3:
                             raise InputError(seq.root, f"could not place a {profile} tracklet on free ground of the "
-                                                       "background even in 3 empty copies (try other --frames)")
+                                                       "background even in 3 empty copies (try other --frames, or "
+                                                       "the synthetic open road: docs/benchmark.md)")
                     impossible.add(cell)
                 left.append(cell)
                 continue
@@ -219,6 +238,27 @@ def plan_copies(seq: Sequence, bank: Bank, config: MakeConfig, progress: bool = 
             plans.append(CopyPlan(c, f"{seq.id}_c{c:02d}", vehicles))
     bar.close()
     return plans
+
+
+def _hide(frame: InsertedFrame, hidden: list[int]) -> InsertedFrame:
+    """The frame without the points of the inserted vehicles ``hidden`` (their boxes stay: ground truth)."""
+    if not hidden:
+        return frame
+    keep = ~np.isin(frame.instance, hidden)
+    return dataclasses.replace(frame, xyz=frame.xyz[keep], intensity=frame.intensity[keep],
+                               time_offset_ns=frame.time_offset_ns[keep], instance=frame.instance[keep])
+
+
+def _xyh(world_from_sensor: np.ndarray) -> tuple[float, float, float]:
+    return (float(world_from_sensor[0, 3]), float(world_from_sensor[1, 3]),
+            float(np.arctan2(world_from_sensor[1, 0], world_from_sensor[0, 0])))
+
+
+def _geometry(v: InsertedVehicle, j: int, a: int, b: int, sensor_xyh: np.ndarray, box_xyh: np.ndarray) -> dict:
+    """The profile's per-tracklet figures (hard_profiles.tracklet_geometry) over frames a..b, relative to a."""
+    hidden = (v.hidden[0] - a, v.hidden[1] - a) if v.hidden else None
+    boxes = box_xyh[a:b + 1, j]
+    return tracklet_geometry(v.motion.profile, boxes[:, 0:2], boxes[:, 2], sensor_xyh[a:b + 1], hidden)
 
 
 _BACKGROUNDS: dict[str, Sequence] = {}
@@ -259,13 +299,16 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
     infos: list[FrameInfo] = []
     annotations: list[list[BoxAnnotation]] = []
     counts = np.zeros((len(frames), len(plan.vehicles)), dtype=np.int64)
+    sensor_xyh: list[tuple[float, float, float]] = []
+    box_xyh: list[list[tuple[float, float, float]]] = []
     removed = [0, 0]
     for i, k in enumerate(tqdm(frames, desc=plan.name, unit="frame", disable=not progress, leave=False)):
         realism = Realism(drop_random=config.drop_random, seed=config.seed * 1_000_003 + plan.index * 1_009 + k)
         replaced = {v.replaces for v in plan.vehicles if v.replaces}
         real = [a for a in (seq.annotations[k] if seq.annotations else []) if a.track_id not in replaced]
         cut = [a.box for a in (seq.annotations[k] if seq.annotations else []) if a.track_id in replaced]
-        frame = simulate_frame(seq, k, sensor, plan.vehicles, meshes, realism, scenes, config.origin, cut)
+        frame = _hide(simulate_frame(seq, k, sensor, plan.vehicles, meshes, realism, scenes, config.origin, cut),
+                      [j for j, v in enumerate(plan.vehicles) if v.hidden and v.hidden[0] <= i <= v.hidden[1]])
         sweeps.append(Sweep(frame.xyz, frame.intensity, frame.time_offset_ns))
         write_npz(out / "labels" / f"{i:06d}.npz", instance=frame.instance)
         info = seq.frames[k]
@@ -274,6 +317,8 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
                                    for v, b in zip(plan.vehicles, frame.boxes)])
         world = transform_points(info.world_from_ego, frame.xyz)
         counts[i] = [int(points_in_box(world, b).sum()) for b in frame.boxes]
+        sensor_xyh.append(_xyh(info.world_from_ego @ ego_from_sensor(seq, config.origin)))
+        box_xyh.append([(b.x, b.y, b.heading) for b in frame.boxes])
         removed[0] += frame.removed_real
         removed[1] += frame.removed_inserted
     copy = Sequence(id=plan.name, root=Path(config.background), format="benchmark", frames=infos,
@@ -284,14 +329,20 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
         "sensor": sensor.to_dict(), "vehicles": [
             {"id": v.id, "bank_id": v.bank_id, "label": v.label, "listed": v.listed, "occluder_of": v.occluder_of,
              "size": {"length": v.size[0], "width": v.size[1], "height": v.size[2]}, "motion": v.motion.to_dict(),
+             "hidden_frames": list(v.hidden) if v.hidden else None,
              "times_ns": v.times_ns, "states": np.round(v.states, 5)} for v in plan.vehicles]})
     write_sequence(copy, out, progress=False)
     n = min(10, len(frames))
     tracklets = []
+    unlisted: dict[str, int] = {}
     for j, v in enumerate(plan.vehicles):
         if not v.listed:
             continue
         a, b = v.span if v.span is not None else (0, len(frames) - 1)
+        hidden = (v.hidden[0] - a, v.hidden[1] - a) if v.hidden else None
+        if not points_ok(v.motion.profile, counts[a:b + 1, j], hidden):
+            unlisted[v.motion.profile] = unlisted.get(v.motion.profile, 0) + 1
+            continue
         mean10 = float(counts[a:a + n, j].mean())
         sensor_xy = (seq.frames[frames[a]].world_from_ego @ ego_from_sensor(seq, config.origin))[:2, 3]
         r0 = float(np.hypot(*(annotations[a][len(annotations[a]) - len(plan.vehicles) + j].box.center[:2] - sensor_xy)))
@@ -300,8 +351,10 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
                           "profile": v.motion.profile, "mean_points_first10": round(mean10, 2),
                           "initial_range_m": round(r0, 2), "bank_id": v.bank_id, "motion": v.motion.to_dict(),
                           "min_points": int(counts[a:b + 1, j].min()),
-                          "mean_points": round(float(counts[a:b + 1, j].mean()), 2)})
-    summary = {"digest": digest, "tracklets": tracklets, "removed_real_points": removed[0],
+                          "mean_points": round(float(counts[a:b + 1, j].mean()), 2),
+                          "start_points": int(counts[a, j]), "split": config.split}
+                         | _geometry(v, j, a, b, np.array(sensor_xyh), np.array(box_xyh)))
+    summary = {"digest": digest, "tracklets": tracklets, "unlisted": unlisted, "removed_real_points": removed[0],
                "removed_inserted_points": removed[1]}
     write_json(out / "done.json", summary)
     return summary
@@ -337,8 +390,14 @@ def make_benchmark(config: MakeConfig, progress: bool = True) -> dict:
         write_json(out / f"{level}.json", [e for e in entries if e["difficulty"] == level])
     counts = {"difficulty": {d: sum(e["difficulty"] == d for e in entries) for d in ("easy", "medium", "hard")},
               "profile": {p: sum(e["profile"] == p for e in entries)
-                          for p in list(PROFILES) + sorted({e["profile"] for e in entries} - set(PROFILES))}}
+                          for p in list(config.profiles)
+                          + sorted({e["profile"] for e in entries} - set(config.profiles))}}
+    unlisted: dict[str, int] = {}
+    for s in summaries:
+        for p, n in s.get("unlisted", {}).items():
+            unlisted[p] = unlisted.get(p, 0) + n
     report = {"config": asdict(config), "copies": len(plans), "tracklets": len(entries), "counts": counts,
+              "unlisted": unlisted,
               "removed_real_points": sum(s["removed_real_points"] for s in summaries),
               "removed_inserted_points": sum(s["removed_inserted_points"] for s in summaries),
               "seconds": {"planning": round(planned, 1), "total": round(time.perf_counter() - start, 1)}}

@@ -40,6 +40,7 @@ from tracker import iou_3d_batch
 
 from ..objects.motion_profiles import MotionPath, MotionSpec, integrate_motion, place_path, sample_motion
 from .background import GroundMap
+from .hard_profiles import extra_headings, geometry_ok
 from .deps import Trajectory
 
 __all__ = ["InsertedVehicle", "PlacementContext", "place_vehicle", "place_occluder", "swept_boxes", "EGO_SIZE",
@@ -70,6 +71,7 @@ class InsertedVehicle:
     occluder_of: str | None = None
     span: tuple[int, int] | None = None   # listed frames (indices into the copy's frames); None: all
     replaces: str | None = None           # a real track this vehicle stands in for (its points are cut)
+    hidden: tuple[int, int] | None = None  # frames (first, last; copy indices) whose points are all removed
 
     def states_at(self, t_ns: np.ndarray | int) -> np.ndarray:
         """(..., 4) x, y, z, heading at the given times (linear between samples, held outside)."""
@@ -386,11 +388,30 @@ def _finish(ctx: PlacementContext, vid: str, bank_id: str, label: str, size, spe
                            occluder_of, span)
 
 
-def _headings(ctx: PlacementContext, rng: np.random.Generator) -> list[float]:
-    """Along, against and across the ego's direction of travel (random order, a little noise)."""
+def _headings(ctx: PlacementContext, rng: np.random.Generator, profile: str = "") -> list[float]:
+    """Along, against and across the ego's direction of travel, plus the profile's own (``oblique``: the
+    diagonals); random order, a little noise."""
     sh = float(ctx.sensor_xyh[0, 2])
-    return [sh + float(turn) + float(rng.normal(0.0, 0.01)) for turn in rng.permutation([0.0, math.pi, math.pi / 2,
-                                                                                         -math.pi / 2])]
+    turns = [0.0, math.pi, math.pi / 2, -math.pi / 2] + [h - sh for h in extra_headings(profile, sh)]
+    return [sh + float(turn) + float(rng.normal(0.0, 0.01)) for turn in rng.permutation(turns)]
+
+
+def _frame_states(ctx: PlacementContext, path: MotionPath, times_ns: np.ndarray) -> np.ndarray:
+    """(F, 3) local x, y, heading of a path at the frame times."""
+    t = (ctx.frame_times_ns - times_ns[0]) * 1e-9
+    return np.column_stack([np.interp(t, path.times_s, v) for v in (path.x, path.y, path.heading)])
+
+
+def _geometry_filter(ctx: PlacementContext, profile: str, local: np.ndarray, heading: float,
+                     starts: np.ndarray) -> np.ndarray:
+    """The start cells whose path has the profile's geometry relative to the sensor (hard_profiles.py)."""
+    if starts.size == 0:
+        return starts
+    xy = ctx._start_xy[starts]
+    positions = _rigid(local[None, :, 0:2], xy[:, 0:1], xy[:, 1:2], heading)
+    headings = np.broadcast_to(local[None, :, 2] + heading, positions.shape[:2])
+    times_s = (ctx.frame_times_ns - ctx.frame_times_ns[0]) * 1e-9
+    return starts[geometry_ok(profile, positions, headings, ctx.sensor_xyh, times_s)]
 
 
 def place_vehicle(ctx: PlacementContext, rng: np.random.Generator, vid: str, bank_id: str, label: str,
@@ -408,8 +429,9 @@ def place_vehicle(ctx: PlacementContext, rng: np.random.Generator, vid: str, ban
             states = path.states()
             window = _window_index(ctx, times_ns)
             fp = _footprint(states, window, size, ctx.margin)
-            for heading in _headings(ctx, rng):
-                starts = _starts(ctx, fp, heading, band, rng)
+            local = _frame_states(ctx, path, times_ns)
+            for heading in _headings(ctx, rng, profile):
+                starts = _geometry_filter(ctx, profile, local, heading, _starts(ctx, fp, heading, band, rng))
                 if starts.size == 0:
                     continue
                 for chunk in np.array_split(starts, max(1, len(starts) // 64)):

@@ -98,7 +98,7 @@ def run_list(args: argparse.Namespace) -> int:
     from ..objects.bank import bank_summary_rows, read_bank
 
     bank = read_bank(args.bank)
-    headers = ["id", "label", "size LxWxH (m)", "points", "quality", "source", "sequence/path", "track"]
+    headers = ["id", "split", "label", "size LxWxH (m)", "points", "quality", "source", "sequence/path", "track"]
     rows = bank_summary_rows(bank)
     widths = [max([len(h)] + [len(r[i]) for r in rows]) for i, h in enumerate(headers)]
     print("  ".join(h.ljust(w) for h, w in zip(headers, widths)).rstrip())

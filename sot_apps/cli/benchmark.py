@@ -71,6 +71,13 @@ def register(subparsers) -> argparse.ArgumentParser:
                            "replaced by its bank vehicle on its own path (real points cut, vehicle simulated; same "
                            "ranges, headings, occluders), listed over the track's annotated frames; compare "
                            "`eval --benchmark` with `eval SEQUENCE --tracks`")
+    make.add_argument("--profiles", nargs="+", default=None, metavar="PROFILE",
+                      help="motion profiles, tracklet i gets the (i mod P)-th (default: the 8 classic ones, "
+                           "constant_speed ... occluded); also far_approach, passing, hidden, oblique (they start "
+                           "in their own range band; docs/benchmark.md)")
+    make.add_argument("--split", choices=("choose", "confirm", "all"), default="all",
+                      help="the part of the bank to draw vehicles from: choose (tuning), confirm (never used to "
+                           "choose), all (default); see docs/benchmark.md")
     make.set_defaults(action_run=_run_make)
 
     build = sub.add_parser("build", help="LiDAR-SOT-style lists from annotated sequences")
@@ -105,17 +112,22 @@ def _run(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 def _run_make(args: argparse.Namespace) -> int:
     from ..benchmark.make import MakeConfig, make_benchmark
+    from ..objects.motion_profiles import PROFILES
 
     if args.workers < 1:
         raise InputError(None, "--workers must be >= 1")
     config = MakeConfig(str(args.background), str(args.bank), args.tracklets, tuple(args.frames), args.seed,
                         str(args.out), args.per_copy, args.sensor, tuple(args.range), args.drop, args.workers,
-                        tuple(args.origin), tuple(args.replicas), tuple(args.bands))
+                        tuple(args.origin), tuple(args.replicas), tuple(args.bands),
+                        tuple(args.profiles) if args.profiles else PROFILES, args.split)
     report = make_benchmark(config, progress=sys.stderr.isatty())
     counts = report["counts"]
     print(f"{report['tracklets']} tracklets in {report['copies']} copies -> {Path(args.out) / 'benchmark.json'}")
     print("difficulty: " + ", ".join(f"{k} {v}" for k, v in counts["difficulty"].items()))
     print("profile:    " + ", ".join(f"{k} {v}" for k, v in counts["profile"].items()))
+    if report.get("unlisted"):
+        print("unlisted (the points did not show the profile; docs/benchmark.md): "
+              + ", ".join(f"{k} {v}" for k, v in report["unlisted"].items()))
     print(f"time: {report['seconds']['total']:.0f} s (planning {report['seconds']['planning']:.0f} s)")
     return 0
 

@@ -30,6 +30,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--cameras", action="store_true", help="also render a front pinhole camera (pyrender, EGL)")
     parser.add_argument("--camera-size", default="640x360", metavar="WxH", help="camera image size (default 640x360)")
+    parser.add_argument("--open-road", action="store_true",
+                        help="no walls and no poles: open ground all round (a background for the benchmark's "
+                             "far_approach, passing and oblique profiles; docs/benchmark.md)")
     parser.add_argument("--profiles", action="store_true",
                         help="moving vehicles follow the benchmark's motion profiles (kinematic bicycle, bounded "
                              "acceleration and jerk: constant speed, hard braking, strong acceleration, stop-and-go, "
@@ -56,6 +59,6 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, "--frames must be >= 1 and --vehicles >= 0")
     out = write_world(Path(args.out), frames=args.frames, vehicles=args.vehicles, sensor=args.sensor,
                       seed=args.seed, cameras=args.cameras, camera_size=_size(args.camera_size), progress=True,
-                      profiles=args.profiles)
+                      profiles=args.profiles, open_road=args.open_road)
     print(f"wrote {out / 'sequence.json'} ({args.frames} frames, {args.vehicles} moving vehicles; ground truth in {out / 'gt'})")
     return 0

@@ -17,10 +17,19 @@ Entry sources:
 Point entries are meshed with surfel disks (:mod:`.meshing`), optionally mirror-completed. ``quality`` is
 the tracker's mean frame quality for tracker outputs, ``min(1, points / 1000)`` for annotation entries,
 and 1 for mesh files.
+
+**Choosing and confirming parts** (:func:`bank_split`): every entry belongs to exactly one part, decided by
+its source alone (no file, no state: the same entry is in the same part in every bank). Entries built from a
+PandaSet sequence (``source.sequence`` starting with ``pandaset``: the dev tracks the tracker was tuned on and
+the generated benchmark's own background) are *choose*. Every other entry goes by its vehicle (source
+sequence + track, so the mirrored or re-built copies of one vehicle stay together; mesh files by path):
+*choose* when the first 8 bytes of the SHA-256 of that key, as an integer, are divisible by 3, else
+*confirm*, so about two thirds of the other sources confirm. ``benchmark make --split`` draws from one part.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 import time
@@ -41,11 +50,14 @@ from .meshes import SurfelParams, surfel_mesh
 from .shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
 from ..interrupts import import_trimesh
 
-__all__ = ["BankEntry", "Bank", "read_bank", "write_bank_index", "entry_from_points", "entry_from_track_dir",
+__all__ = ["BankEntry", "Bank", "SPLITS", "bank_split", "split_entries", "read_bank", "write_bank_index",
+           "entry_from_points", "entry_from_track_dir",
            "entries_from_annotations", "entry_from_mesh_file", "aggregate_track_points", "aggregate_tracks_points",
            "track_points_by_frame"]
 
 GROUND_CLEARANCE = 0.15
+SPLITS: tuple[str, ...] = ("choose", "confirm")
+TUNING_SEQUENCE_PREFIXES: tuple[str, ...] = ("pandaset",)   # tuned on: always in the choosing part
 
 
 @dataclass
@@ -91,6 +103,30 @@ class Bank:
 
     def upsert(self, entry: BankEntry) -> None:
         self.entries = [e for e in self.entries if e.id != entry.id] + [entry]
+
+
+def _vehicle_key(entry: "BankEntry") -> str:
+    source = entry.source or {}
+    if source.get("track") is not None:
+        return f"{source.get('sequence', '')}/{source['track']}"
+    return str(source.get("path") or entry.id)
+
+
+def bank_split(entry: "BankEntry") -> str:
+    """``"choose"`` or ``"confirm"``: the part of the bank an entry belongs to (module docstring)."""
+    if str((entry.source or {}).get("sequence", "")).lower().startswith(TUNING_SEQUENCE_PREFIXES):
+        return "choose"
+    digest = hashlib.sha256(_vehicle_key(entry).encode()).digest()
+    return "choose" if int.from_bytes(digest[:8], "big") % 3 == 0 else "confirm"
+
+
+def split_entries(entries: Iterable["BankEntry"], split: str | None) -> list["BankEntry"]:
+    """The entries of one part (``None`` or ``"all"``: every entry)."""
+    if split in (None, "all"):
+        return list(entries)
+    if split not in SPLITS:
+        raise ValueError(f"unknown bank split {split!r}; known: {', '.join(SPLITS)}, all")
+    return [e for e in entries if bank_split(e) == split]
 
 
 def _safe_id(text: str) -> str:
@@ -254,7 +290,7 @@ def bank_summary_rows(bank: Bank) -> list[list[str]]:
     rows = []
     for e in bank.entries:
         s = e.size
-        rows.append([e.id, e.label or "-", f"{s['length']:.2f}x{s['width']:.2f}x{s['height']:.2f}",
+        rows.append([e.id, bank_split(e), e.label or "-", f"{s['length']:.2f}x{s['width']:.2f}x{s['height']:.2f}",
                      str(e.point_count), f"{e.quality:.2f}", str(e.source.get("kind", "")) + (f" ({e.source['tracker_mode']})" if e.source.get("tracker_mode") else ""),
                      str(e.source.get("sequence", e.source.get("path", ""))), str(e.source.get("track", "-"))])
     return rows

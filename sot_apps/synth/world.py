@@ -2,7 +2,8 @@
 
 The world (everything in metres, world frame z up, ground plane z = 0):
 
-- a straight road along +x; walls (with gaps) at |y| ~ 14 m, poles at |y| ~ 12 m, parked cars at |y| ~ 10 m;
+- a straight road along +x; walls (with gaps) at |y| ~ 14 m, poles at |y| ~ 12 m, parked cars at |y| ~ 10 m
+  (``open_road``: no walls and no poles, open ground all round);
 - ``vehicles`` procedural vehicles (sedan/SUV/van/truck, varied size) in lanes y = 3.5, -3.5, 7 (oncoming),
   0 (ego lane, ahead or behind); each follows a random piecewise profile of cruising, turning, abrupt
   stops (-6..-9 m/s^2) and abrupt accelerations (+3..+5 m/s^2), integrated at 1 ms; or, with
@@ -234,10 +235,12 @@ def _cylinder_mesh(radius: float, height: float, centre) -> tuple[np.ndarray, np
     return np.asarray(m.vertices) + np.asarray(centre), np.asarray(m.faces)
 
 
-def _background(rng: np.random.Generator, x_min: float, x_max: float) -> list[SimObject]:
+def _background(rng: np.random.Generator, x_min: float, x_max: float, open_road: bool = False) -> list[SimObject]:
     out: list[SimObject] = []
     ground_v = np.array([[x_min - 300, -300, 0], [x_max + 300, -300, 0], [x_max + 300, 300, 0], [x_min - 300, 300, 0]], float)
     out.append(SimObject(ground_v, np.array([[0, 1, 2], [0, 2, 3]]), Trajectory.static(0, 0, 0, 0), -1, 0.2, "ground"))
+    if open_road:  # open ground all round: no walls, no poles
+        return out
     for side in (1.0, -1.0):
         x = x_min
         while x < x_max:  # walls with gaps
@@ -271,12 +274,13 @@ def default_front_camera(width: int = 640, height: int = 360, period_ns: int = 1
 
 def make_world(frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pandar64", seed: int = 0,
                cameras: bool = False, camera_size: tuple[int, int] = (640, 360), parked: int | None = None,
-               realism: Realism | None = None, profiles: bool = False) -> World:
+               realism: Realism | None = None, profiles: bool = False, open_road: bool = False) -> World:
     """Build (but do not simulate) a synthetic world; cheap (well under a second).
 
     ``profiles``: moving vehicle i follows motion profile ``PROFILES[i % 7]`` of
     :mod:`sot_apps.objects.motion_profiles` (the benchmark's: kinematic bicycle, bounded acceleration and
-    jerk; ``occluded`` is left out) instead of the random piecewise profile."""
+    jerk; ``occluded`` is left out) instead of the random piecewise profile. ``open_road``: no walls and no
+    poles, open ground all round (the generated benchmark's hard profiles need room off the road)."""
     if frames < 1 or vehicles < 0:
         raise ValueError("frames must be >= 1 and vehicles >= 0")
     sensor = load_sensor(sensor)
@@ -324,7 +328,7 @@ def make_world(frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pand
         traj = Trajectory.static(x, side * float(rng.uniform(9.5, 10.5)), mesh.size[2] / 2.0, heading)
         objects.append(WorldObject(f"parked_{j:03d}", mesh.label, mesh.kind, mesh.size, mesh.vertices, mesh.faces,
                                    traj, moving=False, color=_color(rng), reflectivity=float(rng.uniform(0.3, 0.8))))
-    background = _background(rng, x_min, x_max)
+    background = _background(rng, x_min, x_max, open_road)
     cams = [default_front_camera(*camera_size, period_ns=period_ns)] if cameras else []
     return World(sensor, seed, frame_times, ego, objects, background, cams, realism or Realism())
 
@@ -364,14 +368,15 @@ def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
 
 def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pandar64",
                 seed: int = 0, cameras: bool = False, camera_size: tuple[int, int] = (640, 360),
-                world: World | None = None, progress: bool = False, profiles: bool = False) -> Path:
+                world: World | None = None, progress: bool = False, profiles: bool = False,
+                open_road: bool = False) -> Path:
     """Synthesise a world and write it as a canonical sequence with ground truth; returns ``out``.
 
     Pass ``world`` (from :func:`make_world`) to write a world you built or modified yourself.
     """
     out = Path(out)
     if world is None:
-        world = make_world(frames, vehicles, sensor, seed, cameras, camera_size, profiles=profiles)
+        world = make_world(frames, vehicles, sensor, seed, cameras, camera_size, profiles=profiles, open_road=open_road)
     out.mkdir(parents=True, exist_ok=True)
     static = world.static_scene()
     sweeps: list[Sweep] = []

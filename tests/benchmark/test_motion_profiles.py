@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from sot_apps.objects.motion_profiles import PROFILES, VehicleLimits, integrate_motion, place_path, sample_motion
+from sot_apps.objects.motion_profiles import ALL_PROFILES, VehicleLimits, integrate_motion, place_path, sample_motion
 
 LIMITS = VehicleLimits()
 DT = 0.01
 
 
-@pytest.mark.parametrize("profile", PROFILES)
+@pytest.mark.parametrize("profile", ALL_PROFILES)
 def test_dynamics_stay_within_the_bounds(profile):
     for seed in range(6):
         spec = sample_motion(profile, np.random.default_rng(seed), 6.0)
@@ -27,6 +27,20 @@ def test_dynamics_stay_within_the_bounds(profile):
         # the measured speed is the path's: the integrator is consistent
         step = np.hypot(np.diff(path.x), np.diff(path.y)) / DT
         assert np.allclose(step, path.speed[:-1], atol=1e-6)
+
+
+def test_hard_profiles_drive_at_their_speeds_and_oblique_curves_gently():
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        for profile, (lo, hi) in (("far_approach", (5.0, 12.0)), ("passing", (7.0, 14.0)), ("hidden", (3.0, 10.0)),
+                                  ("oblique", (3.0, 9.0))):
+            path = integrate_motion(sample_motion(profile, rng, 4.0), 4.0, DT)
+            assert lo <= path.speed.min() and path.speed.max() <= hi  # constant speed in the profile's range
+            turned = abs(path.heading[-1] - path.heading[0])
+            if profile == "oblique":  # radius >= wheelbase / tan(0.02 / 2)-ish: at most a few degrees in 4 s
+                assert turned <= 2.0 * 9.0 * 4.0 * math.tan(0.02 / 2) / LIMITS.wheelbase + 1e-9
+            else:
+                assert turned == 0.0
 
 
 def test_manoeuvres_do_what_their_names_say():
