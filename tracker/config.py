@@ -196,9 +196,11 @@ class MotionConfig:
     max_speed_change: float = 0.0        # > 0: |dx, dy - predicted| capped at this along / half across (m/frame)
     max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
     travel_weight: float = 0.0           # > 0: the heading-from-travel term (heading toward the direction of travel
-                                         # of the track's recent positions), weight at full speed (0: off)
+                                         # of the track's recent positions), weight at full speed, no points (0: off)
     travel_min_speed: float = 3.0        # m/s: slower tracks get no travel term; full weight from twice this
     travel_frames: int = 5               # the direction of travel over this many frames
+    travel_max_turn: float = 0.1         # rad: the term fades out as the window's half-chords turn by up to this
+    travel_points: int = 100             # the weight x travel_points / (travel_points + object points)
     ctrv: CTRVConfig = field(default_factory=CTRVConfig)
 
     def __post_init__(self) -> None:

@@ -63,8 +63,9 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
                        size_margin: float, time_s: float) -> list[Candidate]:
     """The clusters of ``points`` (non-ground, world) on a BEV grid of ``cell`` metres (8-connected cells) that
     hold at least ``min_points`` points and fit ``box``'s length and width + ``size_margin``, each with ``box``
-    placed on it: where a cluster is shorter than the box, the box's face toward ``sensor`` meets the points
-    (the visible face), as in :func:`start_shift`."""
+    placed on it: along an axis where the cluster is shorter than the box and the line of sight from ``sensor``
+    is within 60 degrees of the axis, the box's face toward the sensor meets the points (the visible face, as in
+    :func:`start_shift`); else the box is centred on the cluster's extent."""
     if len(points) < min_points:
         return []
     c, s = np.cos(box.heading), np.sin(box.heading)
@@ -93,6 +94,8 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     mid = 0.5 * (low[keep] + high[keep])
     toward = sensor_uv < mid                               # the sensor is on the low side: that face is seen
     placed = np.where(toward, low[keep] + half, high[keep] - half)
-    placed = np.where(extent[keep] >= 2.0 * half, mid, placed)
+    sight = sensor_uv - mid
+    faced = np.abs(sight) > 0.5 * np.linalg.norm(sight, axis=1, keepdims=True)  # that face is seen, not edge-on
+    placed = np.where(faced & (extent[keep] < 2.0 * half), placed, mid)
     world = box.center[:2] + placed[:, :1] * np.array([c, s]) + placed[:, 1:] * np.array([-s, c])
     return [Candidate(world[i], extent[k], int(sizes[k]), time_s) for i, k in enumerate(keep)]

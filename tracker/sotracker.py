@@ -251,7 +251,7 @@ class Tracker:
             x = self.strategies.first_frame.motion(FrameOne(prev, local, prior, det_target, self._last_dt,
                                                             self.prev_points, self._start_points, self.rng, icp))
             reference = x.copy()
-        travel = self.strategies.travel.target(prev.heading, self._timestamp_ns * 1e-9)
+        travel = self.strategies.travel.target(prev.heading, len(self.prev_points))
         x, info = reg.estimate(prev, self._source(), self.shape.points, target, x, search_scale,
                                c.registration.outer_iterations, False, reference, flags, self.rng, det_target, travel)
         if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
