@@ -29,7 +29,8 @@ from typing import Any, Iterable, Mapping
 from .ground import GroundParams
 
 __all__ = ["TrackerConfig", "GroundConfig", "SearchConfig", "RegistrationConfig", "RansacConfig", "ShapeConfig",
-           "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "ReacquireConfig", "DetectionConfig", "OfflineParams",
+           "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "ReacquireConfig", "DetectionConfig",
+           "OfflineParams",
            "RefinementConfig", "LAG_PARAMS", "PRESETS", "DETECTION_PRESETS", "get_preset", "preset_names",
            "parse_overrides"]
 

@@ -1,5 +1,6 @@
 """Heading from travel (``motion.travel_weight`` > 0): a vehicle moving faster than a few m/s moves along its
-heading, so the direction of travel of the track's own recent box centres is a target for the per-frame heading.
+heading, so the direction of travel of the track's own recent box centres is a target for the per-frame
+heading.
 
 :class:`TravelHeading` keeps the last ``motion.travel_frames`` + 1 centres with their times (at least 3). The direction of
 travel is the chord from the first to the last. In a turn the chord lags the heading, so the term fades out as
