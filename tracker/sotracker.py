@@ -367,8 +367,12 @@ class Tracker:
         r = c.reacquire
         candidates = cluster_candidates(points, self.box, sensor, r.cell, r.cluster_points, r.size_margin, time_s)
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)
-        if relock is None:
-            return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + ("coasting",))),
+        if relock is None or (start is None and float(np.linalg.norm(relock.centre - self.box.center[:2]))
+                              < r.hold_distance):
+            if relock is not None:  # the candidate is where the track is: it holds
+                s.reacquire.reset(time_s)
+            coasting = ("coasting",) if relock is None and "prior_only" in estimate.flags else ()
+            return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
                            time_ms=(time.perf_counter() - t0) * 1e3)
         return self._relock(frame, relock, t0)
 

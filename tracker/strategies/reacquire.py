@@ -5,7 +5,9 @@
 ``min_points`` object points in the box (or frames that continued on the prior); the track keeps predicting on
 its motion model (flag ``coasting``) while the sweep's non-ground points in a region around the prediction,
 growing with the time since support was lost, are clustered (tracker/reacquire.py) and the clusters of the
-box's size are kept as candidates. A start box with fewer than ``start_points`` points is a lost start: its box
+box's size are kept as candidates. The search goes on when points come back (a box that coasted off the object
+follows its points at an offset) until a candidate confirms the track (within ``hold_distance`` of the box: the
+track holds) or moves it, or ``recover_frames`` frames in a row had support. A start box with fewer than ``start_points`` points is a lost start: its box
 is held and the region runs along its heading, ``max_speed`` x the time since the start ahead and a third of
 that behind. The track re-locks (restarts at the candidate, flag ``reacquired``) only on a candidate matched to
 one of the previous frame's candidates in position, size and motion: for a lost track a velocity within
@@ -74,17 +76,29 @@ class ClusterReacquire(Reacquire):
     def reset(self, time_s: float) -> None:
         self._held_s = time_s
         self._misses = 0
+        self._lost = False
+        self._supported = 0
         self._previous: list[Candidate] = []
 
     def lost_start(self, points: int) -> bool:
         return points < self.c.start_points
 
     def holds(self, points: int, coasted: bool, time_s: float) -> bool:
-        if points >= self.c.min_points and not coasted:
+        supported = points >= self.c.min_points and not coasted
+        if not self._lost:
+            if supported:
+                self._held_s, self._misses = time_s, 0
+                return True
+            self._misses += 1
+            self._lost = self._misses >= self.c.lost_frames
+            return not self._lost
+        # lost: the search goes on while the points come back (the box may follow them off the object's centre)
+        # until a candidate confirms the track or ``recover_frames`` supported frames in a row
+        self._supported = self._supported + 1 if supported else 0
+        if self._supported >= self.c.recover_frames:
             self.reset(time_s)
             return True
-        self._misses += 1
-        return self._misses < self.c.lost_frames
+        return False
 
     def region(self, box: Box, time_s: float, start: Box | None) -> Box:
         c = self.c
