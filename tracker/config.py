@@ -326,6 +326,11 @@ class OfflineParams:
     gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
     trial_pairs: str = "rematch"        # a Gauss-Newton step's cost check: "rematch" the trial's points to the
                                         # shape; "fixed": keep the pairs the step was linearised on
+    travel_sigma_heading: float = 0.0   # > 0: heading from travel, each heading toward the direction of the chord
+                                        # through the states travel_frames before and after it, this sigma (rad)
+    travel_frames: int = 2
+    travel_min_step: float = 0.3        # m per frame over the chord: slower frames get no travel term (full
+                                        # weight from twice this)
 
     def __post_init__(self) -> None:
         _choice("refinement.*.ground", self.ground, ("local", "tracker"))

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker import get_preset, track
+from tracker import get_preset, refine_offline, track
 from tracker.frames import LidarFrame
 from tracker.geometry import Box, invert_transform, make_transform, rotation_z, transform_points
 from tracker.metrics import iou_3d_batch
@@ -126,3 +126,14 @@ def test_a_straight_drive_seen_obliquely_keeps_its_heading_with_the_travel_term(
     assert on[-1] <= off[-1] + 0.5
     if seed == 1:
         assert off[-1] > 30.0
+
+
+def test_the_offline_solve_with_heading_from_travel_holds_the_heading_of_an_oblique_straight_drive():
+    boxes = _straight(30, (18.0, -14.0), np.deg2rad(45.0), 0.6)
+    seq = _scene(boxes, 2, density=lambda r: 80.0 * (6.0 / r) ** 2, ground_centre=(28.0, -4.0), ground_half=22.0)
+    online = track(seq, boxes[0], 0, len(seq) - 1, get_preset("full", seed=0))
+    off = refine_offline(seq, online, get_preset("full", seed=0))
+    on = refine_offline(seq, online, get_preset("full", seed=0, **{"refinement.offline.travel_sigma_heading": 0.02}))
+    err_on, err_off = _heading_error_deg(on, boxes), _heading_error_deg(off, boxes)
+    assert np.median(err_on) < 0.6 and np.median(err_on) < np.median(err_off)
+    assert err_on.max() < 3.0
