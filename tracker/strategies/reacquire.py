@@ -1,15 +1,16 @@
 """Re-acquisition strategies (``reacquire.mode``): what a track does when its points no longer support it.
 
-"none" (:class:`NoReacquire`): nothing; a frame without data keeps the prediction (``registration.data_free_frames``).
+"none" (:class:`NoReacquire`): nothing; a frame without data keeps the prediction
+(``registration.data_free_frames``).
 "clusters" (:class:`ClusterReacquire`): support is lost after ``lost_frames`` frames with fewer than
 ``min_points`` object points in the box (or frames that continued on the prior); the track keeps predicting on
 its motion model (flag ``coasting``) while the sweep's non-ground points in a region around the prediction,
 growing with the time since support was lost, are clustered (tracker/reacquire.py) and the clusters of the
 box's size are kept as candidates. The search goes on when points come back (a box that coasted off the object
 follows its points at an offset) until a candidate confirms the track (within ``hold_distance`` of the box: the
-track holds) or moves it, or ``recover_frames`` frames in a row had support. A start box with fewer than ``start_points`` points is a lost start: its box
-is held and the region runs along its heading, ``max_speed`` x the time since the start ahead and a third of
-that behind. The track re-locks (restarts at the candidate, flag ``reacquired``) only on a candidate matched to
+track holds) or moves it, or ``recover_frames`` frames in a row had support. A start box with fewer than
+``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
+the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag ``reacquired``) only on a candidate matched to
 one of the previous frame's candidates in position, size and motion: for a lost track a velocity within
 ``velocity_gate`` of the predicted one; for a lost start a velocity along the start box's heading line (within
 ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance travelled from the start box
@@ -39,8 +40,6 @@ class Relock:
 class Reacquire:
     """The interface (and the "none" behaviour)."""
 
-    searches = False
-
     def reset(self, time_s: float) -> None:
         """A track (re)starts at ``time_s``."""
 
@@ -67,8 +66,6 @@ class NoReacquire(Reacquire):
 
 
 class ClusterReacquire(Reacquire):
-    searches = True
-
     def __init__(self, config: ReacquireConfig) -> None:
         self.c = config
         self.reset(0.0)
