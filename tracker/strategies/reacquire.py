@@ -10,7 +10,8 @@ box's size are kept as candidates. The search goes on when points come back (a b
 follows its points at an offset) until a candidate confirms the track (within ``hold_distance`` of the box: the
 track holds) or moves it, or ``recover_frames`` frames in a row had support. A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
-the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag ``reacquired``) only on a candidate matched to
+the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
+``reacquired``) only on a candidate matched to
 one of the previous frame's candidates in position, size and motion: for a lost track a velocity within
 ``velocity_gate`` of the predicted one; for a lost start a velocity along the start box's heading line (within
 ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance travelled from the start box
