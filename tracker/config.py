@@ -29,7 +29,8 @@ from typing import Any, Iterable, Mapping
 from .ground import GroundParams
 
 __all__ = ["TrackerConfig", "GroundConfig", "SearchConfig", "RegistrationConfig", "RansacConfig", "ShapeConfig",
-           "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "DetectionConfig", "OfflineParams",
+           "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "ReacquireConfig", "DetectionConfig",
+           "OfflineParams",
            "RefinementConfig", "LAG_PARAMS", "PRESETS", "DETECTION_PRESETS", "get_preset", "preset_names",
            "parse_overrides"]
 
@@ -195,6 +196,12 @@ class MotionConfig:
     consistency: str = "symmetric"
     max_speed_change: float = 0.0        # > 0: |dx, dy - predicted| capped at this along / half across (m/frame)
     max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
+    travel_weight: float = 0.0           # > 0: the heading-from-travel term (heading toward the direction of travel
+                                         # of the track's recent positions), weight at full speed, no points (0: off)
+    travel_min_speed: float = 3.0        # m/s: slower tracks get no travel term; full weight from twice this
+    travel_frames: int = 5               # the direction of travel over this many frames
+    travel_max_turn: float = 0.1         # rad: the term fades out as the window's half-chords turn by up to this
+    travel_points: int = 100             # the weight x travel_points / (travel_points + object points)
     ctrv: CTRVConfig = field(default_factory=CTRVConfig)
 
     def __post_init__(self) -> None:
@@ -246,6 +253,38 @@ class FirstFrameConfig:
 
 
 @dataclass(frozen=True)
+class ReacquireConfig:
+    """Re-acquisition (tracker/strategies/reacquire.py). ``mode``: "none", or "clusters": a track whose support
+    is lost (``lost_frames`` frames in a row with fewer than ``min_points`` object points in the box, or
+    continued on the prior) coasts on its motion model and searches the non-ground clusters of its box's size in a
+    region growing with the time since; a start box with fewer than ``start_points`` points is a lost start,
+    searched along its heading. It re-locks on a candidate consistent over 2 frames (size, position, motion)."""
+
+    mode: str = "none"
+    min_points: int = 3                  # object points in the box that hold the track
+    lost_frames: int = 2                 # frames in a row without that support: the track is lost
+    recover_frames: int = 10             # a lost track is held again after this many supported frames in a row
+    hold_distance: float = 1.0           # m: a confirmed candidate this near the box confirms the track as it is
+    start_points: int = 3                # a start box with fewer points is a lost start
+    reach: float = 1.0                   # m: the lost track's region around the prediction at loss (each side)
+    growth: float = 4.0                  # m/s: ... grows by this per second since the support was lost
+    max_speed: float = 15.0              # m/s: a lost start's region reaches this far ahead per second (a third behind)
+    max_reach: float = 45.0              # m: the region grows no further
+    rise: float = 0.5                    # m: the region is this much taller each way than the box
+    cell: float = 0.4                    # m: the BEV grid the clusters are connected on
+    cluster_points: int = 2              # a candidate cluster holds at least this many points
+    size_margin: float = 1.0             # m: a candidate's extent is at most the box's length / width + this
+    size_gate: float = 1.0               # m: a candidate's extent changes at most this between frames
+    velocity_gate: float = 4.0           # m/s: its velocity differs at most this from the predicted one
+    min_speed: float = 1.5               # m/s: a lost start's candidate moves at least this fast
+    max_angle: float = 0.6               # rad: ... along its heading line (either way) within this
+
+    def __post_init__(self) -> None:
+        _choice("reacquire.mode", self.mode, ("none", "clusters"))
+        _positive(self, "reacquire", "lost_frames", "cell", "max_speed")
+
+
+@dataclass(frozen=True)
 class DetectionConfig:
     """The Detection term (Det+SOT, docs/detection.md); ``weight`` 0 = off. With ``method="det"`` the detections
     alone are tracked with a constant-velocity Kalman filter (the paper's Det row)."""
@@ -287,6 +326,11 @@ class OfflineParams:
     gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
     trial_pairs: str = "rematch"        # a Gauss-Newton step's cost check: "rematch" the trial's points to the
                                         # shape; "fixed": keep the pairs the step was linearised on
+    travel_sigma_heading: float = 0.0   # > 0: heading from travel, each heading toward the direction of the chord
+                                        # through the states travel_frames before and after it, this sigma (rad)
+    travel_frames: int = 2
+    travel_min_step: float = 0.3        # m per frame over the chord: slower frames get no travel term (full
+                                        # weight from twice this)
 
     def __post_init__(self) -> None:
         _choice("refinement.*.ground", self.ground, ("local", "tracker"))
@@ -336,6 +380,7 @@ class TrackerConfig:
     motion: MotionConfig = field(default_factory=MotionConfig)
     height: HeightConfig = field(default_factory=HeightConfig)
     first_frame: FirstFrameConfig = field(default_factory=FirstFrameConfig)
+    reacquire: ReacquireConfig = field(default_factory=ReacquireConfig)
     detection: DetectionConfig = field(default_factory=DetectionConfig)
     refinement: RefinementConfig = field(default_factory=RefinementConfig)
 

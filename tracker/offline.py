@@ -304,6 +304,7 @@ class _Solver:
         self.sig = sig
         self.anchor = anchor
         self._matched: tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+        self._travel = (np.zeros(self.k), np.zeros(self.k))  # heading targets and weights (_travel_targets)
         self._object_cache: tuple[np.ndarray, np.ndarray] | None = None
 
     def set_shapes(self, states: np.ndarray) -> bool:
@@ -457,14 +458,47 @@ class _Solver:
         grad = _second_difference_transpose(diff2 / self.sig**2, self.k) + dev / self.anchor**2
         return cost, grad
 
+    def _travel_targets(self, states: np.ndarray) -> None:
+        """Heading from travel (``travel_sigma_heading`` > 0): frame k's heading toward the direction of the
+        chord from state k - m to state k + m (m = ``travel_frames``; the heading at k in a steady turn), weight
+        1 / sigma^2 x a speed factor (0 below ``travel_min_step`` m per frame over the chord, 1 from twice it);
+        frames without both ends, or whose chord is more than 0.5 rad off their heading, get none. The targets
+        are held through a Gauss-Newton step (its cost check included)."""
+        p = self.params
+        m, k = max(int(p.travel_frames), 1), self.k
+        self._travel = (np.zeros(k), np.zeros(k))
+        if p.travel_sigma_heading <= 0 or k <= 2 * m:
+            return
+        chord = states[2 * m:, :2] - states[:-2 * m, :2]
+        step = np.linalg.norm(chord, axis=1) / (2 * m)
+        direction = np.arctan2(chord[:, 1], chord[:, 0])
+        heading = states[m:k - m, 3]
+        offset = wrap_angle(direction - heading)
+        offset = np.where(np.abs(offset) > 0.5 * np.pi, wrap_angle(offset + np.pi), offset)  # reversing
+        weight = np.clip(step / p.travel_min_step - 1.0, 0.0, 1.0) / p.travel_sigma_heading**2
+        weight = np.where(np.abs(offset) > 0.5, 0.0, weight)
+        target, w = np.zeros(k), np.zeros(k)
+        target[m:k - m], w[m:k - m] = heading + offset, weight
+        self._travel = (target, w)
+
+    def _travel_cost(self, states: np.ndarray) -> tuple[float, np.ndarray]:
+        target, w = self._travel
+        r = states[:, 3] - target
+        return float(np.sum(w * r**2)), w * r
+
     def cost(self, states: np.ndarray, pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> float:
-        return self._data(states, False, pairs)[0] + self._prior(states)[0]
+        return self._data(states, False, pairs)[0] + self._prior(states)[0] + self._travel_cost(states)[0]
 
     def step(self, states: np.ndarray) -> np.ndarray:
         cost_d, blocks, grads = self._data(states, True)
         pairs = self._matched[1] if self.params.trial_pairs == "fixed" else None  # the pairs at ``states``
         cost_p, grad_p = self._prior(states)
+        self._travel_targets(states)
+        cost_t, grad_t = self._travel_cost(states)
+        cost_p += cost_t
+        grad_p[:, 3] += grad_t
         h = self.h_prior.copy()  # + the data's 4x4 block of each frame (upper band storage)
+        h[_BANDS, 3::4] += self._travel[1]
         for a in range(4):
             for b in range(a, 4):
                 h[_BANDS + a - b, b::4] += blocks[:, a, b]

@@ -1,4 +1,7 @@
-"""The empty start's search (``first_frame.reacquire``): where along its heading a held start box finds points.
+"""Searching for a track's object again: the empty start's slide along the heading (``first_frame.reacquire``)
+and the candidates of the lost-track search (``reacquire.mode="clusters"``, tracker/strategies/reacquire.py).
+
+The empty start's search (``first_frame.reacquire``): where along its heading a held start box finds points.
 
 The start box had too few points to follow. A region along its heading that grows with the time since the start
 is searched: ``max_speed`` x elapsed ahead, a third of that behind, the box's width + 0.5 m each side across.
@@ -9,19 +12,23 @@ visible one).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from scipy import ndimage
 
 from .geometry import Box, points_in_box
 from .shape import to_object_frame
 
-__all__ = ["search_region", "start_shift"]
+__all__ = ["Candidate", "cluster_candidates", "search_region", "start_shift"]
 
 
-def search_region(box: Box, ahead: float, behind: float) -> Box:
-    """The box stretched ``ahead`` along its heading and ``behind`` against it, 0.5 m wider each side."""
+def search_region(box: Box, ahead: float, behind: float, across: float = 0.5, rise: float = 0.0) -> Box:
+    """The box stretched ``ahead`` along its heading and ``behind`` against it, ``across`` wider each side and
+    ``rise`` taller each way (a road that climbs or falls)."""
     return Box(box.x + 0.5 * (ahead - behind) * np.cos(box.heading),
                box.y + 0.5 * (ahead - behind) * np.sin(box.heading), box.z, box.heading,
-               box.length + ahead + behind, box.width + 1.0, box.height)
+               box.length + ahead + behind, box.width + 2.0 * across, box.height + 2.0 * rise)
 
 
 def start_shift(local: np.ndarray, box: Box, ahead: float, behind: float, min_points: int,
@@ -39,3 +46,56 @@ def start_shift(local: np.ndarray, box: Box, ahead: float, behind: float, min_po
     best = shifts[counts == counts.max()]
     sensor_u = float(np.dot(sensor[:2] - box.center[:2], [np.cos(box.heading), np.sin(box.heading)]))
     return float(best.min() if sensor_u > best.mean() else best.max())  # the visible face meets the points
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A non-ground cluster of the right size: the box placed on it (``centre``, xy, world), its extent along
+    and across the searched box's heading (m), its number of points, and the time it was seen (s)."""
+
+    centre: np.ndarray
+    extent: np.ndarray
+    count: int
+    time_s: float
+
+
+def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: float, min_points: int,
+                       size_margin: float, time_s: float) -> list[Candidate]:
+    """The clusters of ``points`` (non-ground, world) on a BEV grid of ``cell`` metres (8-connected cells) that
+    hold at least ``min_points`` points and fit ``box``'s length and width + ``size_margin``, each with ``box``
+    placed on it: along an axis where the cluster is shorter than the box and the line of sight from ``sensor``
+    is within 60 degrees of the axis, the box's face toward the sensor meets the points (the visible face, as in
+    :func:`start_shift`); else the box is centred on the cluster's extent."""
+    if len(points) < min_points:
+        return []
+    c, s = np.cos(box.heading), np.sin(box.heading)
+    d = points[:, :2] - box.center[:2]
+    uv = np.column_stack([d @ np.array([c, s]), d @ np.array([-s, c])])
+    ij = np.floor((uv - uv.min(axis=0)) / cell).astype(np.int64)
+    grid = np.zeros(tuple(ij.max(axis=0) + 1), dtype=bool)
+    grid[ij[:, 0], ij[:, 1]] = True
+    labels, count = ndimage.label(grid, structure=np.ones((3, 3), dtype=bool))
+    if count == 0:
+        return []
+    label = labels[ij[:, 0], ij[:, 1]] - 1
+    sizes = np.bincount(label, minlength=count)
+    low = np.full((count, 2), np.inf)
+    high = np.full((count, 2), -np.inf)
+    np.minimum.at(low, label, uv)
+    np.maximum.at(high, label, uv)
+    extent = high - low
+    limit = np.array([box.length, box.width]) + size_margin
+    keep = np.flatnonzero((sizes >= min_points) & np.all(extent <= limit, axis=1))
+    if len(keep) == 0:
+        return []
+    sensor_uv = np.array([(sensor[:2] - box.center[:2]) @ np.array([c, s]),
+                          (sensor[:2] - box.center[:2]) @ np.array([-s, c])])
+    half = 0.5 * np.array([box.length, box.width])
+    mid = 0.5 * (low[keep] + high[keep])
+    toward = sensor_uv < mid                               # the sensor is on the low side: that face is seen
+    placed = np.where(toward, low[keep] + half, high[keep] - half)
+    sight = sensor_uv - mid
+    faced = np.abs(sight) > 0.5 * np.linalg.norm(sight, axis=1, keepdims=True)  # that face is seen, not edge-on
+    placed = np.where(faced & (extent[keep] < 2.0 * half), placed, mid)
+    world = box.center[:2] + placed[:, :1] * np.array([c, s]) + placed[:, 1:] * np.array([-s, c])
+    return [Candidate(world[i], extent[k], int(sizes[k]), time_s) for i, k in enumerate(keep)]

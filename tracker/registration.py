@@ -21,7 +21,8 @@ from .strategies.association import Association
 from .strategies.inliers import ShapeInliers
 from .strategies.loss import Consistency, DataFreeFrames, IterationReference, PriorReference
 from .strategies.metric import FrameTarget, Metric
-from .terms import PairMoments, ResidualBlock, detection_block, motion_prior_block, point_pair_block
+from .terms import (PairMoments, ResidualBlock, detection_block, motion_prior_block, point_pair_block,
+                    travel_heading_block)
 
 __all__ = ["Anderson", "Registration", "box_moved"]
 
@@ -75,9 +76,11 @@ class Registration:
 
     def estimate(self, prev: Box, source: np.ndarray, shape: np.ndarray, target: FrameTarget, x0: np.ndarray,
                  scale: float, outer: int, icp_only: bool, mp_reference: np.ndarray | None, flags: list[str],
-                 rng: np.random.Generator, det_target: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+                 rng: np.random.Generator, det_target: np.ndarray | None = None,
+                 travel: tuple[float, float] | None = None) -> tuple[np.ndarray, dict]:
         """Outer loop from motion ``x0``; returns the motion and diagnostics. ``source``: the ICP source (world),
-        ``shape``: the shape model (object frame, placed at ``prev``); ``icp_only``: no shape or motion terms."""
+        ``shape``: the shape model (object frame, placed at ``prev``); ``icp_only``: no shape or motion terms;
+        ``travel``: (heading, weight) of the heading-from-travel term (tracker/strategies/travel.py) or None."""
         c = self.config
         reg, assoc = c.registration, self.association
         pivot = prev.center
@@ -118,7 +121,8 @@ class Registration:
                     info["shape_inliers"] = len(src)
             if not fixed and not motion_terms_only:
                 break
-            blocks_at = self._loss(fixed, pivot, prev.heading, None if icp_only else reference, icp_only, det_target)
+            blocks_at = self._loss(fixed, pivot, prev.heading, None if icp_only else reference, icp_only, det_target,
+                                   travel)
             # the LM stops on a step below a tenth of the outer tolerance (at least 1e-8: never a fixed 50 steps)
             result = solve(blocks_at, x, max_iterations=reg.solver_iterations,
                            tolerance=max(0.1 * reg.convergence_tolerance, 1e-8))
@@ -133,7 +137,7 @@ class Registration:
         return x, info
 
     def _loss(self, fixed: list, pivot: np.ndarray, heading: float, reference: np.ndarray | None, icp_only: bool,
-              det_target: np.ndarray | None):
+              det_target: np.ndarray | None, travel: tuple[float, float] | None = None):
         """The loss's residual blocks as a function of the motion (data terms fixed, motion terms unless icp_only)."""
         c = self.config
         # point-to-point pairs as sums, so each LM trial costs O(1) in the pairs (PairMoments)
@@ -152,6 +156,8 @@ class Registration:
                 blocks.append(motion_prior_block(xx, reference, c.motion.prior_weight))
             if det_target is not None:
                 blocks.append(detection_block(xx, det_target, c.detection.weight))
+            if travel is not None:
+                blocks.append(travel_heading_block(xx, heading, travel[0], travel[1]))
             return blocks
 
         return blocks_at

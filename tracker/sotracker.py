@@ -33,13 +33,14 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .local_region import LocalCrop, local_region
 from .motion_limits import limit_motion
-from .reacquire import search_region, start_shift
+from .reacquire import cluster_candidates, search_region, start_shift
 from .registration import box_moved
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .strategies.choose import choose_strategies
 from .strategies.first_frame import FrameOne
 from .strategies.metric import FrameTarget
 from .strategies.motion import choose_motion_model
+from .strategies.reacquire import Relock
 
 __all__ = ["FrameEstimate", "LocalCrop", "TrackResult", "Tracker", "track", "deskew_points"]
 
@@ -141,6 +142,11 @@ class Tracker:
         obj = local[points_in_box(local, box, 1.0)]
         self._start_points = obj  # the Finder's source (first_frame.search="finder")
         self._waiting = c.first_frame.reacquire and len(obj) < c.search.min_target_points  # see _reacquire
+        time_s = int(frame.timestamp_ns) * 1e-9
+        self.strategies.reacquire.reset(time_s)
+        self._lost_start = self.strategies.reacquire.lost_start(len(obj))  # see _search
+        self.strategies.travel.reset()
+        self.strategies.travel.record(box, time_s)
         if len(obj) == 0:
             flags.append("no_points")
         return FrameEstimate(frame.index, box.state, box, len(obj), 1.0, tuple(["init"] + flags),
@@ -160,6 +166,8 @@ class Tracker:
             return self._predict_only(frame, t0)
         if self._waiting:
             return self._reacquire(frame, t0)
+        if self._lost_start:
+            return self._search(frame, self._held(frame), np.zeros(2), self.first_box, t0)
         self.steps += 1
         first, flags = self.steps == 1, list[str]()
         prior = self.motion.predict(self.box, self._last_dt, self._coasting)
@@ -174,7 +182,10 @@ class Tracker:
         coasting = "prior_only" in flags
         x = self.strategies.height.motion(x, self.box, self._ground_points, fit=not coasting)
         x = self._update_motion(x, local, coasting)
-        return self._finish_step(frame, x, local, flags, t0)
+        estimate = self._finish_step(frame, x, local, flags, t0)
+        if self.strategies.reacquire.holds(estimate.num_points, coasting, int(frame.timestamp_ns) * 1e-9):
+            return estimate
+        return self._search(frame, estimate, prior[:2] / self._last_dt, None, t0)
 
     def shape_points(self) -> np.ndarray:
         """The aggregated shape (object frame)."""
@@ -240,8 +251,9 @@ class Tracker:
             x = self.strategies.first_frame.motion(FrameOne(prev, local, prior, det_target, self._last_dt,
                                                             self.prev_points, self._start_points, self.rng, icp))
             reference = x.copy()
+        travel = self.strategies.travel.target(prev.heading, len(self.prev_points))
         x, info = reg.estimate(prev, self._source(), self.shape.points, target, x, search_scale,
-                               c.registration.outer_iterations, False, reference, flags, self.rng, det_target)
+                               c.registration.outer_iterations, False, reference, flags, self.rng, det_target, travel)
         if info.get("icp_pairs", 0) == 0 and info.get("shape_inliers", 0) == 0:
             flags.append("low_points")
             if reg.data_free.keeps_prior():  # else (upstream) the motion terms alone decided x
@@ -293,6 +305,7 @@ class Tracker:
         if 0 < len(obj_world) < c.registration.min_points:
             flags.append("low_points")
         self.box = box
+        self.strategies.travel.record(box, int(frame.timestamp_ns) * 1e-9)
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)
 
@@ -327,6 +340,51 @@ class Tracker:
         first_box, previous = self.first_box, self._previous_pose
         estimate = self.start(frame, box_moved(prev, motion), previous, motion * (_NOMINAL_DT / elapsed))
         self.first_box = first_box
+        return replace(estimate, flags=tuple(f for f in estimate.flags if f != "init") + ("reacquired",),
+                       time_ms=(time.perf_counter() - t0) * 1e3)
+
+    def _held(self, frame: LidarFrame) -> FrameEstimate:
+        """A lost start's frame: the start box held (the time is set by :meth:`_search`)."""
+        self._coasting += 1
+        self._previous_pose = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+        return FrameEstimate(frame.index, self.box.state, self.box, 0, 0.0, ("no_points", "prior_only"), 0.0,
+                             np.zeros((0, 3)))
+
+    def _search(self, frame: LidarFrame, estimate: FrameEstimate, velocity: np.ndarray, start: Box | None,
+                t0: float) -> FrameEstimate:
+        """Re-acquisition (``reacquire.mode``, tracker/strategies/reacquire.py): the frame's estimate (the motion
+        model's prediction where the points did not hold it) is flagged ``coasting`` while the non-ground clusters
+        of the box's size in the strategy's region are searched; a candidate consistent with the previous frame's
+        restarts the track there (flag ``reacquired``). ``velocity``: the predicted velocity (m/s, xy);
+        ``start``: the start box of a lost start (searched along its heading), else None."""
+        c, s = self.config, self.strategies
+        time_s = int(frame.timestamp_ns) * 1e-9
+        region = s.reacquire.region(self.box, time_s, start)
+        points = local_region(frame, region, 1.0, s.ground, s.road, c.ground.margin, c.deskew,
+                              self._previous_pose).points
+        points = points[points_in_box(points, region, 1.0)]
+        sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
+        r = c.reacquire
+        candidates = cluster_candidates(points, self.box, sensor, r.cell, r.cluster_points, r.size_margin, time_s)
+        relock = s.reacquire.confirm(candidates, self.box, velocity, start)
+        if relock is None or (start is None and float(np.linalg.norm(relock.centre - self.box.center[:2]))
+                              < r.hold_distance):
+            if relock is not None:  # the candidate is where the track is: it holds
+                s.reacquire.reset(time_s)
+            coasting = ("coasting",) if relock is None and "prior_only" in estimate.flags else ()
+            return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
+                           time_ms=(time.perf_counter() - t0) * 1e3)
+        return self._relock(frame, relock, t0)
+
+    def _relock(self, frame: LidarFrame, relock: Relock, t0: float) -> FrameEstimate:
+        """Restart the track at a confirmed candidate, its velocity seeding the motion model."""
+        prev = self.box
+        box = Box(float(relock.centre[0]), float(relock.centre[1]), prev.z, prev.heading, prev.length, prev.width,
+                  prev.height)
+        motion = np.array([relock.velocity[0] * _NOMINAL_DT, relock.velocity[1] * _NOMINAL_DT, 0.0, 0.0])
+        first_box, previous = self.first_box, self._previous_pose
+        estimate = self.start(frame, box, previous, motion)
+        self.first_box, self._lost_start = first_box, False
         return replace(estimate, flags=tuple(f for f in estimate.flags if f != "init") + ("reacquired",),
                        time_ms=(time.perf_counter() - t0) * 1e3)
 

@@ -13,7 +13,7 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["ResidualBlock", "PairMoments", "apply_motion", "point_pair_block", "motion_consistency_block",
-           "motion_prior_block", "detection_block"]
+           "motion_prior_block", "detection_block", "travel_heading_block"]
 
 
 @dataclass(frozen=True)
@@ -201,3 +201,10 @@ def detection_block(x: np.ndarray, target: np.ndarray, weight: float) -> Residua
     r = np.asarray(x, dtype=np.float64) - target
     r[3] = (r[3] + np.pi) % (2.0 * np.pi) - np.pi
     return ResidualBlock("det", r, np.eye(4), weight)
+
+
+def travel_heading_block(x: np.ndarray, previous_heading: float, target: float, weight: float) -> ResidualBlock:
+    """Heading from travel: (previous_heading + dtheta - target)^2, the new heading toward the direction of
+    travel (tracker/strategies/travel.py)."""
+    r = (previous_heading + float(x[3]) - target + np.pi) % (2.0 * np.pi) - np.pi
+    return ResidualBlock("travel", np.array([r]), np.array([[0.0, 0.0, 0.0, 1.0]]), weight)

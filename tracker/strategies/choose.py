@@ -15,6 +15,8 @@ from .inliers import AllPairs, FixedRansac, ShapeInliers, UpstreamRansac
 from .loss import (DataFreeFrames, IterationReference, KeepPrior, MotionTermsOnly, PriorReference,
                    SymmetricConsistency, XOnlyConsistency)
 from .metric import Metric, PlaneMetric, PointMetric
+from .reacquire import Reacquire, choose_reacquire
+from .travel import NoTravel, choose_travel
 
 __all__ = ["Strategies", "choose_strategies"]
 
@@ -26,6 +28,8 @@ class Strategies:
     registration: Registration
     first_frame: FirstFrameSearch
     height: HeightModel
+    reacquire: Reacquire
+    travel: NoTravel
 
 
 def choose_strategies(config: TrackerConfig) -> Strategies:
@@ -51,4 +55,5 @@ def choose_strategies(config: TrackerConfig) -> Strategies:
     first = firsts[c.first_frame.search]
     return Strategies(ground=choose_ground(c), road=choose_road(c),
                       registration=Registration(c, association, inliers, metric, reference, consistency, data_free),
-                      first_frame=first(c), height=choose_height(c.height))
+                      first_frame=first(c), height=choose_height(c.height),
+                      reacquire=choose_reacquire(c.reacquire), travel=choose_travel(c.motion))

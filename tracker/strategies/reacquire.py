@@ -1,0 +1,157 @@
+"""Re-acquisition strategies (``reacquire.mode``): what a track does when its points no longer support it.
+
+"none" (:class:`NoReacquire`): nothing; a frame without data keeps the prediction
+(``registration.data_free_frames``).
+"clusters" (:class:`ClusterReacquire`): support is lost after ``lost_frames`` frames with fewer than
+``min_points`` object points in the box (or frames that continued on the prior); the track keeps predicting on
+its motion model (flag ``coasting``) while the sweep's non-ground points in a region around the prediction,
+growing with the time since support was lost, are clustered (tracker/reacquire.py) and the clusters of the
+box's size are kept as candidates. The search goes on when points come back (a box that coasted off the object
+follows its points at an offset) until a candidate confirms the track (within ``hold_distance`` of the box: the
+track holds) or moves it, or ``recover_frames`` frames in a row had support. A start box with fewer than
+``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
+the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
+``reacquired``) only on a candidate matched to
+one of the previous frame's candidates in position, size and motion: for a lost track a velocity within
+``velocity_gate`` of the predicted one; for a lost start a velocity along the start box's heading line (within
+``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance travelled from the start box
+since the start.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import ReacquireConfig
+from ..geometry import Box
+from ..reacquire import Candidate, search_region
+
+__all__ = ["Reacquire", "NoReacquire", "ClusterReacquire", "Relock", "choose_reacquire"]
+
+
+class Relock:
+    """Where a confirmed candidate puts the track: ``centre`` (xy, world) and the velocity to seed the motion
+    model with (m/s, xy, world)."""
+
+    def __init__(self, centre: np.ndarray, velocity: np.ndarray) -> None:
+        self.centre = centre
+        self.velocity = velocity
+
+
+class Reacquire:
+    """The interface (and the "none" behaviour)."""
+
+    def reset(self, time_s: float) -> None:
+        """A track (re)starts at ``time_s``."""
+
+    def lost_start(self, points: int) -> bool:
+        """Whether a start box holding ``points`` object points is a lost start."""
+        return False
+
+    def holds(self, points: int, coasted: bool, time_s: float) -> bool:
+        """Whether the frame's support holds the track (``coasted``: the frame continued on the prior)."""
+        return True
+
+    def region(self, box: Box, time_s: float, start: Box | None) -> Box:
+        """The region to search: around the predicted ``box``, or along the lost ``start`` box's heading."""
+        raise NotImplementedError
+
+    def confirm(self, candidates: list[Candidate], box: Box, velocity: np.ndarray | None,
+                start: Box | None) -> Relock | None:
+        """A candidate consistent with one of the previous frame's, or None (the candidates are kept)."""
+        raise NotImplementedError
+
+
+class NoReacquire(Reacquire):
+    pass
+
+
+class ClusterReacquire(Reacquire):
+    def __init__(self, config: ReacquireConfig) -> None:
+        self.c = config
+        self.reset(0.0)
+
+    def reset(self, time_s: float) -> None:
+        self._held_s = time_s
+        self._misses = 0
+        self._lost = False
+        self._supported = 0
+        self._previous: list[Candidate] = []
+
+    def lost_start(self, points: int) -> bool:
+        return points < self.c.start_points
+
+    def holds(self, points: int, coasted: bool, time_s: float) -> bool:
+        supported = points >= self.c.min_points and not coasted
+        if not self._lost:
+            if supported:
+                self._held_s, self._misses = time_s, 0
+                return True
+            self._misses += 1
+            self._lost = self._misses >= self.c.lost_frames
+            return not self._lost
+        # lost: the search goes on while the points come back (the box may follow them off the object's centre)
+        # until a candidate confirms the track or ``recover_frames`` supported frames in a row
+        self._supported = self._supported + 1 if supported else 0
+        if self._supported >= self.c.recover_frames:
+            self.reset(time_s)
+            return True
+        return False
+
+    def region(self, box: Box, time_s: float, start: Box | None) -> Box:
+        c = self.c
+        lost_s = max(time_s - self._held_s, 0.0)
+        if start is not None:
+            ahead = min(c.max_speed * lost_s, c.max_reach)
+            return search_region(start, ahead, ahead / 3.0, c.reach, c.rise)
+        reach = min(c.reach + c.growth * lost_s, c.max_reach)
+        return search_region(box, reach, reach, reach, c.rise)
+
+    def confirm(self, candidates: list[Candidate], box: Box, velocity: np.ndarray | None,
+                start: Box | None) -> Relock | None:
+        c = self.c
+        previous, self._previous = self._previous, candidates
+        best: tuple[float, Relock] | None = None
+        for now in candidates:
+            for before in previous:
+                dt = now.time_s - before.time_s
+                if dt <= 0 or np.any(np.abs(now.extent - before.extent) > c.size_gate):
+                    continue
+                v = (now.centre - before.centre) / dt
+                relock = (self._from_start(now, v, start) if start is not None else
+                          self._from_track(now, v, velocity))
+                if relock is None:
+                    continue
+                # a lost track: the candidate nearest the prediction; a lost start: the steadiest motion
+                score = float(np.linalg.norm(now.centre - box.center[:2]) if start is None
+                              else np.linalg.norm(v - relock.velocity))
+                if best is None or score < best[0]:
+                    best = (score, relock)
+        return None if best is None else best[1]
+
+    def _from_track(self, now: Candidate, v: np.ndarray, velocity: np.ndarray | None) -> Relock | None:
+        predicted = np.zeros(2) if velocity is None else velocity
+        if np.linalg.norm(v - predicted) > self.c.velocity_gate:
+            return None
+        return Relock(now.centre, predicted.copy())
+
+    def _from_start(self, now: Candidate, v: np.ndarray, start: Box) -> Relock | None:
+        c = self.c
+        axis = np.array([np.cos(start.heading), np.sin(start.heading)])
+        speed = float(np.linalg.norm(v))
+        if not c.min_speed <= speed <= c.max_speed:
+            return None
+        if abs(float(v @ axis)) < speed * np.cos(c.max_angle):   # not along the heading line (either way)
+            return None
+        travelled = float((now.centre - start.center[:2]) @ axis)
+        elapsed = now.time_s - self._held_s
+        if elapsed <= 0 or travelled * float(v @ axis) <= 0:   # it must have come from the start box
+            return None
+        mean = travelled / elapsed                          # the mean velocity along the heading since the start
+        if not c.min_speed <= abs(mean) <= c.max_speed or abs(abs(mean) - speed) > c.velocity_gate:
+            return None
+        return Relock(now.centre, mean * axis)
+
+
+def choose_reacquire(config: ReacquireConfig) -> Reacquire:
+    return ClusterReacquire(config) if config.mode == "clusters" else NoReacquire()

@@ -1,0 +1,88 @@
+"""Heading from travel (``motion.travel_weight`` > 0): a vehicle moving faster than a few m/s moves along its
+heading, so the direction of travel of the track's own recent box centres is a target for the per-frame
+heading.
+
+:class:`TravelHeading` keeps the last ``motion.travel_frames`` + 1 centres with their times (at least 3). The direction of
+travel is the chord from the first to the last. In a turn the chord lags the heading, so the term fades out as
+the window turns: the direction of its second half-chord less its first's, the weight x (1 - that /
+``travel_max_turn``), none beyond (a turn measured from the positions only: the motion model's turn rate, which a
+rotating box feeds, would feed the rotation back). Its
+weight is ``travel_weight`` x a speed factor (0 below ``travel_min_speed``, rising to 1 at twice that speed) x a
+sparseness factor ``travel_points`` / (``travel_points`` + the previous frame's object points): few points (a far
+or partial view) pin the heading weakly. In
+the solve it is a quadratic term on the heading (tracker/terms.py ``travel_heading_block``) beside the data terms:
+where the points pin the heading (a curved loss in dtheta) they decide, where they pin it weakly (a partial view)
+the travel does. A direction more than ``_MAX_OFFSET`` from the previous heading (a reversal, a re-lock) is not
+used. :class:`NoTravel`: off (the paper, ``faithful``)."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from ..config import MotionConfig
+from ..geometry import Box, wrap_angle
+
+__all__ = ["NoTravel", "TravelHeading", "choose_travel"]
+
+_MAX_OFFSET = 0.5  # rad
+
+
+class NoTravel:
+    def reset(self) -> None:
+        pass
+
+    def record(self, box: Box, time_s: float) -> None:
+        pass
+
+    def target(self, heading: float, points: int) -> tuple[float, float] | None:
+        """(the heading to pull toward, the term's weight) for the frame after a box with ``heading``; ``points``:
+        the previous frame's object points (how well the points can pin the heading)."""
+        return None
+
+
+class TravelHeading(NoTravel):
+    def __init__(self, config: MotionConfig) -> None:
+        self.weight = config.travel_weight
+        self.min_speed = config.travel_min_speed
+        self.points = config.travel_points
+        self.max_turn = config.travel_max_turn
+        self._track: deque[tuple[float, float, float]] = deque(maxlen=max(config.travel_frames, 2) + 1)
+
+    def reset(self) -> None:
+        self._track.clear()
+
+    def record(self, box: Box, time_s: float) -> None:
+        self._track.append((time_s, box.x, box.y))
+
+    def target(self, heading: float, points: int) -> tuple[float, float] | None:
+        if len(self._track) < 3:
+            return None
+        track = np.array(self._track)
+        span = track[-1, 0] - track[0, 0]
+        chord = track[-1, 1:] - track[0, 1:]
+        if span <= 0:
+            return None
+        speed = float(np.linalg.norm(chord)) / span
+        factor = min(1.0, max(0.0, speed / self.min_speed - 1.0))
+        if factor <= 0:
+            return None
+        # a turn: the chord lags the heading; the term fades out as the half-chords turn (up to max_turn)
+        mid = track[len(track) // 2, 1:]
+        first, second = mid - track[0, 1:], track[-1, 1:] - mid
+        turn = abs(float(wrap_angle(np.arctan2(second[1], second[0]) - np.arctan2(first[1], first[0]))))
+        factor *= max(0.0, 1.0 - turn / self.max_turn)
+        if factor <= 0:
+            return None
+        direction = float(np.arctan2(chord[1], chord[0]))
+        offset = float(wrap_angle(direction - heading))
+        if abs(offset) > 0.5 * np.pi:                  # driving backwards: the heading is the other way
+            offset = float(wrap_angle(offset + np.pi))
+        if abs(offset) > _MAX_OFFSET:
+            return None
+        return heading + offset, self.weight * factor * self.points / (self.points + points)
+
+
+def choose_travel(config: MotionConfig) -> NoTravel:
+    return TravelHeading(config) if config.travel_weight > 0 else NoTravel()
