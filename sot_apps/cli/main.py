@@ -11,6 +11,12 @@ import os
 import signal
 import sys
 
+# A worker process that multiprocessing spawned from this program (a Dask worker, a pool worker) imports this
+# module again first: Ctrl-C is its parent's to handle (the parent stops its workers), so the worker ignores it
+# from here on and never prints its own traceback or line.
+if "--multiprocessing-fork" in getattr(sys, "orig_argv", ()):
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
 
 def _interrupted_while_starting(signum, frame) -> None:
     # Nothing has been written yet, so leave at once: an exception raised here could land inside importlib's

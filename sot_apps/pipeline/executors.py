@@ -20,7 +20,7 @@ from typing import Any, Callable, Iterable
 
 from tqdm import tqdm
 
-from ..interrupts import sigint_ignored_in_children
+from ..interrupts import deferred_interrupt, sigint_ignored_in_children
 
 __all__ = ["Task", "TaskOutcome", "ExecutorSpec", "ExecutorSession", "run_tasks"]
 
@@ -277,6 +277,8 @@ class ExecutorSession:
                         except BrokenProcessPool as exc:
                             broken = True
                             outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
+                        except KeyboardInterrupt:
+                            raise   # the Ctrl-C reached the worker first: the run is interrupted, not the task failed
                         except BaseException as exc:  # noqa: BLE001 - e.g. an unpicklable result
                             outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
                         bar.update(1)
@@ -298,10 +300,11 @@ class ExecutorSession:
             if self.spec.address:
                 self._client = Client(self.spec.address)
             else:
-                # the workers start with SIGINT ignored (and keep it so: asyncio installs no handler over an
-                # ignored signal): a Ctrl-C to the process group reaches only this process, which cancels the
-                # tasks and closes the cluster; without this each worker and nanny printed its own traceback
-                with sigint_ignored_in_children():
+                # a Ctrl-C while the cluster starts is held and delivered once it stands (the session's close
+                # then stops it; ignoring it lost the Ctrl-C for seconds); the spawned workers ignore SIGINT from
+                # their first import of sot_apps.cli.main on (and keep it so: asyncio installs no handler over
+                # an ignored signal), so they print nothing of their own
+                with deferred_interrupt():
                     self._cluster = LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1,
                                                  processes=True, dashboard_address=None,
                                                  worker_dashboard_address=None,
