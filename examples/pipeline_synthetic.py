@@ -11,13 +11,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sot_apps.synth import write_world
 from sot_apps.apps.flow import FlowConfig
 from sot_apps.apps.scans import ScanConfig
 from sot_apps.pipeline.config import ObjectSource, PipelineConfig, SequenceConfig, Stages, TrackStage
 from sot_apps.pipeline.executors import ExecutorSpec
 from sot_apps.pipeline.runner import run_pipeline
 from sot_apps.report import build_report
+from sot_apps.synth import write_world
 
 
 def main() -> None:

@@ -18,6 +18,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "tracker"))
 
 from test_motion_filter import _rear_view_sequence  # noqa: E402  (the tests' scene builder)
+
 from tracker import Tracker, get_preset, parse_overrides  # noqa: E402
 from tracker.geometry import wrap_angle  # noqa: E402
 

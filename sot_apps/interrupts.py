@@ -65,7 +65,7 @@ def import_trimesh() -> ModuleType:
 
 def import_pyrender() -> ModuleType:
     with deferred_interrupt():
-        import pyrender   # imports trimesh
+        import pyrender  # imports trimesh
     return pyrender
 
 

@@ -19,12 +19,22 @@ from typing import Any
 
 import numpy as np
 
-from tracker import (Box, Detections, FrameEstimate, LidarFrame, Tracker, TrackResult, TrackerConfig,
-                     cached_sweep_ground_mask, points_in_box, track)
+from tracker import (
+    Box,
+    Detections,
+    FrameEstimate,
+    LidarFrame,
+    Tracker,
+    TrackerConfig,
+    TrackResult,
+    cached_sweep_ground_mask,
+    points_in_box,
+    track,
+)
 
 from .errors import InputError
-from .io.sequence import Sequence
 from .io.atomic import write_text
+from .io.sequence import Sequence
 from .io.tracks import FrameRecord, Size, TrackFile, write_track
 
 __all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read_shape_growth", "parse_init_box",

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sot_apps.cli.main import main
-from sot_apps.evaluation import DEV_TRACKS   # the one list of the tuning set
+from sot_apps.evaluation import DEV_TRACKS  # the one list of the tuning set
 from sot_apps.evaluation.tracker import select_moving_vehicle_tracks
 from sot_apps.objects.selection import annotated_span
 

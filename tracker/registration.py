@@ -21,8 +21,14 @@ from .strategies.association import Association
 from .strategies.inliers import ShapeInliers
 from .strategies.loss import Consistency, DataFreeFrames, IterationReference, PriorReference
 from .strategies.metric import FrameTarget, Metric
-from .terms import (PairMoments, ResidualBlock, detection_block, motion_prior_block, point_pair_block,
-                    travel_heading_block)
+from .terms import (
+    PairMoments,
+    ResidualBlock,
+    detection_block,
+    motion_prior_block,
+    point_pair_block,
+    travel_heading_block,
+)
 
 __all__ = ["Anderson", "Registration", "box_moved"]
 

@@ -17,8 +17,8 @@ and their offline refinement; ``ground.remover="local"`` fits planes on the trac
 from __future__ import annotations
 
 import math
-from functools import partial
 import weakref
+from functools import partial
 
 import numpy as np
 

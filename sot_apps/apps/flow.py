@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import AppBase, RunContext, Skip, SequenceTracks, Unit, UnitOutput, track_dir
+from . import AppBase, RunContext, SequenceTracks, Skip, Unit, UnitOutput, track_dir
 
 
 @dataclass(frozen=True)

@@ -29,8 +29,8 @@ class ScansApp(AppBase):
     needs = ("bank",)
 
     def plan(self, config: ScanConfig, run: RunContext) -> list[Unit | Skip]:
-        from ..objects.bank import read_bank
         from ..io.checksums import sha256_file
+        from ..objects.bank import read_bank
 
         bank = read_bank(run.out / "bank", must_exist=False)
         entries = sorted(bank.entries, key=lambda e: (-e.quality, e.id))[: config.max_entries]

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 import numpy as np
 
-from ..errors import InputError
 from ..benchmark.profile_scores import pool_figures, tracklet_figures
+from ..errors import InputError
 
 if TYPE_CHECKING:   # imported by `sot-apps bench --help` (module discovery): the libraries load when a run starts
     from ..benchmark.lists import SequenceResolver, Tracklet

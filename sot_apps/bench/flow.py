@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -36,7 +35,7 @@ def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int =
     """Per object and pair: best-of-``repeats`` dense-flow time (ms) and its pixel count."""
     import numpy as np
 
-    from ..flow.annotate import FlowOptions, write_pair_outputs, build_pair, compute_pair
+    from ..flow.annotate import FlowOptions, build_pair, compute_pair, write_pair_outputs
     from ..flow.dense import RayCache
 
     camera = seq.cameras[camera_name]
@@ -184,10 +183,10 @@ def _quality_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_quality(args: argparse.Namespace) -> int:
-    from .flow_quality import photometric_quality, synthetic_quality, tracker_objects
     from ..flow.objects import objects_from_annotations
     from ..io import open_sequence
     from ..io.atomic import write_json
+    from .flow_quality import photometric_quality, synthetic_quality, tracker_objects
 
     try:
         w, h = (int(v) for v in args.camera_size.lower().split("x"))

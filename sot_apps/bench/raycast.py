@@ -75,11 +75,11 @@ def _vehicle_meshes(bank_dir: str | None, count: int) -> tuple[list[tuple[np.nda
 def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int = 20, sensor_name: str = "waymo_top") -> dict:
     import numpy as np
 
-    from ..sensor.noise import Realism
-    from ..raycast import RaycastScene
-    from ..sensor.scan import SimObject, simulate_scan
     from ..objects.trajectory import Trajectory
+    from ..raycast import RaycastScene
     from ..sensor.model import load_sensor
+    from ..sensor.noise import Realism
+    from ..sensor.scan import SimObject, simulate_scan
 
     pinned = _pin_one_core()
     sensor = load_sensor(sensor_name)
@@ -168,7 +168,6 @@ def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int 
 
 def _open3d_time(scene, origins, dirs, repeats: int) -> float:
     import numpy as np
-
     import open3d as o3d
 
     rs = o3d.t.geometry.RaycastingScene()
@@ -222,7 +221,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..io.atomic import write_json
-
     from . import format_machine, machine_description
 
     result = run_benchmark(args.bank, args.vehicles, args.repeats, args.sensor)

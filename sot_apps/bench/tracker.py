@@ -124,8 +124,8 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
     from tracker import get_preset
 
     from ..evaluation.tracker import prepare_tracks, resolve_presets, select_moving_vehicle_tracks
-    from ..io.cached_source import CachedSource
     from ..io import open_sequence
+    from ..io.cached_source import CachedSource
 
     pinned = pin_one_core()
     sequence = open_sequence(sequence_path)

@@ -25,8 +25,8 @@ from tracker import DIFFICULTIES, DIFFICULTY_THRESHOLDS, difficulty, points_in_b
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from ..schemas import load_json_validated
 from ..objects.selection import DEFAULT_SELECTION, annotated_span
+from ..schemas import load_json_validated
 
 __all__ = ["Tracklet", "ListCriteria", "read_list", "read_lists", "build_lists", "SequenceResolver",
            "default_resolver", "write_lists", "LIST_FILES", "type_of_label"]

@@ -40,8 +40,8 @@ from tracker import iou_3d_batch
 
 from ..objects.motion_profiles import MotionPath, MotionSpec, integrate_motion, place_path, sample_motion
 from .background import GroundMap
-from .hard_profiles import extra_headings, geometry_ok
 from .deps import Trajectory
+from .hard_profiles import extra_headings, geometry_ok
 
 __all__ = ["InsertedVehicle", "PlacementContext", "place_vehicle", "place_occluder", "swept_boxes", "EGO_SIZE",
            "STEP_S", "SPEED_SCALES"]

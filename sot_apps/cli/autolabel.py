@@ -6,8 +6,15 @@ import argparse
 import sys
 
 from ..errors import InputError
-from .common import (declare_outputs, add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
-                     simulated_detections)
+from .common import (
+    add_detections_arguments,
+    add_sequence_argument,
+    add_subcommand,
+    declare_outputs,
+    load_detections,
+    load_sequence,
+    simulated_detections,
+)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -43,9 +50,9 @@ def run(args: argparse.Namespace) -> int:
     from tracker import get_preset
 
     from ..detection.autolabel import autolabel, write_autolabels
+    from ..io.atomic import write_json
     from ..io.cached_source import CachedSource
     from ..objects.selection import DEFAULT_SELECTION
-    from ..io.atomic import write_json
 
     sequence = load_sequence(args)
 

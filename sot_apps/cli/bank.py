@@ -49,9 +49,15 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def run_build(args: argparse.Namespace) -> int:
     from ..io import open_sequence
+    from ..objects.bank import (
+        entries_from_annotations,
+        entry_from_mesh_file,
+        entry_from_track_dir,
+        is_track_dir,
+        read_bank,
+        write_bank_index,
+    )
     from ..objects.selection import DEFAULT_SELECTION
-    from ..objects.bank import (entries_from_annotations, entry_from_mesh_file, entry_from_track_dir,
-                                  is_track_dir, read_bank, write_bank_index)
 
     if not args.inputs and not args.from_annotations:
         raise InputError(None, "bank build: give TRACK_DIR/mesh inputs or --from-annotations SEQUENCE")

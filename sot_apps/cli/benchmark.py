@@ -6,8 +6,18 @@ import argparse
 from pathlib import Path
 
 from ..errors import InputError
-from .common import (add_action, add_subcommand, coordinate, declare_outputs, finite_float, nonnegative_float,
-                     nonnegative_int, positive_float, positive_int, probability)
+from .common import (
+    add_action,
+    add_subcommand,
+    coordinate,
+    declare_outputs,
+    finite_float,
+    nonnegative_float,
+    nonnegative_int,
+    positive_float,
+    positive_int,
+    probability,
+)
 
 
 def _frames(text: str) -> tuple[int, int]:

@@ -6,8 +6,15 @@ import argparse
 import sys
 
 from ..errors import InputError
-from .common import (declare_outputs, add_detections_arguments, add_sequence_argument, add_subcommand, load_detections, load_sequence,
-                     simulated_detections)
+from .common import (
+    add_detections_arguments,
+    add_sequence_argument,
+    add_subcommand,
+    declare_outputs,
+    load_detections,
+    load_sequence,
+    simulated_detections,
+)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -38,9 +45,9 @@ def register(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from ..objects.selection import DEFAULT_SELECTION
     from ..io.atomic import write_json
     from ..io.detections import write_detections
+    from ..objects.selection import DEFAULT_SELECTION
 
     if not args.out and not args.evaluate:
         raise InputError(None, "nothing to do: give --out FILE and/or --evaluate")

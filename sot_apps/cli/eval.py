@@ -6,8 +6,17 @@ import argparse
 import sys
 
 from ..io import FORMATS
-from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, declare_outputs, load_detections,
-                     load_sequence, check_profile, nonnegative_int, positive_int, simulated_detections)
+from .common import (
+    add_detections_arguments,
+    add_subcommand,
+    check_profile,
+    declare_outputs,
+    load_detections,
+    load_sequence,
+    nonnegative_int,
+    positive_int,
+    simulated_detections,
+)
 
 
 def register(subparsers) -> argparse.ArgumentParser:

@@ -52,8 +52,12 @@ def register(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..motion_export.export import export_motion
-    from ..motion_export.sources import (DEFAULT_INVALID_FLAGS, aggregate_shape, tracks_from_annotations,
-                                         tracks_from_dirs)
+    from ..motion_export.sources import (
+        DEFAULT_INVALID_FLAGS,
+        aggregate_shape,
+        tracks_from_annotations,
+        tracks_from_dirs,
+    )
 
     if args.track_id and not args.from_annotations:
         raise InputError(None, "--track-id selects annotated tracks and needs --from-annotations")

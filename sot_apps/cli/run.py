@@ -6,7 +6,6 @@ import argparse
 
 from .common import add_subcommand, declare_outputs, positive_int
 
-
 EXIT_RULE = ("Exit code 1 when any unit failed, except annotated objects the tracker could not start or follow for "
              "lack of LiDAR points (listed as FAILED; far or hidden vehicles are a normal outcome on real data); "
              "0 otherwise. Tracks that look lost are reported, not counted as failures.")

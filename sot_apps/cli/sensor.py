@@ -12,8 +12,16 @@ if TYPE_CHECKING:
     import numpy as np
 
 from ..errors import InputError
-from .common import (add_action, add_sequence_argument, add_subcommand, coordinate, declare_outputs, load_sequence,
-                     nonnegative_float, positive_float)
+from .common import (
+    add_action,
+    add_sequence_argument,
+    add_subcommand,
+    coordinate,
+    declare_outputs,
+    load_sequence,
+    nonnegative_float,
+    positive_float,
+)
 
 MAX_PLAUSIBLE_BEAMS = 128   # the most beams of any spinning LiDAR on sale (e.g. Hesai OT128, Ouster OS-128)
 

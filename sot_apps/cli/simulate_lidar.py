@@ -43,11 +43,11 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from ..io import open_sequence
-    from ..objects.bank import read_bank
     from ..lidar_sim.export import FORMATS
     from ..lidar_sim.scene import load_scene, overlapping_objects, random_scene
-    from ..sensor.model import load_sensor
     from ..lidar_sim.simulate import counts_table, run_simulation
+    from ..objects.bank import read_bank
+    from ..sensor.model import load_sensor
 
     if (args.scene is None) == (args.random is None):
         raise InputError(None, "simulate-lidar: give exactly one of --scene SCENE.json or --random N")

@@ -8,8 +8,16 @@ import sys
 from tracker import DETECTION_PRESETS, get_preset, preset_names
 
 from ..errors import InputError
-from .common import (add_detections_arguments, add_sequence_argument, add_subcommand, declare_outputs, load_detections,
-                     load_sequence, nonnegative_int, positive_int)
+from .common import (
+    add_detections_arguments,
+    add_sequence_argument,
+    add_subcommand,
+    declare_outputs,
+    load_detections,
+    load_sequence,
+    nonnegative_int,
+    positive_int,
+)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -56,9 +64,18 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from ..io.bounds import check_box_values
-    from ..tracking import (TrackingFailed, check_vehicle_size, first_box_with_points, init_points, parse_init_box,
-                            refine_track_fixed_lag, refine_track_offline, resolve_span, track_sequence,
-                            write_track_result)
+    from ..tracking import (
+        TrackingFailed,
+        check_vehicle_size,
+        first_box_with_points,
+        init_points,
+        parse_init_box,
+        refine_track_fixed_lag,
+        refine_track_offline,
+        resolve_span,
+        track_sequence,
+        write_track_result,
+    )
 
     if args.lag is not None and args.offline:
         raise InputError(None, "--lag and --offline are exclusive (offline refines with all frames)")

@@ -27,9 +27,22 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from tracker import (align_heading, Box, ConstantVelocityFilter, FrameDetections, FrameSource, get_preset,
-                     iou_bev_batch, LidarFrame, points_in_box, track, TrackerConfig, TrackResult, voxel_downsample,
-                     wrap_angle)
+from tracker import (
+    Box,
+    ConstantVelocityFilter,
+    FrameDetections,
+    FrameSource,
+    LidarFrame,
+    TrackerConfig,
+    TrackResult,
+    align_heading,
+    get_preset,
+    iou_bev_batch,
+    points_in_box,
+    track,
+    voxel_downsample,
+    wrap_angle,
+)
 
 __all__ = ["AssociationConfig", "DetectionTrack", "AutoLabel", "associate_tracks", "label_track", "anchor_to_detections",
            "PointFit", "fit_to_points", "detection_sigma", "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",

@@ -26,7 +26,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from tracker import FrameDetections, ground_mask, GroundParams, transform_points, wrap_angle
+from tracker import FrameDetections, GroundParams, ground_mask, transform_points, wrap_angle
 
 __all__ = ["DetectorConfig", "fit_rectangle", "detect_frame", "detect_sequence"]
 

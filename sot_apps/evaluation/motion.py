@@ -23,8 +23,15 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from ..objects.smoother import (ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, Kinematics, ObjectTrack,
-                                        SmootherConfig, central_difference_kinematics, smooth_track)
+from ..objects.smoother import (
+    ANNOTATION_SMOOTHER,
+    TRACKER_SMOOTHER,
+    Kinematics,
+    ObjectTrack,
+    SmootherConfig,
+    central_difference_kinematics,
+    smooth_track,
+)
 
 __all__ = ["TrackMotionErrors", "MotionAccuracy", "evaluate_motion", "format_table", "plot_accuracy",
            "find_track_dirs"]

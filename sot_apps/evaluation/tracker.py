@@ -25,16 +25,37 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from tracker import (DETECTION_PRESETS, DIFFICULTIES, DIFFICULTY_THRESHOLDS, PRECISION_THRESHOLDS, ROB_THRESHOLDS, SUCCESS_THRESHOLDS,
-                     Box, Detections, PooledMetrics, TrackResult, TrackerConfig, TrackletScores, chamfer_distance,
-                     difficulty, get_preset, refine_fixed_lag, mean_points_in_boxes, pool_metrics, preset_names, pseudo_gt_shape,
-                     score_tracklet, track, tracklet_metrics)
+from tracker import (
+    DETECTION_PRESETS,
+    DIFFICULTIES,
+    DIFFICULTY_THRESHOLDS,
+    PRECISION_THRESHOLDS,
+    ROB_THRESHOLDS,
+    SUCCESS_THRESHOLDS,
+    Box,
+    Detections,
+    PooledMetrics,
+    TrackerConfig,
+    TrackletScores,
+    TrackResult,
+    chamfer_distance,
+    difficulty,
+    get_preset,
+    mean_points_in_boxes,
+    pool_metrics,
+    preset_names,
+    pseudo_gt_shape,
+    refine_fixed_lag,
+    score_tracklet,
+    track,
+    tracklet_metrics,
+)
 
 from ..errors import InputError
 from ..io.cached_source import CachedSource
 from ..io.jsonable import json_safe
-from ..objects.selection import DEFAULT_SELECTION, Selection, annotated_span
 from ..io.sequence import Sequence as LidarSequence
+from ..objects.selection import DEFAULT_SELECTION, Selection, annotated_span
 
 __all__ = [
     "EvalConfig",

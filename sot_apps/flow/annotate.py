@@ -31,16 +31,16 @@ from ..errors import InputError
 from ..io.atomic import write_bytes, write_json
 from ..io.images import read_color_image
 from ..io.sequence import Camera, Sequence
+from ..objects.trajectory import interpolate_pose
 from .camera import CameraModel
 from .dense import RayCache, dense_flow
 from .flo_io import write_flo
 from .kitti_io import write_kitti_flow
-from .png import encode_png
 from .objects import TrackedObject
 from .occlusion import ProjectedPoints, project_lidar
+from .png import encode_png
 from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup
 from .sparse import sparse_flow
-from ..objects.trajectory import interpolate_pose
 from .visualize import flow_to_color, overlay
 
 __all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "write_pair_outputs",

@@ -20,9 +20,9 @@ from tracker import points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from ..objects.selection import DEFAULT_SELECTION
 from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample
-from ..objects.shapes import ShapeParams, box_capture_time, TrackBoxes, object_points_by_frame
+from ..objects.selection import DEFAULT_SELECTION
+from ..objects.shapes import ShapeParams, TrackBoxes, box_capture_time, object_points_by_frame
 from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 
 __all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]

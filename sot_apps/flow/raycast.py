@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..raycast import RaycastScene
 from ..objects.meshes import Mesh
+from ..raycast import RaycastScene
 
 __all__ = ["MultiMeshScene"]
 

@@ -8,8 +8,8 @@ import numpy as np
 
 from tracker import invert_transform
 
-from .camera import CameraModel, apply_transform, project
 from ..objects.meshes import Mesh
+from .camera import CameraModel, apply_transform, project
 from .occlusion import ProjectedPoints
 
 __all__ = ["FlowObject", "OcclusionParams", "PairSetup", "ObjectPairStats", "PairFlow", "image_roi"]

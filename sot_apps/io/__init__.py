@@ -22,9 +22,8 @@ FORMATS = ("sequence", "pandaset", "waymo_v1", "waymo_v2",
 
 def detect_format(path: str | Path) -> str:
     """Name of the format of the sequence at ``path`` (see FORMATS)."""
-    from .pandaset import is_pandaset
-
     from .convert_util import split_selector
+    from .pandaset import is_pandaset
 
     path = Path(path)
     base, name = split_selector(path)

@@ -20,7 +20,8 @@ Three formats (``read_detections`` picks one from the content unless ``format`` 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Sequence as Seq
+from typing import Any
+from typing import Sequence as Seq
 
 import numpy as np
 

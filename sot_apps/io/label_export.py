@@ -12,8 +12,15 @@ import re
 from pathlib import Path
 
 from ..errors import InputError
-from .labels import (LabelsWritten, LabelTrack, annotation_tracks, kitti_camera, write_av2_annotations,
-                     write_av2_submission, write_kitti_tracking)
+from .labels import (
+    LabelsWritten,
+    LabelTrack,
+    annotation_tracks,
+    kitti_camera,
+    write_av2_annotations,
+    write_av2_submission,
+    write_kitti_tracking,
+)
 from .sequence import Sequence
 
 __all__ = ["LABEL_FORMATS", "kitti_sequence_number", "label_paths", "export_labels"]

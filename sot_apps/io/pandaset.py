@@ -32,7 +32,6 @@ PandaSet's quirks end here. The reader converts to the project's conventions:
 from __future__ import annotations
 
 import csv
-import gzip
 import json
 import math
 from pathlib import Path

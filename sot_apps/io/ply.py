@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .atomic import atomic_path, write_bytes
 from ..interrupts import import_trimesh
+from .atomic import atomic_path, write_bytes
 
 __all__ = ["write_ply_points", "read_ply", "read_ply_points", "write_ply_mesh", "read_ply_mesh"]
 

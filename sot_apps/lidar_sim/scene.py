@@ -25,13 +25,13 @@ import numpy as np
 from tracker import Box
 
 from ..errors import InputError
-from ..schemas import validate
 from ..objects.bank import Bank
-from ..sensor.noise import Realism
 from ..raycast import RaycastScene
-from ..sensor.scan import Scan, SimObject, Trajectory, simulate_scan
+from ..schemas import validate
 from ..sensor.model import Sensor, load_sensor
+from ..sensor.noise import Realism
 from ..sensor.occlusion import OCCLUDER_MARGIN_M, angular_tolerance, blocked_by_real
+from ..sensor.scan import Scan, SimObject, Trajectory, simulate_scan
 from .visibility import Visibility, vehicle_visibility
 
 __all__ = ["SceneObject", "SceneSpec", "SimResult", "load_scene", "overlapping_objects", "random_scene", "simulate_scene",

@@ -11,8 +11,8 @@ from tracker import invert_transform, transform_points
 
 from ..io.atomic import write_json
 from ..objects.bank import Bank
-from .export import write_bin, write_boxes, write_pcd, write_ply, write_scan_npz
 from ..sensor.preview import write_bev_png, write_object_gallery
+from .export import write_bin, write_boxes, write_pcd, write_ply, write_scan_npz
 from .scene import SceneSpec, SimResult, insert_into_background, simulate_scene
 
 __all__ = ["SimulationOutputs", "run_simulation"]

@@ -21,8 +21,8 @@ import numpy as np
 from tracker import Box
 
 from ..raycast import RaycastScene
-from ..sensor.scan import SimObject
 from ..sensor.model import Sensor
+from ..sensor.scan import SimObject
 
 __all__ = ["Visibility", "vehicle_visibility", "occlusion_level", "FULLY_VISIBLE_SHARE", "PARTLY_VISIBLE_SHARE"]
 

@@ -7,7 +7,14 @@ from pathlib import Path
 
 from .. import __version__
 from ..io.sequence import Sequence
-from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, Kinematics, ObjectTrack, SmootherConfig, smooth_track
+from ..objects.smoother import (
+    ANNOTATION_SMOOTHER,
+    TRACKER_SMOOTHER,
+    Kinematics,
+    ObjectTrack,
+    SmootherConfig,
+    smooth_track,
+)
 from .mcap_writer import McapSummary, write_motion_mcap
 from .tables import make_scenario, write_csv, write_npz_table, write_parquet
 

@@ -35,8 +35,8 @@ from scipy.spatial.transform import Rotation
 
 from ..io.atomic import atomic_path
 from ..io.sequence import Sequence
-from ..schemas import load_schema, validate
 from ..objects.smoother import Kinematics
+from ..schemas import load_schema, validate
 
 __all__ = ["write_motion_mcap", "McapSummary", "object_color", "METADATA_NAME", "WORLD_FRAME", "EGO_FRAME",
            "object_frame", "KINEMATICS_SCHEMA_NAME"]
@@ -284,7 +284,8 @@ def write_motion_mcap(path: str | Path, sequence: Sequence, kinematics: list[Kin
     Frames written: every sequence frame from the first to the last frame of any object.
     """
     import foxglove
-    from foxglove import channels, messages as m
+    from foxglove import channels
+    from foxglove import messages as m
     from tqdm import tqdm
 
     path = Path(path)

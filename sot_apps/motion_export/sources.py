@@ -11,7 +11,8 @@ always valid.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterable, Sequence as Seq
+from typing import Iterable
+from typing import Sequence as Seq
 
 import numpy as np
 

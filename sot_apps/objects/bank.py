@@ -42,13 +42,13 @@ import numpy as np
 from tracker import Box
 
 from ..errors import InputError
+from ..interrupts import import_trimesh
 from ..io.atomic import write_json
 from ..io.ply import read_ply_mesh, read_ply_points, write_ply_mesh, write_ply_points
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
 from .meshes import SurfelParams, surfel_mesh
 from .shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
-from ..interrupts import import_trimesh
 
 __all__ = ["BankEntry", "Bank", "SPLITS", "bank_split", "split_entries", "read_bank", "write_bank_index",
            "entry_from_points", "entry_from_track_dir",

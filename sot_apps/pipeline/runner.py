@@ -23,13 +23,13 @@ from typing import Any, Callable
 from ..apps import App, RunContext, SequenceTracks, Skip, get_app
 from ..errors import InputError, OutputError
 from ..io.atomic import remove_stale_temporaries, write_json
+from . import stages as st
 from .config import PipelineConfig
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
 from .health import health_lines, run_track_health
 from .lock import RunLock
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
 from .plan import Plan, make_plan, open_sequences, safe_name, track_chunks
-from . import stages as st
 
 __all__ = ["UnitRecord", "PipelineResult", "run_pipeline"]
 

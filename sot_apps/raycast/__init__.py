@@ -3,6 +3,6 @@
 ``RaycastScene`` is the one entry point (flow and lidar_sim both use it); see :mod:`sot_apps.raycast.scene`.
 """
 
-from .scene import BACKENDS, MISS, RayHits, RaycastScene, cast_rays, compiled_backend_available
+from .scene import BACKENDS, MISS, RaycastScene, RayHits, cast_rays, compiled_backend_available
 
 __all__ = ["RayHits", "RaycastScene", "cast_rays", "MISS", "compiled_backend_available", "BACKENDS"]

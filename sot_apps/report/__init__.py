@@ -21,8 +21,7 @@ from ..pipeline.plan import open_cached
 from ..pipeline.runner import PipelineResult
 from ..pipeline.stages import MOTION_EVAL_FILE, track_dir
 from ..tracking import read_shape_growth
-from .figures import (flow_figure, motion_figure, scans_figure, score_tracks, shape_growth_figure,
-                      tracks_bev_figure)
+from .figures import flow_figure, motion_figure, scans_figure, score_tracks, shape_growth_figure, tracks_bev_figure
 from .page import Section, table_html, write_page
 
 __all__ = ["build_report"]

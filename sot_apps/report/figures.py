@@ -14,8 +14,26 @@ from tracker import Box
 from ..io.sequence import Sequence
 from ..io.tracks import TrackFile
 from ..tracking import ShapeGrowth
-from .draw import (BLACK, EGO_COLOR, GREY, GT_COLOR, WHITE, BevCanvas, LegendEntry, colour_bar, colour_for, hstack,
-                   legend_panel, place_labels, text, text_size, title_bar, vstack, with_metre_axes, write_png)
+from .draw import (
+    BLACK,
+    EGO_COLOR,
+    GREY,
+    GT_COLOR,
+    WHITE,
+    BevCanvas,
+    LegendEntry,
+    colour_bar,
+    colour_for,
+    hstack,
+    legend_panel,
+    place_labels,
+    text,
+    text_size,
+    title_bar,
+    vstack,
+    with_metre_axes,
+    write_png,
+)
 
 __all__ = ["TrackScore", "score_tracks", "BevFigure", "tracks_bev_figure", "shape_growth_figure", "flow_figure",
            "flow_key", "scans_figure", "motion_figure"]

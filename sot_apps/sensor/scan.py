@@ -22,10 +22,10 @@ import numpy as np
 from tracker import invert_transform
 
 from ..objects.trajectory import Trajectory, world_from_object
-from .noise import Realism, grazing_drop_probability, incidence_cosine, lambertian_intensity
 from ..raycast import RaycastScene, RayHits
 from ..raycast.compiled import SweepReturns, compiled_sweep_returns
 from .model import Sensor
+from .noise import Realism, grazing_drop_probability, incidence_cosine, lambertian_intensity
 
 __all__ = ["SimObject", "Scan", "simulate_scan", "range_image", "build_static_scene"]
 

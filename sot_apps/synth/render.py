@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path
 from ..interrupts import deferred_interrupt, import_pyrender, import_trimesh
+from ..io.atomic import atomic_path
 
 __all__ = ["render_camera_images", "CV_FROM_GL"]
 

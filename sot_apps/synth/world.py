@@ -48,19 +48,19 @@ from tqdm import tqdm
 
 from tracker import Box, invert_transform, transform_points
 
+from ..interrupts import import_trimesh
 from ..io.atomic import write_json, write_npz
 from ..io.canonical import write_sequence
 from ..io.ply import write_ply_mesh
 from ..io.sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 from ..objects.meshes import box_mesh
 from ..objects.motion_profiles import PROFILES, integrate_motion, place_path, sample_motion
-from ..sensor.noise import Realism
-from ..raycast import RaycastScene
-from ..sensor.scan import Scan, SimObject, simulate_scan
 from ..objects.trajectory import Trajectory, world_from_object, wrap_heading
+from ..raycast import RaycastScene
 from ..sensor.model import Sensor, load_sensor
+from ..sensor.noise import Realism
+from ..sensor.scan import Scan, SimObject, simulate_scan
 from .vehicles import random_vehicle
-from ..interrupts import import_trimesh
 
 __all__ = ["WorldObject", "World", "SynthCamera", "make_world", "write_world", "SENSOR_HEIGHT", "BASE_TIME_NS"]
 

@@ -4,10 +4,10 @@ file's stages map onto them, and a bad section is refused naming the field."""
 from __future__ import annotations
 
 import json
-import tomllib
 from pathlib import Path
 
 import pytest
+import tomllib
 
 from sot_apps.apps import BUILTIN_APPS, ENTRY_POINT_GROUP, App, build_config, get_app, installed_apps
 from sot_apps.errors import InputError

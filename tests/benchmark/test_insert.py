@@ -11,9 +11,9 @@ from sot_apps.benchmark.deps import RaycastScene, Realism, SimObject, Trajectory
 from sot_apps.benchmark.insert import simulate_frame
 from sot_apps.benchmark.placement import InsertedVehicle
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
-from sot_apps.synth.vehicles import make_vehicle
 from sot_apps.objects.motion_profiles import MotionSpec
-from tracker.geometry import Box, points_in_box
+from sot_apps.synth.vehicles import make_vehicle
+from tracker.geometry import points_in_box
 
 T0 = 1_700_000_000_000_000_000
 GROUND_Z = -1.8

@@ -13,7 +13,6 @@ from sot_apps.io import open_sequence
 from sot_apps.io.detections import read_detections
 from tracker.metrics import iou_3d_batch, iou_bev_batch
 
-
 FRONT_K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 180.0], [0.0, 0.0, 1.0]])
 # a front camera 1.5 m up, looking along ego +x (OpenCV axes: x right = -y ego, y down = -z ego, z = +x ego)
 EGO_FROM_FRONT = np.array([[0.0, 0.0, 1.0, 1.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 1.5], [0.0, 0.0, 0.0, 1.0]])

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from .interrupt_driver import checksums, pipeline_file
 from .conftest import run_cli
+from .interrupt_driver import checksums, pipeline_file
 
 DASK = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
 WORKER = [sys.executable, "-m", "distributed.cli.dask_worker"]

@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-import pytest
+from scipy.spatial.transform import Rotation
 
-from tracker.geometry import invert_transform, make_transform, rotation_z
 from sot_apps.flow.camera import CameraModel
 from sot_apps.flow.dense import RayCache, dense_flow
-from sot_apps.objects.meshes import Mesh
 from sot_apps.flow.scene import FlowObject, PairSetup
+from sot_apps.objects.meshes import Mesh
 from sot_apps.objects.trajectory import world_from_object
-from scipy.spatial.transform import Rotation
+from tracker.geometry import invert_transform, make_transform, rotation_z
 
 # Camera looking along world +x from 1.5 m height (OpenCV axes: x right, y down, z forward).
 CAM_ROT = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])

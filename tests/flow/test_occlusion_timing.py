@@ -6,16 +6,16 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.geometry import invert_transform, make_transform
 from sot_apps.flow.annotate import FlowOptions, build_pair, compute_pair
 from sot_apps.flow.camera import CameraModel, project
 from sot_apps.flow.dense import RayCache, dense_flow
-from sot_apps.objects.meshes import Mesh
 from sot_apps.flow.objects import TrackedObject
 from sot_apps.flow.occlusion import project_lidar
 from sot_apps.flow.scene import FlowObject, OcclusionParams, PairSetup
-from sot_apps.objects.trajectory import Trajectory, world_from_object
 from sot_apps.io.sequence import Camera, CameraFrame, FrameInfo, Sequence, Sweep
+from sot_apps.objects.meshes import Mesh
+from sot_apps.objects.trajectory import Trajectory, world_from_object
+from tracker.geometry import invert_transform, make_transform
 
 CAM_ROT = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 K = np.array([[700.0, 0.0, 320.0], [0.0, 700.0, 240.0], [0.0, 0.0, 1.0]])

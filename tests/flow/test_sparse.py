@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-
-from sot_apps.objects.meshes import box_mesh
-from sot_apps.flow.scene import FlowObject, PairSetup
-from sot_apps.flow.sparse import sparse_flow
-from sot_apps.objects.trajectory import world_from_object
-
 from test_dense_analytic import K, plane_in_camera_k, scenario
+
+from sot_apps.flow.scene import FlowObject
+from sot_apps.flow.sparse import sparse_flow
+from sot_apps.objects.meshes import box_mesh
 
 
 def test_sparse_flow_of_visible_face_matches_homography_and_hides_far_face():

@@ -5,14 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from test_occlusion_timing import _sequence
 
-from tracker.geometry import Box, State
 from sot_apps.flow.annotate import FlowOptions, build_pair, compute_pair
 from sot_apps.flow.objects import objects_from_tracks
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
 from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
-
-from test_occlusion_timing import CAMERA_POSE, K, _sequence
+from tracker.geometry import Box, State
 
 
 def test_track_directory_drives_the_flow(tmp_path):

@@ -6,7 +6,6 @@ import math
 import shutil
 
 import numpy as np
-import pytest
 
 from sot_apps.io import detect_format, open_sequence
 from sot_apps.io.pandaset import read_pandaset

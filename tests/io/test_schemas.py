@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from sot_apps.errors import InputError
-from sot_apps.io.canonical import sequence_to_json
 from sot_apps.io.tracks import FrameRecord, Size, TrackFile
 from sot_apps.schemas import load_json_validated, schema_names, validate
 from tracker.geometry import Box, State

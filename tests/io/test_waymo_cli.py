@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import waymo_synth as ws
+
 from sot_apps.cli.main import main
 from sot_apps.io import open_sequence
 

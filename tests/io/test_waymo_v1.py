@@ -11,9 +11,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import waymo_synth as ws
 from scipy.spatial import cKDTree
 
-import waymo_synth as ws
 from sot_apps.errors import InputError
 from sot_apps.io import detect_format, open_sequence
 from sot_apps.io.waymo import PointSelection, find_waymo_segment, read_waymo_v1

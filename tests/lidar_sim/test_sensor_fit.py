@@ -11,10 +11,10 @@ import trimesh
 from sot_apps.cli.main import main
 from sot_apps.io.canonical import write_sequence
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
-from sot_apps.sensor.noise import Realism
-from sot_apps.sensor.scan import SimObject, simulate_scan
 from sot_apps.objects.trajectory import Trajectory
 from sot_apps.sensor.model import PRESETS
+from sot_apps.sensor.noise import Realism
+from sot_apps.sensor.scan import SimObject, simulate_scan
 
 
 def _room_sweep(name: str, seed: int = 0):
@@ -77,9 +77,8 @@ def test_points_at_capture_pose_undoes_the_sensor_motion():
 def test_align_finds_an_offset_optical_centre():
     """Sweeps given in a frame whose origin is not the optical centre (as PandaSet's): the alignment finds the
     centre, and the fit then recovers the preset's beams."""
-    from tracker.geometry import transform_points
-
     from sot_apps.sensor.fit import align_sensor_frame, fit_sensor
+    from tracker.geometry import transform_points
 
     room = trimesh.creation.box(extents=[60.0, 50.0, 30.0])
     room.apply_translation([3.0, -2.0, 8.0])

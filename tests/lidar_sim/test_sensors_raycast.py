@@ -7,12 +7,12 @@ import pytest
 import trimesh
 
 from sot_apps.errors import InputError
-from sot_apps.sensor.noise import Realism
+from sot_apps.objects.trajectory import Trajectory
 from sot_apps.raycast import RaycastScene, cast_rays, compiled_backend_available
 from sot_apps.raycast.scene import _horizontal_rectangle
-from sot_apps.sensor.scan import SimObject, range_image, simulate_scan
-from sot_apps.objects.trajectory import Trajectory
 from sot_apps.sensor.model import PRESETS, load_sensor
+from sot_apps.sensor.noise import Realism
+from sot_apps.sensor.scan import SimObject, range_image, simulate_scan
 
 # Datasheet tables, written out independently of sensors.py (degrees, laser-id order).
 DATASHEET = {

@@ -12,12 +12,18 @@ from scipy.spatial import cKDTree
 
 from sot_apps.cli.main import main
 from sot_apps.io import open_sequence
-from sot_apps.objects.bank import (Bank, aggregate_track_points, entries_from_annotations, entry_from_mesh_file,
-                                     read_bank, write_bank_index)
 from sot_apps.lidar_sim.export import kitti_label_lines
-from sot_apps.sensor.noise import Realism
 from sot_apps.lidar_sim.scene import SceneObject, SceneSpec, insert_into_background
+from sot_apps.objects.bank import (
+    Bank,
+    aggregate_track_points,
+    entries_from_annotations,
+    entry_from_mesh_file,
+    read_bank,
+    write_bank_index,
+)
 from sot_apps.sensor.model import PRESETS
+from sot_apps.sensor.noise import Realism
 from sot_apps.synth import make_world, write_world
 from tracker.geometry import Box
 
@@ -169,9 +175,8 @@ def test_bank_from_annotations_recovers_the_true_shape(tmp_path):
 
 def test_bank_build_from_tracker_output_dir(tmp_path, capsys):
     from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
-    from tracker.geometry import State
-
     from sot_apps.synth.vehicles import make_vehicle
+    from tracker.geometry import State
 
     vehicle = make_vehicle("suv", 4.6, 1.9, 1.7)
     shape, _ = trimesh.sample.sample_surface(trimesh.Trimesh(vehicle.vertices, vehicle.faces, process=False), 5000, seed=0)

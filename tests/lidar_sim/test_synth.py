@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 
 from sot_apps.io import open_sequence
-from sot_apps.sensor.noise import Realism
 from sot_apps.objects.trajectory import Trajectory, world_from_object
+from sot_apps.sensor.noise import Realism
 from sot_apps.synth import make_world, write_world
 from tracker.geometry import invert_transform, transform_points
 

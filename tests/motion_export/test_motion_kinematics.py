@@ -5,9 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sot_apps.objects.smoother import (SmootherConfig, central_difference_kinematics, ctrv_transition,
-                                               smooth_track)
-
+from sot_apps.objects.smoother import SmootherConfig, central_difference_kinematics, ctrv_transition, smooth_track
 from tracker.geometry import wrap_angle
 
 from .synthetic import constant_turn, frame_times_ns, make_track

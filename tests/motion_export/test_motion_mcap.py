@@ -12,8 +12,8 @@ from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from sot_apps.objects.smoother import smooth_track
 from sot_apps.motion_export.mcap_writer import METADATA_NAME, write_motion_mcap
+from sot_apps.objects.smoother import smooth_track
 from sot_apps.schemas import load_schema
 
 from .synthetic import constant_turn, frame_times_ns, make_sequence, make_track

@@ -9,9 +9,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+from sot_apps.motion_export.tables import av2_object_type, make_scenario, write_csv, write_npz_table, write_parquet
 from sot_apps.objects.smoother import smooth_track
-from sot_apps.motion_export.tables import (av2_object_type, make_scenario, write_csv, write_npz_table,
-                                           write_parquet)
 
 from .synthetic import constant_turn, frame_times_ns, make_track
 

@@ -7,8 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sot_apps.io.sequence import Sweep
-from sot_apps.objects.shapes import (BoxMargin, ShapeParams, TrackBoxes, box_capture_time, in_box,
-                                     object_points_by_frame)
+from sot_apps.objects.shapes import BoxMargin, ShapeParams, TrackBoxes, box_capture_time, in_box, object_points_by_frame
 from tracker import Box
 
 SPEED = 10.0                 # m/s along +x

@@ -27,12 +27,11 @@ def test_every_output_of_two_sequences_by_three_objects(reference_run, tiny_worl
     import pyarrow.parquet as pq
     from mcap.reader import make_reader
 
-    from tracker.config import get_preset
-    from tracker import refine_offline
-    from tracker.sotracker import track as track_api
-
     from sot_apps.io import open_sequence
     from sot_apps.io.tracks import read_track
+    from tracker import refine_offline
+    from tracker.config import get_preset
+    from tracker.sotracker import track as track_api
 
     result, sums = reference_run
     out = result.out
@@ -218,11 +217,10 @@ def test_bench_counts_the_object_frames_and_reads_each_sweep_once(tiny_worlds, t
 def test_annotated_object_starts_at_its_first_box_with_enough_points(tiny_worlds, tmp_path):
     """stages.track.start = first_with_points: the track starts at the first annotated frame whose box the
     tracker finds min_init_points points in; first_annotated keeps frame 0 (and then fails)."""
-    from tracker.config import get_preset
-    from tracker.sotracker import Tracker
-
     from sot_apps.io import open_sequence
     from sot_apps.io.tracks import read_track
+    from tracker.config import get_preset
+    from tracker.sotracker import Tracker
 
     seq = open_sequence(tiny_worlds[0])
     counts = {}

@@ -3,15 +3,19 @@ bit for bit, online, with fixed-lag and offline refinement, while reading each s
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
-from tracker import Box, get_preset, track
-
 from sot_apps.io import open_sequence
-from sot_apps.tracking import (ObjectRequest, TrackingFailed, first_box_with_points, refine_track_fixed_lag,
-                               refine_track_offline, track_objects)
+from sot_apps.tracking import (
+    ObjectRequest,
+    TrackingFailed,
+    first_box_with_points,
+    refine_track_fixed_lag,
+    refine_track_offline,
+    track_objects,
+)
+from tracker import Box, get_preset, track
 
 
 def _alone(seq, request: ObjectRequest, config, mode: str, lag: int):

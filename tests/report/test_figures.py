@@ -6,8 +6,15 @@ import cv2
 import numpy as np
 
 from sot_apps.io.tracks import FrameRecord, Size, TrackFile
-from sot_apps.report.draw import (BevCanvas, colour_bar, legend_panel, LegendEntry, place_labels, rects_overlap,
-                                  with_metre_axes)
+from sot_apps.report.draw import (
+    BevCanvas,
+    LegendEntry,
+    colour_bar,
+    legend_panel,
+    place_labels,
+    rects_overlap,
+    with_metre_axes,
+)
 from sot_apps.report.figures import flow_key, shape_growth_figure, tracks_bev_figure
 from sot_apps.tracking import ShapeGrowth
 from tracker.geometry import State

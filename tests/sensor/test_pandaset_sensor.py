@@ -10,10 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker import invert_transform, transform_points
-
 from sot_apps.sensor.fit import elevation_peaks, ring_sharpness
 from sot_apps.sensor.model import PRESETS
+from tracker import invert_transform, transform_points
 
 STILL_FRAMES = range(0, 17, 4)
 

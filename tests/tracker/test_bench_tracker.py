@@ -6,11 +6,10 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+from tracker_synthetic import make_sequence
 
 from sot_apps.bench.tracker import _offline_row, _time_track, _times_online, format_table
 from tracker import get_preset, pool_metrics, score_tracklet
-
-from tracker_synthetic import make_sequence
 
 
 def test_offline_row_times_the_refinement_per_frame_and_scores_it():

@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from tracker.config import PRESETS, MotionConfig, TrackerConfig, get_preset, parse_overrides
+from tracker.geometry import Box
 from tracker.motion_filter import AverageMotion, CTRVMotion
 from tracker.sotracker import Tracker
 from tracker.strategies.association import GlobalAssociation
@@ -19,7 +20,6 @@ from tracker.strategies.inliers import AllPairs, FixedRansac
 from tracker.strategies.loss import KeepPrior, PriorReference, SymmetricConsistency, XOnlyConsistency
 from tracker.strategies.metric import PlaneMetric, PointMetric
 from tracker.strategies.motion import choose_motion_model
-from tracker.geometry import Box
 
 
 def test_at_most_15_top_level_fields_each_section_frozen():

@@ -8,23 +8,22 @@ import json
 
 import numpy as np
 import pytest
+from tracker_synthetic import car_points, ground_points
 
 from sot_apps.errors import InputError
 from sot_apps.evaluation.reference import compare_with_reference, load_reference
 from tracker.config import TrackerConfig, get_preset
+from tracker.finder import finder_icp, resample
+from tracker.geometry import Box
+from tracker.ground import fit_plane
 from tracker.sotracker import Tracker
 from tracker.strategies.association import CropAssociation
 from tracker.strategies.first_frame import FinderSearch
 from tracker.strategies.ground import SweepGround
 from tracker.strategies.inliers import UpstreamRansac
 from tracker.strategies.loss import IterationReference, MotionTermsOnly, XOnlyConsistency
-from tracker.finder import finder_icp, resample
-from tracker.geometry import Box
-from tracker.ground import fit_plane
 from tracker.sweep_ground import sweep_ground_mask
 from tracker.terms import apply_motion
-
-from tracker_synthetic import car_points, ground_points
 
 
 def _sweep(rng: np.random.Generator, noise_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

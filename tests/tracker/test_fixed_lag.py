@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tracker_synthetic import make_sequence
 
 from tracker.config import get_preset
 from tracker.fixed_lag import LAG_PARAMS, FixedLagTracker, refine_fixed_lag, track_fixed_lag
 from tracker.offline import OfflineParams, refine_offline
 from tracker.sotracker import track
-
-from tracker_synthetic import make_sequence
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,7 @@ import os
 
 import numpy as np
 import pytest
-
-from golden_boxes import GOLDEN, dev_tracks, key, track_boxes
+from golden_boxes import GOLDEN, dev_tracks, track_boxes
 
 ALL = os.environ.get("SOT_APPS_GOLDEN_ALL", "") not in ("", "0")
 CASES = ([(p, s, None) for p in ("full", "faithful") for s in (0, 1, 2)] if ALL

@@ -30,7 +30,6 @@ from tracker.metrics import (
     voxel_downsample_centres,
 )
 
-
 # --------------------------------------------------------------------------- IoU: hand-computed cases
 
 def test_identical_boxes_iou_one():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tracker_synthetic import ground_points
 
 from tracker.config import get_preset
 from tracker.first_frame import explained_points, motion_hypotheses
@@ -11,8 +12,6 @@ from tracker.frames import LidarFrame
 from tracker.geometry import Box, invert_transform, make_transform, rotation_z, transform_points, wrap_angle
 from tracker.motion_filter import AverageMotion, CTRVFilter, HeightFilter, ctrv_predict_state, travel_heading
 from tracker.sotracker import Tracker
-
-from tracker_synthetic import ground_points
 
 
 def _arc(v: float, w: float, t: np.ndarray, start=(0.0, 0.0, 0.3)) -> np.ndarray:

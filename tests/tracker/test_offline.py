@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from scipy.spatial import cKDTree
 
 from tracker.config import TrackerConfig

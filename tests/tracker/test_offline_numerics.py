@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
+from tracker_synthetic import make_sequence
 
 from tracker.config import get_preset
 from tracker.frames import LidarFrame
@@ -16,8 +17,6 @@ from tracker.ground import ground_mask
 from tracker.offline import _BANDS, OfflineParams, _normals, _prior_band, _Solver, frame_region_points
 from tracker.sotracker import Tracker, deskew_points
 from tracker.sweep_ground import sweep_ground_mask
-
-from tracker_synthetic import make_sequence
 
 
 def _dense_from_upper_band(band: np.ndarray) -> np.ndarray:

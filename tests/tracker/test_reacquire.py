@@ -5,13 +5,12 @@ track restarts on them with the travelled motion as its prior."""
 from __future__ import annotations
 
 import numpy as np
+from tracker_synthetic import car_points, ground_points, trajectory
 
 from tracker import get_preset, track
 from tracker.frames import LidarFrame
 from tracker.geometry import Box, invert_transform, make_transform, rotation_z, transform_points
 from tracker.metrics import iou_3d_batch
-
-from tracker_synthetic import car_points, ground_points, trajectory
 
 HIDDEN = 4  # the car has no points in frames 0..HIDDEN-1 (say, a truck in between), then it is seen
 

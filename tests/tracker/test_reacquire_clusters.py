@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tracker_synthetic import BOX_SIZE, SyntheticSequence, car_points, ground_points
 
 from tracker import get_preset, refine_offline, track
 from tracker.frames import LidarFrame
 from tracker.geometry import Box, invert_transform, make_transform, rotation_z, transform_points
 from tracker.metrics import iou_3d_batch
-
-from tracker_synthetic import BOX_SIZE, SyntheticSequence, car_points, ground_points
 
 REACQUIRE = {"reacquire.mode": "clusters"}
 _EGO = make_transform(rotation_z(0.0), np.array([0.0, 0.0, 1.0]))   # a parked ego, sensor 1 m up

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tracker_synthetic import make_sequence
 
 from tracker.config import PRESETS, get_preset
 from tracker.detection import FrameDetections
-from tracker.sotracker import Tracker, track
 from tracker.metrics import iou_3d
-
-from tracker_synthetic import make_sequence
+from tracker.sotracker import Tracker, track
 
 
 @pytest.fixture(scope="module")

@@ -4,11 +4,10 @@ that the height uses (z_mode "filter"), and none of them reaches the registratio
 from __future__ import annotations
 
 import numpy as np
+from tracker_synthetic import make_sequence
 
 from tracker.config import get_preset
 from tracker.sotracker import Tracker
-
-from tracker_synthetic import make_sequence
 
 
 def test_sweep_scope_keeps_the_road_near_the_box_for_the_height():

@@ -12,8 +12,15 @@ from .first_frame import FinderSearch, FirstFrameSearch, HypothesesSearch, Movin
 from .ground import GroundRemover, RoadPoints, choose_ground, choose_road
 from .height import HeightModel, choose_height
 from .inliers import AllPairs, FixedRansac, ShapeInliers, UpstreamRansac
-from .loss import (DataFreeFrames, IterationReference, KeepPrior, MotionTermsOnly, PriorReference,
-                   SymmetricConsistency, XOnlyConsistency)
+from .loss import (
+    DataFreeFrames,
+    IterationReference,
+    KeepPrior,
+    MotionTermsOnly,
+    PriorReference,
+    SymmetricConsistency,
+    XOnlyConsistency,
+)
 from .metric import Metric, PlaneMetric, PointMetric
 from .reacquire import Reacquire, choose_reacquire
 from .travel import NoTravel, choose_travel

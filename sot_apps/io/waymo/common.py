@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import hashlib
 import math
-from fractions import Fraction
 import os
 from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import Callable
 

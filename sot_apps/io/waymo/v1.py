@@ -37,8 +37,19 @@ from tracker.geometry import invert_transform
 
 from ...errors import InputError
 from ..sequence import BoxAnnotation, Camera, FrameInfo, Sequence, Sweep
-from .common import (WAYMO_CAMERA_FROM_OPENCV, ImageRecord, LazyCameraFrames, box_annotation, camera_intrinsics,
-                     image_cache_dir, micros_to_ns, PointSelection, seconds_to_ns, sweep_from_parts, transform_4x4)
+from .common import (
+    WAYMO_CAMERA_FROM_OPENCV,
+    ImageRecord,
+    LazyCameraFrames,
+    PointSelection,
+    box_annotation,
+    camera_intrinsics,
+    image_cache_dir,
+    micros_to_ns,
+    seconds_to_ns,
+    sweep_from_parts,
+    transform_4x4,
+)
 from .messages import CAMERA_IMAGE_BYTES, CAMERA_NAMES, FRAME_IMAGES, FRAME_LASERS, LASER_NAMES, messages
 from .range_image import LaserCalibration, decode_matrix_float, lidar_points
 from .tfrecord import TFRecordFile
