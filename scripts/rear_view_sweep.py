@@ -32,7 +32,7 @@ def rear_view(preset: str, scenes: int, seeds: int, overrides: dict) -> str:
             tracker = Tracker(get_preset(preset, seed=seed, **overrides))
             tracker.start(frames[0], boxes[0])
             h, a = [], []
-            for frame, box in zip(frames[1:], boxes[1:]):
+            for frame, box in zip(frames[1:], boxes[1:], strict=True):
                 est = tracker.step(frame)
                 h.append(abs(np.degrees(wrap_angle(est.box.heading - box.heading))))
                 a.append((est.box.center[:2] - box.center[:2]) @ [-np.sin(box.heading), np.cos(box.heading)])

@@ -99,8 +99,8 @@ def summarize_tracks(seq: Sequence, first_n: int = 10, vehicles_only: bool = Fal
     if vehicles_only:
         tracks = {tid: t for tid, t in tracks.items() if selection.is_vehicle(t.label)}
     stationary: dict[str, list[bool]] = {}
-    for annotations in seq.annotations or []:
-        for ann in annotations:
+    for frame_annotations in seq.annotations or []:
+        for ann in frame_annotations:
             if ann.track_id in tracks and ann.stationary is not None:
                 stationary.setdefault(ann.track_id, []).append(bool(ann.stationary))
     points = _mean_points_first_frames(seq, tracks, first_n, progress)
@@ -137,7 +137,7 @@ def summarize_sequence(seq: Sequence, point_stats: bool = True, vehicles_only: b
         with_sweep = [k for k in range(len(seq)) if seq.frames[k].has_sweep]
         counts = np.array([len(seq.sweep(k)) for k in tqdm(with_sweep, desc="reading sweeps", unit="frame",
                                                             disable=not progress, leave=False)], dtype=np.int64)
-        empty = [k for k, n in zip(with_sweep, counts) if n == 0]
+        empty = [k for k, n in zip(with_sweep, counts, strict=True) if n == 0]
         if len(counts):
             pmin, pmed, pmax = int(counts.min()), float(np.median(counts)), int(counts.max())
     cameras = []

@@ -245,7 +245,7 @@ class ShapeGrowth:
     def to_json(self) -> dict:
         return {"object_id": self.object_id, "start_frame": self.start_frame, "size": list(self.size),
                 "snapshots": [{"frame": int(k), "points": np.round(p, 3).tolist()}
-                              for k, p in zip(self.frames, self.points)]}
+                              for k, p in zip(self.frames, self.points, strict=True)]}
 
     @classmethod
     def from_json(cls, doc: dict) -> "ShapeGrowth":

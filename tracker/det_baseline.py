@@ -88,7 +88,7 @@ def track_detections(source: FrameSource, init_box: Box, start: int, end: int, c
         frame_dets = detections.get(k)
         d = config.detection
         det = associate_detection(predicted, frame_dets, d.min_score, d.min_iou, d.max_distance)
-        if det is None:
+        if det is None or frame_dets is None:   # no detection is associated without detections
             quality, flags = 0.0, ("prior_only",)
         else:
             kf.update(det)

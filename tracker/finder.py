@@ -14,12 +14,14 @@ estimate and uses the previous-frame points plus the sub-shape.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import Box, points_in_box
 from .solver import solve
-from .terms import apply_motion, point_pair_block
+from .terms import ResidualBlock, apply_motion, point_pair_block
 
 __all__ = ["resample", "finder_icp"]
 
@@ -29,6 +31,11 @@ def resample(points: np.ndarray, max_points: int, rng: np.random.Generator) -> n
     if len(points) <= max_points:
         return points
     return points[rng.integers(len(points), size=max_points)]
+
+
+def _icp_blocks(source: np.ndarray, paired: np.ndarray, pivot: np.ndarray, x: np.ndarray) -> list[ResidualBlock]:
+    """The point-to-point block of ``source`` moved by ``x`` (about ``pivot``) against its ``paired`` points."""
+    return [point_pair_block("icp", x, source, paired, pivot, 1.0)]
 
 
 def finder_icp(source: np.ndarray, frame_points: np.ndarray, box: Box, rng: np.random.Generator, *,
@@ -47,6 +54,6 @@ def finder_icp(source: np.ndarray, frame_points: np.ndarray, box: Box, rng: np.r
         tgt = resample(crop, max_points, rng)
         _, idx = cKDTree(tgt).query(apply_motion(x, src, pivot), k=1)
         paired = tgt[idx]
-        x = solve(lambda xx: [point_pair_block("icp", xx, src, paired, pivot, 1.0)], x,
+        x = solve(partial(_icp_blocks, src, paired, pivot), x,
                   max_iterations=solver_iterations, tolerance=1e-7).x
     return x

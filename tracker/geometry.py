@@ -203,8 +203,8 @@ class Box:
             heading, pitch, roll = zyx_angles(np.asarray(target_from_source)[:3, :3] @ self.rotation())
             return Box(float(center[0]), float(center[1]), float(center[2]), heading,
                        self.length, self.width, self.height, roll, pitch)
-        heading = wrap_angle(self.heading + yaw_of_transform(target_from_source))
-        return Box(float(center[0]), float(center[1]), float(center[2]), float(heading),
+        yaw = wrap_angle(self.heading + yaw_of_transform(target_from_source))
+        return Box(float(center[0]), float(center[1]), float(center[2]), float(yaw),
                    self.length, self.width, self.height)
 
 

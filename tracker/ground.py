@@ -174,7 +174,7 @@ def ground_mask(points: np.ndarray, params: GroundParams | None = None) -> np.nd
     sorted_cells = cells[order]
     starts = np.flatnonzero(np.r_[True, sorted_cells[1:] != sorted_cells[:-1]])
     ends = np.r_[starts[1:], len(order)]
-    for s, e in zip(starts, ends):
+    for s, e in zip(starts, ends, strict=True):
         members = order[s:e]
         cell_plane = None
         if e - s >= params.min_cell_points:

@@ -118,23 +118,23 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
         return crop.points[points_in_box(crop.points, box, params.region_scale)]
     above_ground = ~cached_sweep_ground_mask(pts_ego, *config.ground.sweep_args()) if sweep_ground else None
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
-    use_deskew = (config.deskew and previous is not None and frame.point_time_offset_ns is not None
-                  and len(frame.point_time_offset_ns) == len(pts_ego))
+    deskew_from = previous if (config.deskew and frame.point_time_offset_ns is not None
+                               and len(frame.point_time_offset_ns) == len(pts_ego)) else None
     if world is None:  # only the part of the sweep that can reach the region is moved to the world frame
         world_from_ego = np.asarray(frame.world_from_ego, dtype=np.float64)
-        pad = _deskew_reach(pts_ego, frame, previous) if use_deskew else 0.0
+        pad = _deskew_reach(pts_ego, frame, deskew_from) if deskew_from is not None else 0.0
         idx = _square_candidates(pts_ego, world_from_ego, box.center[:2], reach + pad)
         if above_ground is not None:
             idx = idx[above_ground[idx]]
-        if use_deskew:
+        if deskew_from is not None:
             world = deskew_points(pts_ego[idx], np.asarray(frame.point_time_offset_ns)[idx], frame.timestamp_ns,
-                                  world_from_ego, previous[0], previous[1])
+                                  world_from_ego, deskew_from[0], deskew_from[1])
         else:
             world = transform_points(world_from_ego, pts_ego[idx])
     else:
-        if use_deskew:
-            world = deskew_points(pts_ego, frame.point_time_offset_ns, frame.timestamp_ns, frame.world_from_ego,
-                                  previous[0], previous[1])
+        if deskew_from is not None:
+            world = deskew_points(pts_ego, np.asarray(frame.point_time_offset_ns), frame.timestamp_ns,
+                                  frame.world_from_ego, deskew_from[0], deskew_from[1])
         if above_ground is not None:
             world = world[above_ground]
     near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
@@ -359,7 +359,8 @@ class _Solver:
                 missing.append((f, rows, _neighbour_covariances(self.shapes[f], self.params.normal_neighbours,
                                                                 self.trees[f], rows)))
         if missing:
-            normals = _smallest_eigenvectors(*(np.concatenate(parts) for parts in zip(*(c for _, _, c in missing))))
+            normals = _smallest_eigenvectors(*(np.concatenate(parts)
+                                               for parts in zip(*(c for _, _, c in missing), strict=True)))
             start = 0
             for f, rows, _ in missing:
                 self.normals[f][rows] = normals[start:start + len(rows)]
@@ -491,6 +492,7 @@ class _Solver:
 
     def step(self, states: np.ndarray) -> np.ndarray:
         cost_d, blocks, grads = self._data(states, True)
+        assert self._matched is not None   # _data without pairs records the pairs it matched at ``states``
         pairs = self._matched[1] if self.params.trial_pairs == "fixed" else None  # the pairs at ``states``
         cost_p, grad_p = self._prior(states)
         self._travel_targets(states)
@@ -585,11 +587,14 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
     config = config or result.config
     params = params or config.refinement.offline
     if points is None:
+        if source is None:
+            raise ValueError("refine_offline needs a source to read when no points are given")
         points = gather_frame_points(source, result, config, params)
     online = np.array([e.state.to_array() for e in result.estimates])
     states, shape = refine_states(points, online, np.asarray(result.size), params, seed=config.seed)
+    assert shape is not None   # with_shape=True
     estimates: list[FrameEstimate] = []
-    for est, pts, s in zip(result.estimates, points, states):
+    for est, pts, s in zip(result.estimates, points, states, strict=True):
         box = _box(s, result.size)
         obj = pts[points_in_box(pts, box, 1.0)]
         flags = tuple(dict.fromkeys(list(est.flags) + ["offline"]))

@@ -48,7 +48,7 @@ def pseudo_gt_shape(source: FrameSource, frames: Sequence[int], boxes: Sequence[
     if len(frames) != len(boxes):
         raise ValueError(f"{len(frames)} frames but {len(boxes)} boxes")
     parts: list[np.ndarray] = []
-    for k, box in zip(frames, boxes):
+    for k, box in zip(frames, boxes, strict=True):
         parts.append(object_points_in_box(_points_world(source, k), box, ground_params, margin, remove_ground))
     if not parts:
         return np.zeros((0, 3))
@@ -59,5 +59,5 @@ def mean_points_in_boxes(source: FrameSource, frames: Iterable[int], boxes: Iter
     """Mean number of sweep points (not ground-removed) inside the boxes: the LiDAR-SOT difficulty statistic
     when given a tracklet's first 10 frames."""
     counts = [int(points_in_box(_points_world(source, k), box, 1.0).sum())
-              for k, box in zip(frames, boxes)]
+              for k, box in zip(frames, boxes, strict=True)]
     return float(np.mean(counts)) if counts else float("nan")

@@ -50,7 +50,8 @@ def solve(blocks_at: BlockFunction, x0: np.ndarray, max_iterations: int = 10, to
     loss = total_loss(blocks)
     lam = damping
     iterations = 0
-    for iterations in range(1, max_iterations + 1):
+    while iterations < max_iterations:
+        iterations += 1
         hessian, gradient = _normal_equations(blocks)
         if not np.isfinite(hessian).all() or not np.any(hessian):
             break

@@ -123,6 +123,7 @@ class App(Protocol):
 class AppBase:
     """Defaults for an app: no dependencies on other apps, nothing to do after the units."""
 
+    name: str   # set by each app
     needs: tuple[str, ...] = ()
     outputs: tuple[str, ...] = ()
     description: str = ""

@@ -49,7 +49,7 @@ class BankApp(AppBase):
                                       mirror=config.mirror, size=size)
             entry.build_seconds = None   # keep index.json reproducible
             entries.append(entry.to_json())
-            files += [bank_root / entry.mesh, bank_root / entry.points]
+            files += [bank_root / entry.mesh] + ([bank_root / entry.points] if entry.points else [])
         return UnitOutput(files, {"sequence": sequence, "entries": entries, "skipped": skipped})
 
     def finish(self, config: BankConfig, out: Path, results: list[dict]) -> None:

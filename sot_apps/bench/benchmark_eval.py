@@ -61,7 +61,7 @@ class BenchmarkRun:
             ms = np.concatenate([self.records[(preset, seed, k)][1] for k in keys])
             per_seed.append({"acc": pooled.acc, "rob": pooled.rob, "shape": pooled.shape, "success": pooled.success,
                              "precision": pooled.precision, "ms": float(np.mean(ms)) if ms.size else float("nan")})
-        for seed, row in zip(self.seeds, per_seed):
+        for seed, row in zip(self.seeds, per_seed, strict=True):
             row.update(pool_figures(self.figures.get((preset, seed, k), {}) for k in keys))
         mean = {k: _nan_mean([s.get(k, float("nan")) for s in per_seed]) for k in per_seed[0]}
         mean["acc_std"] = float(np.std([s["acc"] for s in per_seed]))
@@ -99,7 +99,7 @@ def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSp
     frames = tuple(range(a, b + 1))
     boxes = tuple(tracks[t.id].box_at(k) for k in frames)
     if any(box is None for box in boxes):
-        missing = [k for k, box in zip(frames, boxes) if box is None]
+        missing = [k for k, box in zip(frames, boxes, strict=True) if box is None]
         raise InputError(seq.root, f"tracklet {t.id}: no box at frame {missing[0]} of {a}..{b}")
     n = min(config.selection.difficulty_frames, len(frames))
     mean10 = mean_points_in_boxes(source, frames[:n], boxes[:n])
@@ -174,6 +174,11 @@ def _fmt(v: float, spec: str) -> str:
     return "—" if v is None or not np.isfinite(v) else format(v, spec)
 
 
+def _table_line(cells: list[str], widths: list[int]) -> str:
+    """One table row: the first cell left-aligned, the others right-aligned, to ``widths``."""
+    return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
+
+
 def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
     """One table per preset: rows = all / easy / medium / hard / each motion profile."""
     out = [title] if title else []
@@ -193,9 +198,8 @@ def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
                          _fmt(m["success"], ".1f"), _fmt(m["precision"], ".1f"), _fmt(m["ms"], ".1f")]
                         + [_fmt(scale * m[k], spec) if k in m else "" for k, _, scale, spec in extra])
         widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-        line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
-                                       for i, (c, w) in enumerate(zip(cells, widths)))
-        out += [line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows] + [""]
+        out += ([_table_line(header, widths), "  ".join("-" * w for w in widths)]
+                + [_table_line(r, widths) for r in rows] + [""])
     out.append("Acc, Rob in %; Success, Precision: 100 x AUC; Shape: mean Chamfer to the pseudo-ground-truth shape; "
                "difficulty by mean GT-box points over the first 10 frames (hard < 38.2 <= medium < 808.3 <= easy).")
     if any(k in run.summary(p, keys) for p in run.presets for _, keys in run.groups() for k, *_ in _EXTRA_COLUMNS):

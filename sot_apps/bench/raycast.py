@@ -22,6 +22,10 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["register", "run_benchmark"]
 
@@ -127,12 +131,12 @@ def run_benchmark(bank_dir: str | None = None, vehicles: int = 20, repeats: int 
     from embreex.mesh_construction import TriangleMesh
 
     raw_scene = rtcore_scene.EmbreeScene()
-    keep = [TriangleMesh(raw_scene, v, f) for v, f in zip(scene.vertices, scene.faces)]
+    keep = [TriangleMesh(raw_scene, v, f) for v, f in zip(scene.vertices, scene.faces, strict=True)]
     raw_scene.run(origins32[:1], dirs32[:1], output=1)  # build outside the timing
     raw_s, _ = best(lambda: raw_scene.run(origins32, dirs32, output=1))
     del keep
     embreex_scene = RaycastScene("embreex")
-    for v, f in zip(scene.vertices, scene.faces):
+    for v, f in zip(scene.vertices, scene.faces, strict=True):
         embreex_scene.add_mesh(v, f)
     embreex_scene.cast(origins32[:1], dirs32[:1])
     embreex_s, _ = best(lambda: embreex_scene.cast(origins32, dirs32))
@@ -171,7 +175,7 @@ def _open3d_time(scene, origins, dirs, repeats: int) -> float:
     import open3d as o3d
 
     rs = o3d.t.geometry.RaycastingScene()
-    for v, f in zip(scene.vertices, scene.faces):
+    for v, f in zip(scene.vertices, scene.faces, strict=True):
         rs.add_triangles(o3d.core.Tensor(v), o3d.core.Tensor(f.astype(np.uint32)))
     rays = o3d.core.Tensor(np.hstack([origins, dirs]).astype(np.float32))
     times = []

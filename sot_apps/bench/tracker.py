@@ -162,7 +162,7 @@ def _timing_row(name: str, specs, timed: list, ground_ms: np.ndarray) -> dict[st
     from tracker import pool_metrics, score_tracklet
 
     pooled = pool_metrics([score_tracklet(spec.track_id, boxes, np.array([b.to_array() for b in spec.boxes]))
-                           for spec, (boxes, _, _) in zip(specs, timed)])
+                           for spec, (boxes, _, _) in zip(specs, timed, strict=True)])
     w_all, c_all = np.concatenate([w for _, w, _ in timed]), np.concatenate([c for _, _, c in timed])
     c_later = np.concatenate([c[1:] for _, _, c in timed])
     return {"row": name, "acc": pooled.acc, "rob": pooled.rob, "frames": int(c_all.size),
@@ -229,7 +229,8 @@ def format_table(result: dict[str, Any]) -> str:
              *(f"{r[key]:.2f}" if key in r else "-" for key in ratios),
              f"{100 * r['acc']:.1f}", f"{100 * r['rob']:.1f}"] for r in result["rows"]]
     widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(header)]
-    fmt = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))  # noqa: E731
+    fmt = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
+                                  for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
     lines = [f"sequence: {result['sequence']}",
              f"tracks: {len(result['tracks'])} ({', '.join(t[:8] for t in result['tracks'])}); "
              f"{result['frames_per_preset']} tracked frames per preset (k >= 1)",

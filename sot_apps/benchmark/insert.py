@@ -130,7 +130,7 @@ def _centre_times(vehicles: list[InsertedVehicle], sensor: Sensor, sensor_from_w
     col_t = sensor.column_time_offsets_ns()
     times = np.full(len(vehicles), frame_time_ns, dtype=np.int64)
     for _ in range(2):
-        centres = np.array([v.states_at(int(t))[:3] for v, t in zip(vehicles, times)]).reshape(-1, 3)
+        centres = np.array([v.states_at(int(t))[:3] for v, t in zip(vehicles, times, strict=True)]).reshape(-1, 3)
         local = transform_points(sensor_from_world, centres)
         az = np.arctan2(local[:, 1], local[:, 0])
         col = np.argmin(np.abs((col_az[None, :] - az[:, None] + np.pi) % (2 * np.pi) - np.pi), axis=1)
@@ -196,7 +196,7 @@ def simulate_frame(seq: Sequence, k: int, sensor: Sensor, vehicles: list[Inserte
     xyz_ego = transform_points(mount, xyz_sensor).astype(np.float32)
     box_times = _centre_times(vehicles, sensor, sensor_from_world, t_k) if vehicles else np.zeros(0, np.int64)
     boxes = []
-    for v, t in zip(vehicles, box_times):
+    for v, t in zip(vehicles, box_times, strict=True):
         x, y, z, h = v.states_at(int(t))
         boxes.append(Box(float(x), float(y), float(z), float(h), *v.size))
     return InsertedFrame(

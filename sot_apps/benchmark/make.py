@@ -114,7 +114,7 @@ def box_size(bank: Bank, entry, sigma: float) -> tuple[float, float, float]:
     leave half the time)."""
     vertices, _ = bank.mesh(entry.id)
     extent = 2.0 * np.abs(vertices).max(axis=0) + 6.0 * sigma
-    return tuple(round(float(max(a, b)), 3) for a, b in zip(entry.box_size(), extent))  # type: ignore[return-value]
+    return tuple(round(float(max(a, b)), 3) for a, b in zip(entry.box_size(), extent, strict=True))  # type: ignore[return-value]
 
 
 def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, entry, profile: str,
@@ -139,7 +139,7 @@ def _place_tracklet(ctx: PlacementContext, rng: np.random.Generator, vid: str, e
 def range_bands(range_m: tuple[float, float], edges: tuple[float, ...]) -> list[tuple[float, float]]:
     """``range_m`` cut at ``edges`` (bands narrower than 1 m are dropped)."""
     cuts = [range_m[0]] + [e for e in edges if range_m[0] < e < range_m[1]] + [range_m[1]]
-    return [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b - a >= 1.0] or [tuple(range_m)]
+    return [(a, b) for a, b in itertools.pairwise(cuts) if b - a >= 1.0] or [tuple(range_m)]
 
 
 def _plan_replicas(seq: Sequence, bank: Bank, config: MakeConfig, frames: list[int]) -> list[CopyPlan]:
@@ -314,7 +314,7 @@ def _simulate_copy(config: MakeConfig, plan: CopyPlan, progress: bool = False) -
         info = seq.frames[k]
         infos.append(FrameInfo(i, info.timestamp_ns, info.world_from_ego, Path(f"points/{i:06d}.npz")))
         annotations.append(real + [BoxAnnotation(v.id, v.label, b, stationary=False)
-                                   for v, b in zip(plan.vehicles, frame.boxes)])
+                                   for v, b in zip(plan.vehicles, frame.boxes, strict=True)])
         world = transform_points(info.world_from_ego, frame.xyz)
         counts[i] = [int(points_in_box(world, b).sum()) for b in frame.boxes]
         sensor_xyh.append(_xyh(info.world_from_ego @ ego_from_sensor(seq, config.origin)))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ class RangeCurves:
 
     def binned(self, which: np.ndarray) -> list[dict]:
         rows = []
-        for lo, hi in zip(RANGE_BINS_M[:-1], RANGE_BINS_M[1:]):
+        for lo, hi in pairwise(RANGE_BINS_M):
             sel = which[(which[:, 0] >= lo) & (which[:, 0] < hi), 1]
             rows.append({"range_m": [lo, hi], "n": int(sel.size),
                          "median": float(np.median(sel)) if sel.size else None,
@@ -135,7 +136,7 @@ def format_replicas(tracks: list[ReplicaTrack], first_frames: int = 10) -> str:
     real = np.concatenate([t.real for t in tracks]) if tracks else np.zeros(0)
     copy = np.concatenate([t.copy for t in tracks]) if tracks else np.zeros(0)
     lines += ["", "| range (m) | frames | real median | copy median | copy / real (sums) |", "|---|---:|---:|---:|---:|"]
-    for lo, hi in zip(RANGE_BINS_M[:-1], RANGE_BINS_M[1:]):
+    for lo, hi in pairwise(RANGE_BINS_M):
         sel = (rng >= lo) & (rng < hi)
         if sel.any():
             lines.append(f"| {lo:.0f}-{hi:.0f} | {int(sel.sum())} | {np.median(real[sel]):.0f} | {np.median(copy[sel]):.0f} | "
@@ -150,7 +151,7 @@ def format_replicas(tracks: list[ReplicaTrack], first_frames: int = 10) -> str:
 def format_realism(curves: RangeCurves) -> str:
     lines = ["points in the ground-truth box versus range: median [p25, p75] (n boxes)", "",
              "| range (m) | real vehicles | inserted vehicles | inserted / real (median) |", "|---|---:|---:|---:|"]
-    for r, s in zip(curves.binned(curves.real), curves.binned(curves.inserted)):
+    for r, s in zip(curves.binned(curves.real), curves.binned(curves.inserted), strict=True):
         cell = lambda x: "—" if x["n"] == 0 else f"{x['median']:.0f} [{x['p25']:.0f}, {x['p75']:.0f}] ({x['n']})"  # noqa: E731
         ratio = (f"{s['median'] / r['median']:.2f}" if r["n"] and s["n"] and r["median"] else "—")
         lines.append(f"| {r['range_m'][0]:.0f}-{r['range_m'][1]:.0f} | {cell(r)} | {cell(s)} | {ratio} |")
@@ -187,7 +188,7 @@ def write_plot(curves: RangeCurves, path: Path, width: int = 900, height: int = 
     for _, data, colour in styles:
         pts = [(px((row["range_m"][0] + row["range_m"][1]) / 2), py(row["median"])) for row in curves.binned(data)
                if row["n"]]
-        for p, q in zip(pts, pts[1:]):
+        for p, q in pairwise(pts):
             cv2.line(img, p, q, colour, 2, cv2.LINE_AA)
         for p in pts:
             cv2.circle(img, p, 4, colour, -1, cv2.LINE_AA)

@@ -107,8 +107,8 @@ def run_list(args: argparse.Namespace) -> int:
     headers = ["id", "split", "label", "size LxWxH (m)", "points", "quality", "source", "sequence/path", "track"]
     rows = bank_summary_rows(bank)
     widths = [max([len(h)] + [len(r[i]) for r in rows]) for i, h in enumerate(headers)]
-    print("  ".join(h.ljust(w) for h, w in zip(headers, widths)).rstrip())
+    print("  ".join(h.ljust(w) for h, w in zip(headers, widths, strict=True)).rstrip())
     for r in rows:
-        print("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
     print(f"{len(rows)} entries")
     return 0

@@ -109,7 +109,7 @@ def associate_tracks(detections: dict[int, FrameDetections], n_frames: int,
         assigned_tracks, assigned_dets = set(), set()
         if cost.size:
             rows, cols = linear_sum_assignment(cost)
-            for r, c in zip(rows, cols):
+            for r, c in zip(rows, cols, strict=True):
                 if cost[r, c] < 1e6:
                     t = live[r]
                     t["kf"].update(boxes[c])

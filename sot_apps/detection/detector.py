@@ -80,8 +80,8 @@ def _complete(lo: float, hi: float, minimum: float, sensor: float) -> tuple[floa
     return hi - minimum, hi
 
 
-def _box_from_cluster(points: np.ndarray, ground_z: float, sensor_xy: np.ndarray, config: DetectorConfig
-                      ) -> tuple[np.ndarray, float] | None:
+def _box_from_cluster(points: np.ndarray, ground_z: float, sensor_xy: np.ndarray | tuple[float, float],
+                      config: DetectorConfig) -> tuple[np.ndarray, float] | None:
     """(7,) box and its score for one cluster, or None when a gate rejects it."""
     span = points[:, :2].max(axis=0) - points[:, :2].min(axis=0)
     if np.hypot(*span) > np.hypot(config.max_length, config.max_width):   # larger than any vehicle in any heading
@@ -124,7 +124,7 @@ def _box_from_cluster(points: np.ndarray, ground_z: float, sensor_xy: np.ndarray
 
 
 def detect_frame(points_ego: np.ndarray, world_from_ego: np.ndarray, config: DetectorConfig = DetectorConfig(),
-                 sensor_xy: np.ndarray = np.zeros(2)) -> FrameDetections:
+                 sensor_xy: np.ndarray | tuple[float, float] = (0.0, 0.0)) -> FrameDetections:
     """Vehicle boxes (WORLD frame) in one sweep given in the ego frame (``sensor_xy``: the LiDAR in it)."""
     pts = np.asarray(points_ego, dtype=np.float64).reshape(-1, 3)
     pts = pts[np.isfinite(pts).all(axis=1)]

@@ -96,7 +96,7 @@ def simulate_frame(gt_boxes: np.ndarray, gt_points: np.ndarray, ego_xyz: np.ndar
     boxes[:, 4:7] = g[:, 4:7] * np.exp(noise.sigma_log_size * e[:, 4:7])
     scores = (noise.tp_score_base + noise.tp_score_gain * (1.0 - np.exp(-npts / 30.0))
               + noise.score_noise * rng.standard_normal(len(g)))
-    kept_labels = tuple(lbl for lbl, k in zip(labels, keep) if k) if labels else ()
+    kept_labels = tuple(lbl for lbl, k in zip(labels, keep, strict=True) if k) if labels else ()
     # false positives: half near real objects, half anywhere within range
     n_fp = int(rng.poisson(noise.false_positives_per_frame))
     fp = np.zeros((n_fp, 7))
@@ -137,7 +137,7 @@ def simulate_detections(sequence, noise: DetectionNoise | str = "learned", seed:
         ego = np.asarray(sequence.frames[k].world_from_ego)[:3, 3]
         fresh = rng.standard_normal((len(anns), 7))
         errors = np.array([rho * state[a.track_id] + np.sqrt(1.0 - rho * rho) * f if a.track_id in state else f
-                           for a, f in zip(anns, fresh)]).reshape(-1, 7)
-        state = {a.track_id: err for a, err in zip(anns, errors)}
+                           for a, f in zip(anns, fresh, strict=True)]).reshape(-1, 7)
+        state = {a.track_id: err for a, err in zip(anns, errors, strict=True)}
         out[k] = simulate_frame(gt, counts, ego, profile, rng, tuple(a.label for a in anns), errors)
     return out

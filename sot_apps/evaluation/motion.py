@@ -16,6 +16,7 @@ Invalid (flagged) frames are excluded; ``n`` counts the samples that entered eac
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from itertools import pairwise
 from pathlib import Path
 from typing import Sequence as Seq
 
@@ -266,9 +267,9 @@ def plot_accuracy(acc: MotionAccuracy | dict, path: str | Path, title: str = "")
         cv2.line(img, px(k0, 10), px(min(k0 + 0.4, k_max), 10), (120, 120, 120), 1, cv2.LINE_AA)
     cv2.putText(img, "10 cm (paper)", (px(k_max, 10)[0] - 120, px(k_max, 10)[1] - 6), font, 0.45, (120, 120, 120), 1,
                 cv2.LINE_AA)
-    for name, curve, color in curves:
+    for _, curve, color in curves:
         pts = [px(k + 1, 100 * v) for k, v in enumerate(curve) if np.isfinite(v)]
-        for a, b in zip(pts, pts[1:]):
+        for a, b in pairwise(pts):
             cv2.line(img, a, b, color, 2, cv2.LINE_AA)
         for p in pts:
             cv2.circle(img, p, 3, color, -1, cv2.LINE_AA)

@@ -86,7 +86,7 @@ def format_comparison(rows: list[ReferenceComparison], per_frame: bool = False) 
                      f"  {s['first_diverged']:12d}")
         if per_frame:
             for k, a, b, c, d, h in zip(r.frames, r.iou_ours_gt, r.iou_ref_gt, r.iou_ours_ref, r.centre_dist,
-                                        r.heading_diff):
+                                        r.heading_diff, strict=True):
                 lines.append(f"    {k:3d}  gt {a:.3f}  ref-gt {b:.3f}  ours-ref {c:.3f}  d {d:.3f}  dh {h:+.3f}")
     ours = [r.iou_ours_gt for r in rows]
     refs = [r.iou_ref_gt for r in rows]

@@ -111,7 +111,7 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
     cam_k = setup.camera_k_from_world
     placed = [o.mesh.transformed(cam_k @ o.world_from_object_k) for o in objects]
     rois, footprints = {}, []
-    for obj, mesh in zip(objects, placed):
+    for obj, mesh in zip(objects, placed, strict=True):
         uv = project_vertices(mesh, np.eye(4), model)
         roi = image_roi(uv, model)
         if roi is not None:

@@ -134,7 +134,8 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
     ids = [seq.resolve_track_id(t) for t in track_ids] if track_ids else sorted(tracks)
     frame_list = set(range(len(seq.frames)) if frames is None else frames)
     boxes = {tid: TrackBoxes(tuple(k for k in tracks[tid].frames if k in frame_list),
-                             tuple(b for k, b in zip(tracks[tid].frames, tracks[tid].boxes) if k in frame_list))
+                             tuple(b for k, b in zip(tracks[tid].frames, tracks[tid].boxes, strict=True)
+                                   if k in frame_list))
              for tid in ids}
     boxes = {tid: tb for tid, tb in boxes.items() if tb.frames}
     if moving_only:

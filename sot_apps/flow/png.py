@@ -113,7 +113,7 @@ def encode_rows_png(pixels: np.ndarray, rows: np.ndarray, height: int, backgroun
     adler = 1
     compressor = zlib.compressobj(_LEVEL, zlib.DEFLATED, -15, _MEM_LEVEL)
     done = 0                                          # rows written so far
-    for index, row, c0, c1 in zip(used.tolist(), rows[used].tolist(), first.tolist(), last.tolist()):
+    for index, row, c0, c1 in zip(used.tolist(), rows[used].tolist(), first.tolist(), last.tolist(), strict=True):
         parts.append(empty_segment * (row - done))
         adler = _adler_repeat(adler, empty_adler, len(empty_row), row - done)
         # the filtered span: pixels c0 .. c1 + 1 (the pixel after the content differs from its left neighbour)

@@ -63,7 +63,7 @@ def overlay(image_bgr: np.ndarray, flow: np.ndarray, valid: np.ndarray, instance
         edges = cv2.morphologyEx(region, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
         out[edges > 0] = (255, 255, 255)
     vs, us = np.nonzero(valid[::arrow_step, ::arrow_step])
-    for u, v in zip(us * arrow_step, vs * arrow_step):  # a few hundred arrows at most
+    for u, v in zip(us * arrow_step, vs * arrow_step, strict=True):  # a few hundred arrows at most
         du, dv = flow[v, u]
         cv2.arrowedLine(out, (int(u), int(v)), (int(round(u + du)), int(round(v + dv))), (0, 0, 0), 1, cv2.LINE_AA,
                         tipLength=0.25)

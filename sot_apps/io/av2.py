@@ -126,7 +126,7 @@ def _cameras(root: Path, frames: list[FrameInfo], pose_times: np.ndarray, poses:
                                                         "k3", "height_px", "width_px"))
     ext_path = calib / "egovehicle_SE3_sensor.feather"
     ext = _read_feather(ext_path, ("sensor_name",) + _POSE_COLUMNS)
-    mounts = dict(zip((str(n) for n in ext["sensor_name"]), _transforms(ext, ext_path, "sensor")))
+    mounts = dict(zip((str(n) for n in ext["sensor_name"]), _transforms(ext, ext_path, "sensor"), strict=True))
     cameras: dict[str, Camera] = {}
     for i, name in enumerate(str(n) for n in intr["sensor_name"]):
         if name not in mounts:

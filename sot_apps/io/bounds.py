@@ -73,8 +73,8 @@ def check_sequence_coordinates(sequence) -> None:
             raise InputError(sequence.root, f"frame {k}: ego position {translations[k].tolist()} is beyond the "
                                             f"coordinate bound (|x|, |y|, |z| <= {MAX_COORDINATE_M:g} m)")
     rows, where = [], []
-    for k, annotations in enumerate(sequence.annotations or []):
-        for ann in annotations:
+    for k, frame_annotations in enumerate(sequence.annotations or []):
+        for ann in frame_annotations:
             b = ann.box
             rows.append((b.x, b.y, b.z, b.heading, b.length, b.width, b.height))
             where.append((k, ann.track_id))

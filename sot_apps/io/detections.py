@@ -229,7 +229,7 @@ def detections_to_json(detections: Detections, sequence_id: str | None = None) -
         boxes = []
         for i, b in enumerate(det.boxes):
             entry: dict[str, Any] = dict(zip(("x", "y", "z", "heading", "length", "width", "height"),
-                                             (float(v) for v in b)))
+                                             (float(v) for v in b), strict=True))
             entry["score"] = float(np.clip(det.scores[i], 0.0, 1.0))
             if det.labels and det.labels[i]:
                 entry["label"] = det.labels[i]

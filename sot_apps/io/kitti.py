@@ -258,7 +258,7 @@ def _camera_frames(images: dict[int, Path], frame_numbers: list[int], times: lis
     if not images or any(f not in images for f in frame_numbers):
         return []
     return [CameraFrame(timestamp_ns=t, image_path=images[f], world_from_camera=w @ ego_from_camera)
-            for f, t, w in zip(frame_numbers, times, world_from_ego)]
+            for f, t, w in zip(frame_numbers, times, world_from_ego, strict=True)]
 
 
 def _camera(calib: KittiCalib, name: str, images: dict[int, Path], frame_numbers: list[int], times: list[int],
@@ -385,7 +385,8 @@ def read_kitti_object(path: str | Path) -> Sequence:
     vod = (root / "pose").is_dir()
     calibs = [read_calib(root / "calib" / f"{sweeps[f].stem}.txt") for f in numbers]
     if vod:
-        world_from_ego = [_vod_world_from_ego(root / "pose" / f"{sweeps[f].stem}.json", c) for f, c in zip(numbers, calibs)]
+        world_from_ego = [_vod_world_from_ego(root / "pose" / f"{sweeps[f].stem}.json", c)
+                          for f, c in zip(numbers, calibs, strict=True)]
     else:
         world_from_ego = [np.eye(4) for _ in numbers]
     times = [f * FRAME_DT_NS for f in numbers]

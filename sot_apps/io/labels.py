@@ -260,7 +260,7 @@ def _av2_rows(seq: Sequence, tracks: list[LabelTrack], count_points: bool) -> tu
         for name, value in zip(("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "height_m", "qw", "qx",
                                 "qy", "qz", "tx_m", "ty_m", "tz_m"),
                                (int(seq.frames[k].timestamp_ns), track_uuid, category, ego.length, ego.width, ego.height,
-                                *q, ego.x, ego.y, ego.z)):
+                                *q, ego.x, ego.y, ego.z), strict=True):
             cols[name].append(value)
         cols["score"].append(float(track.score) if track.score is not None else 1.0)
         if count_points:

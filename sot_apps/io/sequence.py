@@ -188,8 +188,8 @@ class Sequence:
         frames: dict[str, list[int]] = {}
         boxes: dict[str, list[Box]] = {}
         labels: dict[str, str] = {}
-        for k, annotations in enumerate(self.annotations):
-            for ann in annotations:
+        for k, frame_annotations in enumerate(self.annotations):
+            for ann in frame_annotations:
                 frames.setdefault(ann.track_id, []).append(k)
                 boxes.setdefault(ann.track_id, []).append(ann.box)
                 labels.setdefault(ann.track_id, ann.label)

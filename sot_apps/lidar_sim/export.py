@@ -77,7 +77,7 @@ def kitti_label_lines(boxes: list[Box], labels: list[str], visibility: list[Visi
     """KITTI label lines; with ``visibility``, invisible vehicles are left out and the others carry their
     truncation and occlusion level (without: truncated 0, occluded 0)."""
     lines = []
-    for i, (box, label) in enumerate(zip(boxes, labels)):
+    for i, (box, label) in enumerate(zip(boxes, labels, strict=True)):
         truncated, occluded = 0.0, 0
         if visibility is not None:
             if not visibility[i].visible:
@@ -99,7 +99,7 @@ def write_boxes(out_dir: Path, boxes: list[Box], labels: list[str], bank_ids: li
     doc = {"version": 1, "frame": "sensor", "boxes": [
         {"index": i, "bank_id": b_id, "label": lab, "x": b.x, "y": b.y, "z": b.z, "heading": b.heading,
          "length": b.length, "width": b.width, "height": b.height, **v.to_json()}
-        for i, (b, lab, b_id, v) in enumerate(zip(boxes, labels, bank_ids, visibility))]}
+        for i, (b, lab, b_id, v) in enumerate(zip(boxes, labels, bank_ids, visibility, strict=True))]}
     write_json(out_dir / "boxes.json", doc)
     lines = kitti_label_lines(boxes, labels, visibility)
     write_text(out_dir / "labels_kitti.txt", "\n".join(lines) + ("\n" if lines else ""))

@@ -109,7 +109,7 @@ def overlapping_objects(spec: SceneSpec, bank: Bank) -> list[tuple[int, int]]:
     boxes = np.array([[o.x, o.y, 0.0, o.heading, *bank.get(o.bank_id).box_size()[:2], 1.0] for o in spec.objects])
     i, j = np.triu_indices(n, k=1)
     hit = iou_3d_batch(boxes[i], boxes[j]) > 0
-    return [(int(a), int(b)) for a, b in zip(i[hit], j[hit])]
+    return [(int(a), int(b)) for a, b in zip(i[hit], j[hit], strict=True)]
 
 
 def _free_spot(background_xyz: np.ndarray, x: float, y: float, heading: float, size: tuple[float, float, float]) -> bool:

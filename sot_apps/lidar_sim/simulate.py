@@ -64,7 +64,7 @@ def run_simulation(spec: SceneSpec, bank: Bank, out: Path, formats: tuple[str, .
 
 def counts_table(result: SimResult) -> list[str]:
     lines = ["index  bank_id                          range_m  heading_deg  points  visible  occluded  truncated"]
-    for i, (o, b, v) in enumerate(zip(result.objects, result.boxes, result.visibility)):
+    for i, (o, b, v) in enumerate(zip(result.objects, result.boxes, result.visibility, strict=True)):
         lines.append(f"{i:5d}  {o.bank_id:31s}  {np.hypot(b.x, b.y):7.1f}  {np.degrees(b.heading):11.1f}  "
                      f"{v.num_points:6d}  {100 * v.visible_share:6.0f}%  "
                      f"{v.occluded if v.visible else '-':>8}  {v.truncated:9.2f}")

@@ -93,7 +93,7 @@ def vehicle_visibility(sensor: Sensor, vehicles: list[SimObject], boxes: list[Bo
     counts = np.bincount(instance[instance >= 0], minlength=len(vehicles)) if len(instance) else \
         np.zeros(len(vehicles), np.int64)
     out = []
-    for i, (obj, box) in enumerate(zip(vehicles, boxes)):
+    for i, (obj, box) in enumerate(zip(vehicles, boxes, strict=True)):
         n = int(counts[i])
         expected = _expected_points(sensor, obj)
         share = 0.0 if n == 0 else (1.0 if expected == 0 else min(1.0, n / expected))

@@ -79,7 +79,7 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
         ann = annotated[tid]
         first, last = ann.frames[0], ann.frames[-1]
         frames = np.arange(first, last + 1)
-        by_frame = dict(zip(ann.frames, ann.boxes))
+        by_frame = dict(zip(ann.frames, ann.boxes, strict=True))
         states = np.full((len(frames), 4), np.nan)
         valid = np.zeros(len(frames), dtype=bool)
         flags: list[list[str]] = []

@@ -227,7 +227,7 @@ def dense_arrays(scenario: Scenario) -> dict[str, np.ndarray]:
                              ("velocity_x", k.velocity_x), ("velocity_y", k.velocity_y), ("speed", k.speed),
                              ("acceleration", k.acceleration), ("yaw_rate", k.yaw_rate)):
             out[name][o, cols[v]] = values[v]
-        for name, value in zip(("length", "width", "height"), k.size):
+        for name, value in zip(("length", "width", "height"), k.size, strict=True):
             out[name][o, cols[v]] = value
         out["valid"][o, cols] = v
     out["object_id"] = np.array([k.object_id for k in scenario.objects], dtype=str)

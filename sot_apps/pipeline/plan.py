@@ -231,5 +231,5 @@ def track_chunks(objects: list[ObjectPlan], workers: int,
             j = min((j for j in range(n) if len(members[j]) < max_objects), key=lambda j: loads[j])
             members[j].append(i)
             loads[j] += objs[i].end - objs[i].start
-        chunks += [(load, [objs[i] for i in sorted(m)]) for load, m in zip(loads, members) if m]
+        chunks += [(load, [objs[i] for i in sorted(m)]) for load, m in zip(loads, members, strict=True) if m]
     return [c for _, c in sorted(chunks, key=lambda lc: -lc[0])]

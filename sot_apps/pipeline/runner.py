@@ -170,7 +170,7 @@ def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
             raise OutputError(None, o.error or "cannot write an output")
     ran: dict[str, UnitRecord] = {}
     breakdown: dict[str, float] = {}
-    for chunk, outcome in zip(chunks, outcomes):
+    for chunk, outcome in zip(chunks, outcomes, strict=True):
         entries = {e["object"]: e for e in (outcome.result or {}).get("objects", [])} if outcome.ok else {}
         for name, value in ((outcome.result or {}).get("times", {}) if outcome.ok else {}).items():
             breakdown[name] = breakdown.get(name, 0.0) + value

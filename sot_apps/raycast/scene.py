@@ -130,7 +130,7 @@ def _worker_cast(span: tuple[int, int]) -> RayHits:
     vertices, faces, origins, directions, backend = _WORKER_ARGS
     if _WORKER_SCENE is None:
         _WORKER_SCENE = RaycastScene(backend)
-        for v, f in zip(vertices, faces):
+        for v, f in zip(vertices, faces, strict=True):
             _WORKER_SCENE.add_mesh(v, f)
     a, b = span
     o = origins if origins.ndim == 1 else origins[a:b]

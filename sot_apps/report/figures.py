@@ -133,7 +133,7 @@ def tracks_bev_figure(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]],
     ego_px = canvas.px(seq.frames[mid].world_from_ego[:2, 3])[0]
     ego_rect = (int(ego_px[0]) - 12, int(ego_px[1]) - 12, int(ego_px[0]) + 12, int(ego_px[1]) + 12)
     rects = place_labels(np.array(anchors), sizes, (w, h), occupied=[ego_rect])
-    for anchor, rect, colour, n in zip(anchors, rects, colours, numbers):
+    for anchor, rect, colour, n in zip(anchors, rects, colours, numbers, strict=True):
         nearest = (int(np.clip(anchor[0], rect[0], rect[2])), int(np.clip(anchor[1], rect[1], rect[3])))
         cv2.line(canvas.image, (int(anchor[0]), int(anchor[1])), nearest, colour, 1, cv2.LINE_AA)
         cv2.rectangle(canvas.image, rect[:2], (rect[2] - 1, rect[3] - 1), WHITE, -1)
@@ -143,7 +143,7 @@ def tracks_bev_figure(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]],
                LegendEntry("ego", EGO_COLOR, f"ego at frame {mid} (arrow: heading)"),
                LegendEntry("line", EGO_COLOR, "ego path"),
                LegendEntry("points", (170, 170, 170), f"LiDAR points, frame {mid}")]
-    entries += [LegendEntry("box", c, s) for c, s in zip(colours, labels)]
+    entries += [LegendEntry("box", c, s) for c, s in zip(colours, labels, strict=True)]
     legend = legend_panel(entries, f"tracked objects (boxes every {box_every} frames)", width=330)
     img = hstack([with_metre_axes(canvas, step), legend], gap=10)
     write_png(path, title_bar(img, f"{seq.id}: tracks in bird's-eye view (world frame)"))
@@ -178,7 +178,7 @@ def shape_growth_figure(growth: ShapeGrowth, path: Path) -> Path:
     size = np.asarray(growth.size, dtype=np.float64)
     height = float(size[2])
     panels = []
-    for k, pts in zip(growth.frames, growth.points):
+    for k, pts in zip(growth.frames, growth.points, strict=True):
         t = np.clip((pts[:, 2] + height / 2) / max(height, 1e-6), 0, 1) if len(pts) else np.zeros(0)
         colours = cv2.applyColorMap((t * 255).astype(np.uint8).reshape(-1, 1), cv2.COLORMAP_VIRIDIS).reshape(-1, 3)
         top = _object_view(pts, colours, size, (0, 1))

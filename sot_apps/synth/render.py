@@ -64,7 +64,7 @@ def render_camera_images(world, cam, times_ns: np.ndarray, out_dir: Path) -> lis
         out_dir.mkdir(parents=True, exist_ok=True)
         for k, t in enumerate(times_ns):
             t = int(t)
-            for node, o in zip(nodes, world.objects):
+            for node, o in zip(nodes, world.objects, strict=True):
                 scene.set_pose(node, world_from_object(o.trajectory.states_at(t)))
             world_from_camera = world.world_from_ego(t) @ cam.ego_from_camera
             scene.set_pose(cam_node, world_from_camera @ CV_FROM_GL)

@@ -355,9 +355,10 @@ def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
                  "states": states}
         if camera_times:
             entry["camera_states"] = {
-                cam.name: [dict(zip(("x", "y", "z", "heading"), (float(v) for v in _wrapped(o.trajectory, int(t)))),
+                cam.name: [dict(zip(("x", "y", "z", "heading"), (float(v) for v in _wrapped(o.trajectory, int(t))),
+                                    strict=True),
                                 timestamp_ns=int(t)) for t in times]
-                for cam, times in zip(world.cameras, camera_times)}
+                for cam, times in zip(world.cameras, camera_times, strict=True)}
         objects.append(entry)
     return {"version": 1, "generator": "sot_apps.synth", "seed": world.seed,
             "sensor": world.sensor.to_dict(), "sensor_height": SENSOR_HEIGHT, "ground_z": 0.0,
@@ -391,7 +392,7 @@ def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: st
         infos.append(FrameInfo(k, t, world.world_from_ego(t), Path(f"points/{k:06d}.npz")))
         seen_ns = observation_times_ns(world, scan, t)
         annotations.append([BoxAnnotation(o.id, o.label, o.box_at(int(ts)), stationary=not o.moving)
-                            for o, ts in zip(world.objects, seen_ns)])
+                            for o, ts in zip(world.objects, seen_ns, strict=True)])
 
     camera_models: dict[str, Camera] = {}
     camera_times: list[np.ndarray] = []
@@ -403,7 +404,7 @@ def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: st
             camera_times.append(times)
             paths = render_camera_images(world, cam, times, out / "cameras" / cam.name)
             cam_frames = [CameraFrame(int(t), p, world.world_from_ego(int(t)) @ cam.ego_from_camera)
-                          for t, p in zip(times, paths)]
+                          for t, p in zip(times, paths, strict=True)]
             camera_models[cam.name] = Camera(cam.name, cam.K, np.zeros(5), cam.width, cam.height, cam_frames,
                                              ego_from_camera=cam.ego_from_camera)
 

@@ -32,7 +32,7 @@ def _tracks(bench: Path) -> list[dict]:
             boxes = [frames[k][2][e["id"]] for k in range(a, b + 1)]
             out.append({"entry": e, "boxes": boxes, "sensor": sensor[a:b + 1],
                         "in_box": np.array([points_in_box(frames[k][0], box).sum()
-                                            for k, box in zip(range(a, b + 1), boxes)]),
+                                            for k, box in zip(range(a, b + 1), boxes, strict=True)]),
                         "own": np.array([(frames[k][1] == i).sum() for k in range(a, b + 1)])})
     return out
 

@@ -31,7 +31,7 @@ def test_swept_box_holds_every_pose_of_a_turning_window():
     window = np.arange(0, len(states) - 10, 7)[:, None] + np.arange(11)[None]
     boxes = placement.swept_boxes(states, window, 4.5, 1.9)
     corners = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [4.5 / 2, 1.9 / 2]
-    for (x, y, h, length, width), idx in zip(boxes, window):
+    for (x, y, h, length, width), idx in zip(boxes, window, strict=True):
         xyh = states[idx]
         pts = placement._rigid(corners[None], xyh[:, 0:1], xyh[:, 1:2], xyh[:, 2:3]).reshape(-1, 2)
         box = Box(x, y, 0.0, h, length + 1e-6, width + 1e-6, 1.0)

@@ -48,7 +48,7 @@ def test_offline_refinement_is_recorded_and_stays_on_the_vehicle(pandaset_root, 
                         for r in track.frames])
 
     # the refined states differ from the online ones, and stay on the annotated vehicle
-    assert max(abs(a.state.x - b.state.x) for a, b in zip(on.frames, off.frames)) > 1e-4
+    assert max(abs(a.state.x - b.state.x) for a, b in zip(on.frames, off.frames, strict=True)) > 1e-4
     assert mean_error(off) < 0.3
 
 

@@ -49,7 +49,7 @@ def _write_nuscenes(path: Path) -> None:
 
 
 def _write_json(path: Path) -> None:
-    frames = [{"frame": k, "boxes": [dict(zip(("x", "y", "z", "heading", "length", "width", "height"), b),
+    frames = [{"frame": k, "boxes": [dict(zip(("x", "y", "z", "heading", "length", "width", "height"), b, strict=True),
                                           score=score, label=label) for b, score, label in items]}
               for k, items in BOXES.items()]
     path.write_text(json.dumps({"version": 1, "frames": frames}))

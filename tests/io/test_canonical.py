@@ -20,7 +20,7 @@ def assert_sequences_equal(a, b) -> None:
     assert len(a) == len(b)
     assert a.id == b.id
     np.testing.assert_array_equal(a.ego_from_lidar, b.ego_from_lidar)
-    for fa, fb in zip(a.frames, b.frames):
+    for fa, fb in zip(a.frames, b.frames, strict=True):
         assert fa.timestamp_ns == fb.timestamp_ns and isinstance(fb.timestamp_ns, int)
         np.testing.assert_array_equal(fa.world_from_ego, fb.world_from_ego)
     for k in range(len(a)):
@@ -37,7 +37,7 @@ def assert_sequences_equal(a, b) -> None:
         np.testing.assert_array_equal(ca.K, cb.K)
         np.testing.assert_array_equal(ca.distortion, cb.distortion)
         assert (ca.width, ca.height, len(ca.frames)) == (cb.width, cb.height, len(cb.frames))
-        for fa, fb in zip(ca.frames, cb.frames):
+        for fa, fb in zip(ca.frames, cb.frames, strict=True):
             assert fa.timestamp_ns == fb.timestamp_ns
             np.testing.assert_array_equal(fa.world_from_camera, fb.world_from_camera)
             assert Path(fa.image_path).read_bytes() == Path(fb.image_path).read_bytes()

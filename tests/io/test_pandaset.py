@@ -37,8 +37,8 @@ def test_pandaset_conventions_on_track_8ac00bad(pandaset):
 
 def test_sensor_1_duplicates_dropped_and_times(pandaset):
     # one box per object per frame
-    for annotations in pandaset.annotations:
-        ids = [a.track_id for a in annotations]
+    for frame_annotations in pandaset.annotations:
+        ids = [a.track_id for a in frame_annotations]
         assert len(ids) == len(set(ids))
     sweep = pandaset.sweep(0)
     # PandaSet's lidar timestamp marks the END of the sweep: offsets span ~0.1 s before it
@@ -46,7 +46,8 @@ def test_sensor_1_duplicates_dropped_and_times(pandaset):
     assert sweep.time_offset_ns.dtype == np.int64 and sweep.xyz.dtype == np.float32
     # cameras fire before the lidar timestamp: front ~50 ms, back ~100 ms
     for name, expected_ms in (("front_camera", -50), ("back_camera", -100)):
-        offsets = [(cf.timestamp_ns - f.timestamp_ns) / 1e6 for cf, f in zip(pandaset.cameras[name].frames, pandaset.frames)]
+        offsets = [(cf.timestamp_ns - f.timestamp_ns) / 1e6
+                   for cf, f in zip(pandaset.cameras[name].frames, pandaset.frames, strict=True)]
         assert abs(np.mean(offsets) - expected_ms) < 5
 
 

@@ -420,7 +420,7 @@ def write_v2(root, vehicle_pose_parquet, lidar_frames=(0, 1, 50), camera_frames:
             values = (*b.ego[:3], *b.world[4:], b.ego[3], b.type_code, 55)
             box_rows["key.frame_timestamp_micros"].append(stamps[k])
             box_rows["key.laser_object_id"].append(b.track_id)
-            for name, v in zip(list(box_rows)[2:], values):
+            for name, v in zip(list(box_rows)[2:], values, strict=True):
                 box_rows[name].append(v)
     f32 = pa.list_(pa.float32())
     write("lidar", {k: (pa.array(v, f32) if k.endswith("values") else v) for k, v in lidar_rows.items()})
@@ -437,7 +437,7 @@ def write_v2(root, vehicle_pose_parquet, lidar_frames=(0, 1, 50), camera_frames:
     names = ["f_u", "f_v", "c_u", "c_v", "k1", "k2", "p1", "p2", "k3"]
     write("camera_calibration", {
         "key.camera_name": [1],
-        **{f"[CameraCalibrationComponent].intrinsic.{n}": [v] for n, v in zip(names, CAMERA_INTRINSIC)},
+        **{f"[CameraCalibrationComponent].intrinsic.{n}": [v] for n, v in zip(names, CAMERA_INTRINSIC, strict=True)},
         "[CameraCalibrationComponent].extrinsic.transform": [CAMERA_EXTRINSIC.reshape(-1).tolist()],
         "[CameraCalibrationComponent].width": [CAMERA_SIZE[0]], "[CameraCalibrationComponent].height": [CAMERA_SIZE[1]],
         "[CameraCalibrationComponent].rolling_shutter_direction": [2]})

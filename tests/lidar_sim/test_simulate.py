@@ -222,4 +222,4 @@ def test_labels_say_what_the_sensor_saw(box_bank, tmp_path):
     lines = (tmp_path / "sim" / "labels_kitti.txt").read_text().splitlines()
     assert len(lines) == 3
     assert [int(line.split()[2]) for line in lines] == [boxes[i]["occluded"] for i in (0, 2, 3)]
-    assert all(float(line.split()[1]) == boxes[i]["truncated"] for line, i in zip(lines, (0, 2, 3)))
+    assert all(float(line.split()[1]) == boxes[i]["truncated"] for line, i in zip(lines, (0, 2, 3), strict=True))

@@ -34,6 +34,6 @@ def test_camera_images_differ_in_at_most_a_few_edge_pixels(tmp_path):
     times = world.frame_times_ns + cam.time_offset_ns
     first = render_camera_images(world, cam, times, tmp_path / "a")
     second = render_camera_images(world, cam, times, tmp_path / "b")
-    for a, b in zip(first, second):
+    for a, b in zip(first, second, strict=True):
         diff = np.abs(cv2.imread(str(a)).astype(int) - cv2.imread(str(b)).astype(int)).max(axis=2)
         assert (diff > 0).sum() <= 4 and diff.max() <= 32

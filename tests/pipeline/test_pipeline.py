@@ -39,7 +39,7 @@ def test_every_output_of_two_sequences_by_three_objects(reference_run, tiny_worl
     assert json.loads((out / "failures.json").read_text()) == {"failures": []}
     names = [s.name for s in result.plan.sequences]
     assert names == ["synth_s4", "synth_s5"]
-    for name, world in zip(names, tiny_worlds):
+    for name, world in zip(names, tiny_worlds, strict=True):
         seq = open_sequence(world)
         gt = seq.tracks()
         for obj in OBJECTS:

@@ -43,7 +43,7 @@ def _assert_identical(seq, requests, mode: str, lag: int = 3) -> None:
     assert len(reads) == len(set(reads)) == times.sweeps   # each sweep read once
     seq.load_sweep = loader
     seq.cache_size = 4
-    for request, got in zip(requests, tracks):
+    for request, got in zip(requests, tracks, strict=True):
         assert got.error is None, got.error
         want = _alone(seq, request, config, mode, lag)
         assert got.result.mode == want.mode and got.result.frames == want.frames
@@ -57,7 +57,7 @@ def _assert_identical(seq, requests, mode: str, lag: int = 3) -> None:
 def _requests(seq, ids, starts, end, max_frames=None):
     tracks = seq.tracks()
     out = []
-    for tid, start in zip(ids, starts):
+    for tid, start in zip(ids, starts, strict=True):
         t = tracks[tid]
         frames = [k for k in t.frames if start <= k <= end]
         if start == 0:   # annotated: starts at its first box with enough points
@@ -112,10 +112,10 @@ def test_ground_masks_stored_in_the_sweep_cache_give_the_same_tracks(tiny_worlds
     requests = _requests(plain, ["veh_000", "veh_002"], [0, 1], 5)
     config = get_preset("full")
     want = [_alone(plain, r, config, "online", 0) for r in requests]
-    for run in range(2):
+    for _ in range(2):
         seq = with_sweep_cache(open_sequence(tiny_worlds[0]), tmp_path / "cache")
         tracks, _ = track_objects(seq, requests, config)
-        for got, alone in zip(tracks, want):
+        for got, alone in zip(tracks, want, strict=True):
             assert np.array_equal([e.box.to_array() for e in got.result.estimates],
                                   [e.box.to_array() for e in alone.estimates])
         cache = SweepCache.of(seq)

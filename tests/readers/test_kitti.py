@@ -164,7 +164,7 @@ def test_velodyne_and_oxts_from_the_synthetic_world(tmp_path):
         expected[:3, 3] -= offset
         np.testing.assert_allclose(seq.frames[k].world_from_ego, expected, atol=2e-6)
         np.testing.assert_allclose(seq.sweep(k).xyz, tiny.sweep(k).xyz, atol=1e-6)
-        for got, ann in zip(seq.annotations[k], tiny.annotations[k]):
+        for got, ann in zip(seq.annotations[k], tiny.annotations[k], strict=True):
             want = ann.box.transformed(info["turn"])
             assert got.label == "Car"
             np.testing.assert_allclose([got.box.x, got.box.y, got.box.z], np.array([want.x, want.y, want.z]) - offset, atol=2e-5)

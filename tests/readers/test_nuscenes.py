@@ -159,7 +159,7 @@ def test_tables_from_the_synthetic_world_read_back(tmp_path, capsys):
     tiny_cam = tiny.cameras["front_camera"]
     np.testing.assert_allclose(cam.K, tiny_cam.K)
     assert (cam.width, cam.height) == (tiny_cam.width, tiny_cam.height) and len(cam.frames) == TINY_NUM_FRAMES
-    for got, want in zip(cam.frames, tiny_cam.frames):
+    for got, want in zip(cam.frames, tiny_cam.frames, strict=True):
         assert got.timestamp_ns == want.timestamp_ns  # per-image time (50 ms before the lidar)
         np.testing.assert_allclose(got.world_from_camera, want.world_from_camera, atol=1e-9)
     tracks = seq.tracks()

@@ -58,7 +58,8 @@ def test_av2_upright_world_boxes_miss_counts(readers_root):
     k = next(f.index for f in seq.frames if f.has_sweep)
     world = seq.points_world(k)
     level = [Box(*a.box.to_array()) for a in seq.annotations[k]]
-    equal = sum(int(points_in_box(world, b).sum()) == a.num_points for b, a in zip(level, seq.annotations[k]))
+    equal = sum(int(points_in_box(world, b).sum()) == a.num_points
+                for b, a in zip(level, seq.annotations[k], strict=True))
     assert equal < len(level) - 5
 
 

@@ -28,7 +28,7 @@ def _tracks_from_annotations(seq, count: int) -> list[tuple[TrackFile, np.ndarra
     for tid in ids:
         gt = annotated[tid]
         records = [FrameRecord(k, int(seq.frames[k].timestamp_ns), State(b.x, b.y, b.z, b.heading), 50, 0.9)
-                   for k, b in zip(gt.frames, gt.boxes)]
+                   for k, b in zip(gt.frames, gt.boxes, strict=True)]
         first = gt.boxes[0]
         out.append((TrackFile(seq.id, tid, Size(first.length, first.width, first.height), gt.frames[0],
                               gt.frames[-1], first, {}, records, gt.label), np.zeros((0, 3))))
@@ -42,7 +42,7 @@ def test_bev_of_a_busy_sequence_names_every_object_and_its_labels_do_not_overlap
     assert image is not None and image.shape[0] > 400
     # one legend entry and one distinct colour per object (not one "tracked" colour for all)
     assert len(figure.object_labels) == 15
-    assert all(t.object_id[:10] in label for (t, _), label in zip(tracks, figure.object_labels))
+    assert all(t.object_id[:10] in label for (t, _), label in zip(tracks, figure.object_labels, strict=True))
     assert len(set(figure.object_colours)) == 15
     # one numbered label per object, none overlapping another
     assert len(figure.label_rects) == 15

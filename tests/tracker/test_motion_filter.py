@@ -137,7 +137,7 @@ def test_straight_drive_seen_only_from_behind_keeps_its_heading_within_2_degrees
     tracker = Tracker(get_preset("full"))
     tracker.start(frames[0], boxes[0])
     errors = np.array([abs(np.degrees(wrap_angle(tracker.step(f).box.heading - b.heading)))
-                       for f, b in zip(frames[1:], boxes[1:])])
+                       for f, b in zip(frames[1:], boxes[1:], strict=True)])
     assert errors.max() < 2.0, np.round(errors, 2)
     assert errors.mean() < 1.0, np.round(errors, 2)
 

@@ -10,11 +10,11 @@ import pytest
 from scipy.spatial import cKDTree
 from tracker_synthetic import make_sequence
 
-from tracker.config import get_preset
+from tracker.config import OfflineParams, get_preset
 from tracker.frames import LidarFrame
 from tracker.geometry import Box, make_transform, points_in_box, rotation_z, transform_points
 from tracker.ground import ground_mask
-from tracker.offline import _BANDS, OfflineParams, _normals, _prior_band, _Solver, frame_region_points
+from tracker.offline import _BANDS, _normals, _prior_band, _Solver, frame_region_points
 from tracker.sotracker import Tracker, deskew_points
 from tracker.sweep_ground import sweep_ground_mask
 
@@ -149,7 +149,7 @@ def test_lazy_normals_are_the_whole_shapes_normals():
     solver, states, params = _solver_on_a_synthetic_track(8)
     solver._data(states, True)
     solver._data(states + 0.01, False)   # a second match adds the newly matched points' normals
-    for shape, normals, has in zip(solver.shapes, solver.normals, solver.has_normal):
+    for shape, normals, has in zip(solver.shapes, solver.normals, solver.has_normal, strict=True):
         assert 0 < has.sum() < len(shape)   # only the matched points'
         np.testing.assert_array_equal(normals[has], _normals(shape, params.normal_neighbours)[has])
 
@@ -162,7 +162,7 @@ def test_fixed_trial_pairs_search_correspondences_once_per_step():
         solver, states, _ = _solver_on_a_synthetic_track(8, params=OfflineParams(trial_pairs=trial_pairs))
         searches = []
         match = solver._match
-        solver._match = lambda local: searches.append(len(local)) or match(local)
+        solver._match = lambda local, searches=searches, match=match: searches.append(len(local)) or match(local)
         for step in range(3):
             before = len(searches)
             new = solver.step(states)

@@ -23,8 +23,9 @@ def full_result(sequence):
 
 
 def test_known_trajectory_is_recovered(sequence, full_result):
-    ious = [iou_3d(b, g) for b, g in zip(full_result.boxes[1:], sequence.boxes[1:])]
-    errors = [np.linalg.norm(b.center - g.center) for b, g in zip(full_result.boxes[1:], sequence.boxes[1:])]
+    ious = [iou_3d(b, g) for b, g in zip(full_result.boxes[1:], sequence.boxes[1:], strict=True)]
+    errors = [np.linalg.norm(b.center - g.center)
+              for b, g in zip(full_result.boxes[1:], sequence.boxes[1:], strict=True)]
     assert np.mean(ious) >= 0.9, np.round(ious, 3)
     assert np.mean(errors) < 0.1, np.round(errors, 3)
     # the turn (last frames) is followed too, not only the straight part
@@ -72,10 +73,10 @@ def test_nan_points_are_dropped_and_flagged():
     result = track(seq, seq.boxes[0], 0, 7, get_preset("full"))
     assert "nan_points" in result.estimates[3].flags
     assert all(np.isfinite(b.to_array()).all() for b in result.boxes)
-    with_nan = np.mean([iou_3d(b, g) for b, g in zip(result.boxes[1:], seq.boxes[1:])])
+    with_nan = np.mean([iou_3d(b, g) for b, g in zip(result.boxes[1:], seq.boxes[1:], strict=True)])
     clean_seq = make_sequence(n_frames=8, seed=2)
     clean = track(clean_seq, clean_seq.boxes[0], 0, 7, get_preset("full"))
-    without = np.mean([iou_3d(b, g) for b, g in zip(clean.boxes[1:], clean_seq.boxes[1:])])
+    without = np.mean([iou_3d(b, g) for b, g in zip(clean.boxes[1:], clean_seq.boxes[1:], strict=True)])
     assert with_nan > 0.75 and with_nan > without - 0.05  # losing 1/7 of one frame's points costs little
 
 
@@ -96,7 +97,7 @@ def test_every_preset_runs(name):
     detections = {k: FrameDetections(b.to_array()[None], np.array([0.9])) for k, b in enumerate(seq.boxes)}
     result = track(seq, seq.boxes[0], 0, 6, get_preset(name), detections=detections)
     assert result.config.preset == name
-    ious = [iou_3d(b, g) for b, g in zip(result.boxes[1:], seq.boxes[1:])]
+    ious = [iou_3d(b, g) for b, g in zip(result.boxes[1:], seq.boxes[1:], strict=True)]
     assert np.mean(ious) > 0.75, (name, np.round(ious, 3))
 
 

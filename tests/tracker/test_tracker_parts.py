@@ -3,6 +3,8 @@ sloped scene with sub-ground noise, RANSAC with outliers, de-skewing, shape aggr
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -230,5 +232,5 @@ def test_config_presets_and_round_trip():
         get_preset("nope")
     with pytest.raises(ValueError):
         TrackerConfig.from_dict({"registration": {"icp_weight": 1.0, "bogus": 2}})
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         full.seed = 3  # frozen

@@ -204,14 +204,14 @@ def _sweep_loader(files: dict[str, Path], segment: str, frames: list[FrameInfo],
         raise InputError(files["lidar"], "range images need lidar_calibration/<segment>.parquet beside lidar/")
     lidar = _ComponentTable(files["lidar"], segment, [TIME, LASER])
     rows: dict[int, list[tuple[int, int]]] = {}
-    for i, (t, laser) in enumerate(zip(lidar.column(TIME), lidar.column(LASER))):
+    for i, (t, laser) in enumerate(zip(lidar.column(TIME), lidar.column(LASER), strict=True)):
         if int(t) in frame_of and selection.wants(int(laser)):
             rows.setdefault(frame_of[int(t)], []).append((i, int(laser)))
     pose_rows: dict[tuple[int, int], int] = {}
     lidar_pose = None
     if "lidar_pose" in files:
         lidar_pose = _ComponentTable(files["lidar_pose"], segment, [TIME, LASER])
-        for i, (t, laser) in enumerate(zip(lidar_pose.column(TIME), lidar_pose.column(LASER))):
+        for i, (t, laser) in enumerate(zip(lidar_pose.column(TIME), lidar_pose.column(LASER), strict=True)):
             if int(t) in frame_of:
                 pose_rows[(frame_of[int(t)], int(laser))] = i
     range_columns = [LIDAR.format(r, f) for r in selection.returns for f in ("values", "shape")]
@@ -251,7 +251,7 @@ def _boxes(path: Path, segment: str, frames: list[FrameInfo], frame_of: dict[int
     columns = {f: table.column(BOX + f) for f in fields}
     counts = table.column(count) if table.has(count) else [None] * len(table.keys)
     out: list[list[BoxAnnotation]] = [[] for _ in frames]
-    for i, (t, object_id) in enumerate(zip(table.column(TIME), table.column(OBJECT))):
+    for i, (t, object_id) in enumerate(zip(table.column(TIME), table.column(OBJECT), strict=True)):
         k = frame_of.get(int(t))
         if k is None:
             raise InputError(path, f"row {i}: box at {t} us, a time with no vehicle pose")
@@ -271,7 +271,7 @@ def _cameras(files: dict[str, Path], segment: str, frames: list[FrameInfo], fram
     img_path = files["camera_image"]
     images = _ComponentTable(img_path, segment, [TIME, CAMERA], [CIMG + "pose.transform", CIMG + "pose_timestamp"])
     by_camera: dict[int, dict[int, int]] = {}
-    for i, (t, name) in enumerate(zip(images.column(TIME), images.column(CAMERA))):
+    for i, (t, name) in enumerate(zip(images.column(TIME), images.column(CAMERA), strict=True)):
         if int(t) in frame_of:
             by_camera.setdefault(int(name), {})[frame_of[int(t)]] = i
     img_poses, img_times = images.column(CIMG + "pose.transform"), images.column(CIMG + "pose_timestamp")
