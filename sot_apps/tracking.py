@@ -353,10 +353,11 @@ MODES = ("online", "lag", "offline")
 class _Live:
     """An object during the pass: its start search, then its tracker, recorder and refinement state."""
 
-    def __init__(self, request: ObjectRequest, seq: Sequence, config: TrackerConfig, min_points: int) -> None:
+    def __init__(self, request: ObjectRequest, seq: Sequence, config: TrackerConfig, min_points: int | None) -> None:
         self.request = request
         self.out = ObjectTrack(request.object_id)
-        self.search = StartSearch(seq, request.annotated, config, min_points) if request.annotated else None
+        self.search = (StartSearch(seq, request.annotated, config, min_points or 0) if request.annotated
+                       else None)
         self.first = min(self.search.candidates, default=None) if self.search else request.start
         self.tracker: Tracker | None = None
         self.end = -1
@@ -378,7 +379,7 @@ def _pose(seq: Sequence, k: int) -> tuple[int, np.ndarray]:
 
 
 def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerConfig, mode: str = "online",
-                  lag: int = 10, detections: Detections | None = None, min_points: int = MIN_INIT_POINTS,
+                  lag: int = 10, detections: Detections | None = None, min_points: int | None = MIN_INIT_POINTS,
                   shape_growth: bool = False, on_done=None, progress=None) -> tuple[list[ObjectTrack], PassTimes]:
     """Track many objects of ``seq`` in ONE pass over its sweeps: each sweep is read once and its whole-sweep
     ground computed once (the tracker's per-sweep cache, shared by every tracker on the sweep), every live
@@ -390,7 +391,8 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
 
     An object whose start box (or every annotated box, see :class:`ObjectRequest`) holds fewer than
     ``min_points`` points, that is lost after its start (no points in any later frame), or whose tracking raises,
-    fails alone (``ObjectTrack.error``). ``shape_growth``: also record :class:`ShapeGrowth`. ``on_done``:
+    fails alone (``ObjectTrack.error``). ``min_points=None`` drops the two point checks (evaluation scores every
+    track as :func:`tracker.track` returns it; annotated objects then start at their first annotated box). ``shape_growth``: also record :class:`ShapeGrowth`. ``on_done``:
     callable(ObjectTrack) as each object finishes (then its result is not kept in the returned list, so a long
     pass holds only live objects). ``progress``: callable(iterable) -> iterable over the frames.
     Returns the objects' outcomes in request order and where the time went."""
@@ -547,13 +549,13 @@ def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerCon
     o.out.seconds += dt
 
 
-def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: int, min_points: int,
+def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: int, min_points: int | None,
             times: PassTimes, on_done) -> None:
     """The object's last frame: the pipeline's checks, the offline solve, its result; then release it."""
     from tracker import refine_offline
 
     online = TrackResult(o.estimates, o.out.init_box.size, o.tracker.shape_points(), config)
-    why = lacking_points(online, min_points)
+    why = None if min_points is None else lacking_points(online, min_points)
     if why is not None:
         _fail(o, why, lacks_points=True)
     else:
@@ -594,7 +596,7 @@ def lacking_points(result: TrackResult, min_points: int) -> str | None:
     return None
 
 
-def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerConfig, detections, min_points: int,
+def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerConfig, detections, min_points: int | None,
                  shape_growth: bool, on_done, times: PassTimes) -> tuple[list[ObjectTrack], PassTimes]:
     """Methods other than SOTracker's (the Det baseline): each object tracked alone through :func:`tracker.track`."""
     outs = []
@@ -602,11 +604,12 @@ def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerCo
         out = ObjectTrack(r.object_id)
         t = time.thread_time()
         try:
-            start, box = first_box_with_points(seq, r.annotated, config, min_points) if r.annotated else (r.start, r.init_box)
+            start, box = (first_box_with_points(seq, r.annotated, config, min_points or 0) if r.annotated
+                          else (r.start, r.init_box))
             end = r.end if r.max_frames is None else min(r.end, start + r.max_frames)
             recorder = ShapeRecorder() if shape_growth else None
             result = track(seq, box, start, end, config, detections=detections, on_frame=recorder)
-            why = lacking_points(result, min_points)
+            why = None if min_points is None else lacking_points(result, min_points)
             if why is not None:
                 raise TrackingFailed(why)
             out.result, out.start, out.init_box = result, start, box

@@ -48,13 +48,17 @@ class BenchRegistry:
 
 
 def discover() -> BenchRegistry:
-    """Import every ``sot_apps.bench.*`` module and collect what its ``register`` adds."""
+    """Import every ``sot_apps.bench.*`` module that defines a ``register`` hook and collect what it adds.
+    Helper modules without one (e.g. ``benchmark_eval``, run by ``sot-apps eval --benchmark``) are not imported:
+    they may import numpy at the top, which ``sot-apps --help`` must not pay for."""
     registry = BenchRegistry()
     package = importlib.import_module(__name__)
     for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
             continue
         module_name = f"{__name__}.{info.name}"
+        if not _defines_register(module_name):
+            continue
         try:
             module = importlib.import_module(module_name)
         except Exception as exc:  # noqa: BLE001 - reported by the CLI, never hidden
@@ -66,6 +70,18 @@ def discover() -> BenchRegistry:
             register(registry)
     registry._module = ""
     return registry
+
+
+def _defines_register(name: str) -> bool:
+    """Whether module ``name``'s source defines a top-level ``register`` (read, not imported; unreadable: True,
+    so that importing it reports the problem)."""
+    import importlib.util
+
+    try:
+        with open(importlib.util.find_spec(name).origin, encoding="utf-8") as handle:
+            return "\ndef register(" in handle.read()
+    except (OSError, TypeError, AttributeError, ImportError):
+        return True
 
 
 def module_docstring(name: str) -> str | None:

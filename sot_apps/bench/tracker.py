@@ -23,11 +23,12 @@ import os
 import subprocess
 import sys
 import time
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from . import format_machine, machine_description, pin_one_core
+
+if TYPE_CHECKING:   # numpy loads when a benchmark runs (`sot-apps --help` imports this module)
+    import numpy as np
 
 __all__ = ["register", "add_arguments", "run", "run_benchmark", "format_table"]
 
@@ -67,6 +68,8 @@ def _time_track(source, spec, config, lag: int = 0) -> tuple[np.ndarray, np.ndar
     """Run the streaming tracker over a track's span: boxes (n, 7), wall ms and CPU ms per frame k >= 1.
 
     ``lag`` > 0: the fixed-lag tracker (tracker.fixed_lag); a step's time includes its window solve."""
+    import numpy as np
+
     from tracker import FixedLagTracker, Tracker
 
     start = spec.frames[0]
@@ -109,6 +112,8 @@ class _FramesOnly:
 def _time_offline(source, spec, config) -> tuple[np.ndarray, float]:
     """Offline refinement of the online result over a track's span: boxes (n, 7) and the refinement's CPU ms
     (gathering each frame's points included; the online pass is not timed here)."""
+    import numpy as np
+
     from tracker import refine_offline, track
 
     online = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], config)
@@ -159,6 +164,8 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
 
 def _timing_row(name: str, specs, timed: list, ground_ms: np.ndarray) -> dict[str, Any]:
     """A row from each track's (boxes, wall ms, CPU ms) of one preset and mode."""
+    import numpy as np
+
     from tracker import pool_metrics, score_tracklet
 
     pooled = pool_metrics([score_tracklet(spec.track_id, boxes, np.array([b.to_array() for b in spec.boxes]))
@@ -186,6 +193,7 @@ def _time_sweep_ground(source, frames: list[int], config) -> np.ndarray:
     """``ground.remover="sweep"``: CPU ms of the whole-sweep ground mask per sweep (one plane per sweep, shared by
     every object tracked in that sweep), measured once per sweep; the cache is then warm, so the step times
     that follow exclude it. Other presets: empty."""
+    import numpy as np
     if config.ground.remover != "sweep":
         return np.zeros(0)
     from tracker import cached_sweep_ground_mask, sweep_ground_mask
@@ -204,6 +212,8 @@ def _time_sweep_ground(source, frames: list[int], config) -> np.ndarray:
 def _offline_row(source, specs, config, preset: str) -> dict[str, Any]:
     """The ``PRESET+offline`` row: the refinement's CPU time per frame (k >= 1, as the other rows count),
     amortised over all tracks, and per track; Acc/Rob of the refined boxes."""
+    import numpy as np
+
     from tracker import pool_metrics, score_tracklet
 
     scores, per_track = [], []

@@ -47,7 +47,6 @@ from tracker import (
     pseudo_gt_shape,
     refine_fixed_lag,
     score_tracklet,
-    track,
     tracklet_metrics,
 )
 
@@ -323,6 +322,22 @@ def refined_modes(source, result: TrackResult, config: TrackerConfig, lags: Sequ
     return out
 
 
+def _track_all(source: CachedSource, specs: Sequence[TrackSpec], config: TrackerConfig,
+               detections: Detections | None) -> list[TrackResult]:
+    """Every spec's online track from its first annotated box, all in one pass over the sweeps
+    (:func:`sot_apps.tracking.track_objects`: the results of :func:`tracker.track` per object, bit for bit,
+    each sweep read and grounded once). A track whose tracking raised raises here."""
+    from ..tracking import ObjectRequest, track_objects
+
+    requests = [ObjectRequest(spec.track_id, spec.boxes[0], int(spec.frames[0]), int(spec.frames[-1]))
+                for spec in specs]
+    outcomes, _ = track_objects(source, requests, config, mode="online", detections=detections, min_points=None)
+    for outcome in outcomes:
+        if outcome.result is None:
+            raise RuntimeError(f"track {outcome.object_id}: {outcome.error}")
+    return [outcome.result for outcome in outcomes]
+
+
 def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, presets: Sequence[str] = ("full",),
              offline: bool = False, seeds: Sequence[int] = (0,), config: EvalConfig = EvalConfig(),
              end_frame: int | None = None, progress: Callable[[Iterable], Iterable] | None = None,
@@ -348,22 +363,21 @@ def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, pr
     if not ids:
         raise InputError(sequence.root, "no track to evaluate (no moving vehicle track matches the selection)")
     specs = prepare_tracks(sequence, ids, source, config, end_frame, with_shape)
-    jobs = [(p, s, spec) for p in presets for s in seeds for spec in specs]
+    jobs = [(p, s) for p in presets for s in seeds]
     online: dict[str, list[RunRecord]] = {p: [] for p in presets}
     moded: dict[str, list[RunRecord]] = {}  # row name (PRESET+lagN, PRESET+offline) -> records
     tracker_configs: dict[str, dict[str, Any]] = {}
-    for preset, seed, spec in (progress(jobs) if progress else jobs):
+    for preset, seed in (progress(jobs) if progress else jobs):
         tconfig = get_preset(preset, seed=int(seed), **overrides)
         tracker_configs[preset] = get_preset(preset, **overrides).to_dict()
-        result = track(source, spec.boxes[0], spec.frames[0], spec.frames[-1], tconfig,
-                       detections=detections_for(int(seed)))
-        ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
-        online[preset].append(RunRecord(preset, int(seed), spec.track_id, score_result(spec, result, config), ms,
-                                        _flag_counts(result)))
-        for suffix, refined, refined_ms in refined_modes(source, result, tconfig, lags, offline, refine):
-            moded.setdefault(preset + suffix, []).append(RunRecord(
-                preset + suffix, int(seed), spec.track_id, score_result(spec, refined, config), refined_ms,
-                _flag_counts(refined)))
+        for spec, result in zip(specs, _track_all(source, specs, tconfig, detections_for(int(seed))), strict=True):
+            ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
+            online[preset].append(RunRecord(preset, int(seed), spec.track_id, score_result(spec, result, config),
+                                            ms, _flag_counts(result)))
+            for suffix, refined, refined_ms in refined_modes(source, result, tconfig, lags, offline, refine):
+                moded.setdefault(preset + suffix, []).append(RunRecord(
+                    preset + suffix, int(seed), spec.track_id, score_result(spec, refined, config), refined_ms,
+                    _flag_counts(refined)))
     rows = []
     for preset in presets:
         rows.append(_summarise_row(preset, preset, False, seeds, online[preset], specs))

@@ -35,7 +35,7 @@ from ..objects.trajectory import interpolate_pose
 from .camera import CameraModel
 from .dense import RayCache, dense_flow
 from .flo_io import write_flo
-from .kitti_io import write_kitti_flow
+from .kitti_io import write_kitti_flows
 from .objects import TrackedObject
 from .occlusion import ProjectedPoints, project_lidar
 from .png import encode_png
@@ -169,8 +169,9 @@ def pair_output_jobs(root: Path, k: int, result: PairFlow, image_path: Path, wri
     (InputError naming it) before any file of the pair is written, never drawn."""
     name = f"{k:06d}"
     image = read_color_image(image_path) if write_vis else None
-    jobs = [lambda: write_kitti_flow(root / "flow_occ" / f"{name}.png", result.flow, result.valid_occ),
-            lambda: write_kitti_flow(root / "flow_noc" / f"{name}.png", result.flow, result.valid_noc),
+    # flow_occ and flow_noc in one job: the non-occluded pixels are some of the valid ones, scaled once for both
+    jobs = [lambda: write_kitti_flows(root / "flow_occ" / f"{name}.png", root / "flow_noc" / f"{name}.png",
+                                      result.flow, result.valid_occ, result.valid_noc),
             lambda: write_flo(root / "flo" / f"{name}.flo", result.flow, result.valid_occ),
             lambda: write_bytes(root / "instances" / f"{name}.png", encode_png(result.instance, 0))]
     if write_vis:

@@ -16,7 +16,8 @@ from ..errors import InputError
 from ..io.atomic import write_bytes
 from .png import encode_rows_png
 
-__all__ = ["encode_kitti_flow", "decode_kitti_flow", "kitti_flow_png", "write_kitti_flow", "read_kitti_flow"]
+__all__ = ["encode_kitti_flow", "decode_kitti_flow", "kitti_flow_png", "kitti_flow_pngs", "write_kitti_flow",
+           "write_kitti_flows", "read_kitti_flow"]
 
 _INVALID_RGB = (2 ** 15, 2 ** 15, 0)   # an invalid pixel in PNG channel order (u, v, valid)
 
@@ -50,28 +51,80 @@ def decode_kitti_flow(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return flow, valid
 
 
+class _FlowBlock:
+    """The rows of a KITTI flow PNG that hold valid pixels, filled: ``pixels`` (len(rows), W, 3) uint16 in PNG
+    order, ``content`` their valid mask, ``candidates`` the valid pixels' flat indices into the block."""
+
+    def __init__(self, flow: np.ndarray, valid: np.ndarray) -> None:
+        height, width = valid.shape
+        rows = np.flatnonzero(valid.any(axis=1))
+        candidates = np.flatnonzero(valid[rows])           # flat indices into the (len(rows), W) block
+        # the same pixels' flat indices into the image: no copy of the rows' flow
+        image_index = rows[candidates // width] * width + candidates % width
+        values = flow.reshape(-1, 2)[image_index]
+        finite = np.isfinite(values).reshape(-1, 2)
+        finite = finite[:, 0] & finite[:, 1]
+        candidates, values = candidates[finite], values[finite]
+        row = np.empty((width, 3), dtype=np.uint16)
+        row[:] = _INVALID_RGB                               # invalid pixels: u = v = 0 px, valid = 0
+        pixels = np.empty((len(rows), width, 3), dtype=np.uint16)
+        pixels[:] = row                                     # row by row: a plain copy, not a 3-value broadcast
+        channels = pixels.reshape(-1)
+        scaled = _kitti_values(values)
+        channels[3 * candidates] = scaled[:, 0]
+        channels[3 * candidates + 1] = scaled[:, 1]
+        channels[3 * candidates + 2] = 1
+        content = np.zeros((len(rows), width), dtype=bool)
+        content.reshape(-1)[candidates] = True
+        self.height, self.rows, self.pixels, self.content, self.candidates = height, rows, pixels, content, candidates
+
+    def png(self) -> bytes:
+        return encode_rows_png(self.pixels, self.rows, self.height, _INVALID_RGB, self.content)
+
+    def restricted(self, keep: np.ndarray) -> "_FlowBlock":
+        """The block with only the pixels of ``keep`` (an (H, W) mask) still valid (a copy; this one unchanged)."""
+        out = object.__new__(_FlowBlock)
+        kept = keep[self.rows].reshape(-1)[self.candidates]
+        drop = self.candidates[~kept]
+        out.height, out.rows, out.candidates = self.height, self.rows, self.candidates[kept]
+        out.pixels, out.content = self.pixels.copy(), self.content.copy()
+        channels = out.pixels.reshape(-1)
+        for channel, value in enumerate(_INVALID_RGB):
+            channels[3 * drop + channel] = value
+        out.content.reshape(-1)[drop] = False
+        return out
+
+
 def kitti_flow_png(flow: np.ndarray, valid: np.ndarray) -> bytes:
     """The KITTI flow PNG's bytes (decoded: exactly :func:`encode_kitti_flow`). Only the rows that hold valid
     pixels are encoded (:mod:`.png`), so the cost follows the object pixels, not the image size."""
+    return _FlowBlock(np.asarray(flow), np.asarray(valid, dtype=bool)).png()
+
+
+def kitti_flow_pngs(flow: np.ndarray, valid: np.ndarray, valid_subset: np.ndarray) -> tuple[bytes, bytes]:
+    """The PNGs of :func:`kitti_flow_png` for ``valid`` and for ``valid_subset`` (e.g. flow_occ and flow_noc: the
+    non-occluded pixels are some of all the valid ones), the flow values scaled once for both. A subset mask
+    that is not one is taken as it is (each PNG on its own)."""
     flow = np.asarray(flow)
     valid = np.asarray(valid, dtype=bool)
-    rows = np.flatnonzero(valid.any(axis=1))
-    candidates = np.flatnonzero(valid[rows])           # flat indices into the (len(rows), W) block
-    values = flow[rows].reshape(-1, 2)[candidates]
-    finite = np.isfinite(values).all(axis=1)
-    candidates, values = candidates[finite], values[finite]
-    pixels = np.empty((len(rows), flow.shape[1], 3), dtype=np.uint16)
-    pixels[:] = _INVALID_RGB                            # invalid pixels: u = v = 0 px, valid = 0
-    flat = pixels.reshape(-1, 3)
-    flat[candidates, :2] = _kitti_values(values)
-    flat[candidates, 2] = 1
-    row_valid = np.zeros(pixels.shape[:2], dtype=bool)
-    row_valid.reshape(-1)[candidates] = True
-    return encode_rows_png(pixels, rows, flow.shape[0], _INVALID_RGB, row_valid)
+    subset = np.asarray(valid_subset, dtype=bool)
+    block = _FlowBlock(flow, valid)
+    if (subset & ~valid).any():
+        return block.png(), kitti_flow_png(flow, subset)
+    return block.png(), block.restricted(subset).png()
 
 
 def write_kitti_flow(path: str | Path, flow: np.ndarray, valid: np.ndarray) -> None:
     write_bytes(path, kitti_flow_png(flow, valid))
+
+
+def write_kitti_flows(path: str | Path, subset_path: str | Path, flow: np.ndarray, valid: np.ndarray,
+                      valid_subset: np.ndarray) -> None:
+    """:func:`write_kitti_flow` of ``valid`` to ``path`` and of ``valid_subset`` to ``subset_path``
+    (:func:`kitti_flow_pngs`: the values scaled once)."""
+    data, subset_data = kitti_flow_pngs(flow, valid, valid_subset)
+    write_bytes(path, data)
+    write_bytes(subset_path, subset_data)
 
 
 def read_kitti_flow(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

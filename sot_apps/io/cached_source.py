@@ -23,6 +23,11 @@ class CachedSource:
     def __len__(self) -> int:
         return len(self.sequence)
 
+    @property
+    def frames(self):
+        """The sequence's frame records (timestamps, poses; no sweep is read)."""
+        return self.sequence.frames
+
     def lidar_frame(self, index: int) -> LidarFrame:
         frame = self._frames.get(index)
         if frame is None:

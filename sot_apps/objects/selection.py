@@ -26,9 +26,11 @@ points in each of the first 10 frames). A tracker cannot start on a box with a h
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 from typing import Sequence as Seq
 
-import numpy as np
+if TYPE_CHECKING:   # numpy loads in the methods: `sot-apps --help` imports this module (info's help text)
+    import numpy as np
 
 __all__ = ["Selection", "TrackMotion", "DEFAULT_SELECTION", "annotated_span"]
 
@@ -81,6 +83,8 @@ class Selection:
 
     def motion(self, centres_xy: np.ndarray, times_ns: np.ndarray) -> TrackMotion:
         """Motion of a track from its (T, 2) box centres and (T,) integer timestamps in ns."""
+        import numpy as np
+
         centres = np.asarray(centres_xy, dtype=np.float64).reshape(-1, 2)
         distances = np.linalg.norm(centres - centres[0], axis=1)
         displacement = float(distances[-1])
@@ -92,6 +96,8 @@ class Selection:
 
     def track_motion(self, track, timestamps_ns: np.ndarray) -> TrackMotion:
         """Motion of an :class:`~sot_apps.io.sequence.AnnotatedTrack` (frame timestamps of its sequence)."""
+        import numpy as np
+
         centres = np.array([[b.x, b.y] for b in track.boxes])
         return self.motion(centres, np.asarray(timestamps_ns)[list(track.frames)])
 

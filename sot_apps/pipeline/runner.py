@@ -281,6 +281,11 @@ def _score_motion(context: RunContext, out: Path, app_records: list[UnitRecord],
     return _run_units(units, out, session, "motion_eval", progress)
 
 
+# what a worker imports for the tracking stage (its tasks run sot_apps.pipeline.stages; the tracker's modules load
+# lazily, so they are named too): imported by :meth:`ExecutorSession.prestart` while the run plans
+WORKER_MODULES = ("sot_apps.pipeline.stages", "tracker.sotracker", "tracker.offline", "sot_apps.io.sweep_cache")
+
+
 def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec(), progress: bool = True,
                  plan: Plan | None = None, session: ExecutorSession | None = None) -> PipelineResult:
     """Run every enabled stage of ``config``; returns what ran, was cached or failed (see module doc).
@@ -291,6 +296,7 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
     """
     if session is None:
         with RunLock(config.out), ExecutorSession(executor) as own:
+            own.prestart(WORKER_MODULES)   # the workers import while this process plans
             return run_pipeline(config, executor, progress, plan, own)
     with RunLock(config.out):
         return _run_with_session(config, executor, progress, plan, session)

@@ -375,6 +375,15 @@ SOT_EXPORT int sot_rt_cast8(void *handle, const float *origins, int origin_step,
     return s->error;
 }
 
+#define GRAZING_C5 (M_PI / 2 - 7.0 / 6.0) /* bounds asin(c) - c - c^3/6 from above by this times c^5 on [0, 1] */
+
+/* the grazing drop probability ((theta - start) / span)^2 clipped to [0, 1], theta in radians */
+static inline double grazing_p(double theta, double start_deg, double span) {
+    double p = (theta * (180.0 / M_PI) - start_deg) / span;
+    p = p < 0.0 ? 0.0 : (p > 1.0 ? 1.0 : p);
+    return p * p;
+}
+
 /*
  * The per-return models of a simulated sweep (sot_apps/sensor/scan.py; formulas in sot_apps/sensor/noise.py), in
  * one pass over the n rays after casting. The random numbers come from numpy's seeded generator (the same draws
@@ -409,10 +418,19 @@ SOT_EXPORT long sot_rt_returns(long n, const double *distance, const float *norm
         c = c < 0.0 ? 0.0 : (c > 1.0 ? 1.0 : c);
         if (u_random && u_random[i] < drop_random) continue;
         if (u_grazing && c < cos_start) {
-            double p = (acos(c) * (180.0 / M_PI) - grazing_start_deg) / span;
-            p = p < 0.0 ? 0.0 : (p > 1.0 ? 1.0 : p);
-            if (u_grazing[i] < p * p) continue;
+            /* acos is the costly part and most ground returns are grazing: bracket theta first.
+             * For c in [0, 1], c <= asin(c) <= c + c^3/6 + (pi/2 - 7/6) c^5, so theta = pi/2 - asin(c) lies in
+             * [hi - c^3/6 - 0.4041 c^5, hi] with hi = pi/2 - c; the exact acos decides only when the draw falls
+             * between the two probabilities (with a margin far above rounding), so the decision is the one the
+             * exact formula gives. */
+            const double u = u_grazing[i], c3 = c * c * c;
+            const double p_hi = grazing_p(M_PI / 2 - c, grazing_start_deg, span);
+            if (u >= p_hi + 1e-9) goto kept_grazing;
+            const double p_lo = grazing_p(M_PI / 2 - c - c3 * (1.0 / 6.0) - c3 * c * c * GRAZING_C5, grazing_start_deg, span);
+            if (u < p_lo - 1e-9) continue;
+            if (u < grazing_p(acos(c), grazing_start_deg, span)) continue;
         }
+    kept_grazing:
         if (u_range) {
             double p = range_a + range_b * d;
             p = p < 0.0 ? 0.0 : (p > 1.0 ? 1.0 : p);

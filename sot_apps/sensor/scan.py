@@ -162,8 +162,12 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
     # the random draws: every ray of the sweep gets one per effect, in this order, so a seed gives the same scan
     # whatever the scene (and whichever implementation below runs)
     n = len(dist)
-    noise = (rng.normal(0.0, sensor.range_noise_sigma, size=n)
-             if realism.range_noise and sensor.range_noise_sigma > 0 else None)
+    noise = None
+    if realism.range_noise and sensor.range_noise_sigma > 0:
+        # rng.normal(0, sigma, n) is 0.0 + sigma * standard_normal: the same numbers (a -0.0 becomes +0.0, which
+        # adds the same to a range), drawn ~20 % faster
+        noise = rng.standard_normal(n)
+        noise *= sensor.range_noise_sigma
     range_on = realism.drop_range and sensor.has_range_drop
     u_random = u_grazing = u_range = None
     if realism.drop_random > 0 or realism.drop_grazing or range_on:
@@ -180,9 +184,10 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
                                        u_random, u_grazing, u_range, sensor_from_world)
     keep, measured, intensity, xyz = returns.keep, returns.measured, returns.intensity, returns.xyz
     inst_of_obj = np.array([o.instance for o in objects] + [-1], dtype=np.int32)
-    return Scan(xyz=xyz, instance=inst_of_obj[object_index[keep]], intensity=intensity,
-                time_offset_ns=col_t[column[keep]].astype(np.int64), beam=beam[keep], column=column[keep],
-                distance=measured.astype(np.float32), object_index=object_index[keep],
+    kept_object, kept_column = object_index[keep], column[keep]   # each gather once (they cost ~0.3 ms apiece)
+    return Scan(xyz=xyz, instance=inst_of_obj[kept_object], intensity=intensity,
+                time_offset_ns=col_t[kept_column].astype(np.int64, copy=False), beam=beam[keep], column=kept_column,
+                distance=measured.astype(np.float32), object_index=kept_object,
                 num_beams=sensor.beams, num_columns=sensor.columns)
 
 

@@ -14,7 +14,13 @@ import pytest
 
 from sot_apps.flow.annotate import PairWriter
 from sot_apps.flow.flo_io import UNKNOWN_FLOW, read_flo, write_flo
-from sot_apps.flow.kitti_io import encode_kitti_flow, read_kitti_flow, write_kitti_flow
+from sot_apps.flow.kitti_io import (
+    encode_kitti_flow,
+    kitti_flow_png,
+    read_kitti_flow,
+    write_kitti_flow,
+    write_kitti_flows,
+)
 from sot_apps.flow.png import encode_png, encode_rows_png
 
 REPO = Path(__file__).resolve().parents[2]
@@ -161,3 +167,19 @@ def test_pair_writer_records_follow_their_files_and_errors_propagate(tmp_path):
         with PairWriter(workers=1, max_pending=0) as writer:
             writer.submit([fail], lambda: written.append("record"))
     assert written == []   # no record for a pair whose files failed
+
+
+def test_occ_and_noc_pngs_written_together_decode_to_the_format_arrays(tmp_path):
+    """flow_occ and flow_noc share one scaling of the flow (kitti_flow_pngs): each PNG still decodes, with OpenCV,
+    to exactly the array the format defines for its own mask; a second mask that is not a subset works too."""
+    rng = np.random.default_rng(3)
+    flow, valid = _flow_1080p(rng)
+    noc = valid & (rng.random(valid.shape) < 0.8)
+    noc[400:420, :] = False                                  # rows whose valid pixels are all occluded
+    for subset in (noc, noc | (rng.random(valid.shape) < 0.001)):   # a subset; not a subset
+        write_kitti_flows(tmp_path / "occ.png", tmp_path / "noc.png", flow, valid, subset)
+        for name, mask in (("occ.png", valid), ("noc.png", subset)):
+            written = cv2.imread(str(tmp_path / name), cv2.IMREAD_UNCHANGED)
+            np.testing.assert_array_equal(written, encode_kitti_flow(flow, mask), err_msg=name)
+        assert (tmp_path / "occ.png").read_bytes() == kitti_flow_png(flow, valid)
+        assert (tmp_path / "noc.png").read_bytes() == kitti_flow_png(flow, subset)

@@ -56,3 +56,24 @@ def test_dask_workers_open_each_sequence_once(tiny_worlds, tmp_path):
     for info in infos:
         assert info["opened"] == 1                      # opened once, when the runner filled the cache
     assert sum(info["reused"] for info in infos) >= 3   # every tracking task reused it
+
+
+def test_prestart_starts_the_local_workers_before_any_task():
+    """``ExecutorSession.prestart``: the worker processes exist (and import the named modules) before the first
+    batch; the batch then runs on them."""
+    import multiprocessing
+    import os
+
+    from sot_apps.pipeline.executors import ExecutorSession
+
+    before = set(multiprocessing.active_children())
+    with ExecutorSession(ExecutorSpec("local", workers=2)) as session:
+        session.prestart(("json",))
+        started = set(multiprocessing.active_children()) - before
+        assert len(started) == 2
+        outcomes = session.run([Task(f"pid/{i}", os.getpid) for i in range(4)], progress=False)
+        assert all(o.ok for o in outcomes)
+        assert {o.result for o in outcomes} <= {p.pid for p in started}
+    with ExecutorSession(ExecutorSpec("inline")) as session:
+        session.prestart(("json",))   # nothing to start
+        assert set(multiprocessing.active_children()) == before

@@ -127,3 +127,31 @@ def test_ground_masks_stored_in_the_sweep_cache_give_the_same_tracks(tiny_worlds
     for k in range(6):
         assert np.array_equal(cache.load_mask(k, name),
                               sweep_ground_mask(plain.lidar_frame(k).points_ego, *config.ground.sweep_args()))
+
+
+def test_eval_tracks_every_object_in_one_pass_as_each_alone(tiny_worlds, monkeypatch):
+    """``sot-apps eval`` (evaluation.tracker.evaluate) scores, per preset and seed, the tracks of one pass over the
+    sweeps; each is the track ``tracker.track`` gives from the object's first annotated box."""
+    import sot_apps.evaluation.tracker as evaluation
+    from sot_apps.io.cached_source import CachedSource
+
+    seq = open_sequence(tiny_worlds[1])
+    ids = ["veh_000", "veh_001", "veh_002"]
+    scored: list = []
+    score = evaluation.score_result
+    monkeypatch.setattr(evaluation, "score_result", lambda spec, result, config: scored.append((spec, result))
+                        or score(spec, result, config))
+    reads: list[int] = []
+    loader = seq.lidar_frame
+    seq.lidar_frame = lambda k: reads.append(k) or loader(k)
+    report = evaluation.evaluate(seq, ids, presets=("full",), seeds=(0, 1), end_frame=5, with_shape=False)
+    seq.lidar_frame = loader
+    assert len(reads) == len(set(reads))                 # every sweep read once (two seeds: the source keeps them)
+    assert [spec.track_id for spec, _ in scored] == ids * 2 and len(report.rows) == 1
+    for i, (spec, got) in enumerate(scored):
+        want = track(CachedSource(seq), spec.boxes[0], int(spec.frames[0]), int(spec.frames[-1]),
+                     get_preset("full", seed=i // len(ids)))
+        assert got.frames == want.frames and len(want.frames) > 3
+        assert np.array_equal([e.box.to_array() for e in got.estimates], [e.box.to_array() for e in want.estimates])
+        assert [(e.num_points, e.flags) for e in got.estimates] == [(e.num_points, e.flags) for e in want.estimates]
+        assert np.array_equal(got.shape, want.shape)

@@ -3,6 +3,8 @@ scan as the numpy implementation for the same seed, and each effect as its model
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -128,3 +130,22 @@ def test_ray_packets_give_the_same_hits_as_single_rays(monkeypatch):
     assert (hits["1"].geom_id >= 1).sum() > 1000   # many vehicle hits
     for name in ("distance", "normal", "prim_id", "geom_id"):
         np.testing.assert_array_equal(getattr(hits["1"], name), getattr(hits["0"], name), err_msg=name)
+
+
+def test_grazing_drops_are_the_exact_formulas_decisions():
+    """The compiled loop brackets the incidence angle before calling acos; every decision is still the exact
+    formula's, also for draws that fall right at a ray's drop probability."""
+    rng = np.random.default_rng(7)
+    n = 400_000
+    cos_incidence = np.concatenate([rng.uniform(0.0, np.cos(np.radians(75.0)), n - 4), [0.0, 1e-9, 0.2588, 0.0871]])
+    dirs = np.tile([1.0, 0.0, 0.0], (n, 1))
+    normal = np.column_stack([-cos_incidence, np.sqrt(1 - cos_incidence ** 2), np.zeros(n)]).astype(np.float32)
+    c = np.clip(-(dirs * normal.astype(np.float64)).sum(axis=1), 0.0, 1.0)
+    theta = np.array([math.acos(x) for x in c]) * (180.0 / np.pi)   # libm's acos, as the loop's exact path
+    p = np.clip((theta - 75.0) / 15.0, 0.0, 1.0) ** 2
+    u = rng.random(n)
+    u[: n // 4] = p[: n // 4]                                     # draws exactly at the probability: kept
+    u[n // 4: n // 2] = np.nextafter(p[n // 4: n // 2], -1.0)     # just below it: dropped
+    out = compiled_sweep_returns(np.full(n, 30.0), normal, dirs, np.zeros(3), np.zeros(n, np.int32), np.array([0.5]),
+                                 0.5, 200.0, None, None, 0.0, u, 75.0, None, 0.0, 0.0, False, 0.0, np.eye(4))
+    np.testing.assert_array_equal(out.keep, np.flatnonzero(~(u < p)))
