@@ -41,15 +41,16 @@ class Relock:
 class Reacquire:
     """The interface (and the "none" behaviour)."""
 
-    def reset(self, time_s: float) -> None:
-        """A track (re)starts at ``time_s``."""
+    def reset(self, time_s: float, centre: np.ndarray) -> None:
+        """A track (re)starts at ``time_s`` with its box at ``centre`` (xy, world)."""
 
     def lost_start(self, points: int) -> bool:
         """Whether a start box holding ``points`` object points is a lost start."""
         return False
 
-    def holds(self, points: int, coasted: bool, time_s: float) -> bool:
-        """Whether the frame's support holds the track (``coasted``: the frame continued on the prior)."""
+    def holds(self, points: int, coasted: bool, time_s: float, centre: np.ndarray) -> bool:
+        """Whether the frame's support holds the track (``coasted``: the frame continued on the prior; ``centre``:
+        the frame's box centre, xy)."""
         return True
 
     def region(self, box: Box, time_s: float, start: Box | None) -> Box:
@@ -69,10 +70,10 @@ class NoReacquire(Reacquire):
 class ClusterReacquire(Reacquire):
     def __init__(self, config: ReacquireConfig) -> None:
         self.c = config
-        self.reset(0.0)
+        self.reset(0.0, np.zeros(2))
 
-    def reset(self, time_s: float) -> None:
-        self._held_s = time_s
+    def reset(self, time_s: float, centre: np.ndarray) -> None:
+        self._held_s, self._held_at = time_s, np.asarray(centre, dtype=np.float64)[:2].copy()
         self._misses = 0
         self._lost = False
         self._supported = 0
@@ -81,11 +82,12 @@ class ClusterReacquire(Reacquire):
     def lost_start(self, points: int) -> bool:
         return points < self.c.start_points
 
-    def holds(self, points: int, coasted: bool, time_s: float) -> bool:
+    def holds(self, points: int, coasted: bool, time_s: float, centre: np.ndarray) -> bool:
         supported = points >= self.c.min_points and not coasted
         if not self._lost:
             if supported:
                 self._held_s, self._misses = time_s, 0
+                self._held_at = np.asarray(centre, dtype=np.float64)[:2].copy()
                 return True
             self._misses += 1
             self._lost = self._misses >= self.c.lost_frames
@@ -94,7 +96,7 @@ class ClusterReacquire(Reacquire):
         # until a candidate confirms the track or ``recover_frames`` supported frames in a row
         self._supported = self._supported + 1 if supported else 0
         if self._supported >= self.c.recover_frames:
-            self.reset(time_s)
+            self.reset(time_s, centre)
             return True
         return False
 
@@ -119,7 +121,7 @@ class ClusterReacquire(Reacquire):
                     continue
                 v = (now.centre - before.centre) / dt
                 relock = (self._from_start(now, v, start) if start is not None else
-                          self._from_track(now, v, velocity))
+                          self._from_track(now, v, box, velocity))
                 if relock is None:
                     continue
                 # a lost track: the candidate nearest the prediction; a lost start: the steadiest motion
@@ -129,9 +131,16 @@ class ClusterReacquire(Reacquire):
                     best = (score, relock)
         return None if best is None else best[1]
 
-    def _from_track(self, now: Candidate, v: np.ndarray, velocity: np.ndarray | None) -> Relock | None:
+    def _from_track(self, now: Candidate, v: np.ndarray, box: Box, velocity: np.ndarray | None) -> Relock | None:
         predicted = np.zeros(2) if velocity is None else velocity
         if np.linalg.norm(v - predicted) > self.c.velocity_gate:
+            return None
+        # the object's path since the loss: a hidden vehicle that keeps going does not end up behind where its
+        # support was lost (along its heading, the way it moves; more than ``reach``): a candidate there is
+        # something it passed (a parked car, the occluder that hid it)
+        axis = np.array([np.cos(box.heading), np.sin(box.heading)])
+        way = float(np.sign(predicted @ axis))
+        if way != 0 and way * float((now.centre - self._held_at) @ axis) < -self.c.reach:
             return None
         return Relock(now.centre, predicted.copy())
 

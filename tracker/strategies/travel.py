@@ -68,14 +68,16 @@ class TravelHeading(NoTravel):
         factor = min(1.0, max(0.0, speed / self.min_speed - 1.0))
         if factor <= 0:
             return None
-        # a turn: the chord lags the heading; the term fades out as the half-chords turn (up to max_turn)
+        # a turn: the chord is the heading at the window's middle time; the half-chords (headings a half span
+        # apart) give the turn rate, which carries it to the next frame's time; the term fades out as they turn
         mid = track[len(track) // 2, 1:]
         first, second = mid - track[0, 1:], track[-1, 1:] - mid
-        turn = abs(float(wrap_angle(np.arctan2(second[1], second[0]) - np.arctan2(first[1], first[0]))))
-        factor *= max(0.0, 1.0 - turn / self.max_turn)
+        turn = float(wrap_angle(np.arctan2(second[1], second[0]) - np.arctan2(first[1], first[0])))
+        factor *= max(0.0, 1.0 - abs(turn) / self.max_turn)
         if factor <= 0:
             return None
-        direction = float(np.arctan2(chord[1], chord[0]))
+        ahead = 0.5 * span + span / (len(track) - 1)      # the window's middle to the next frame (mean interval)
+        direction = float(np.arctan2(chord[1], chord[0])) + turn * ahead / (0.5 * span)
         offset = float(wrap_angle(direction - heading))
         if abs(offset) > 0.5 * np.pi:                  # driving backwards: the heading is the other way
             offset = float(wrap_angle(offset + np.pi))
