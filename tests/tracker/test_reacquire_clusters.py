@@ -160,3 +160,24 @@ def test_the_offline_solve_with_heading_from_travel_holds_the_heading_of_an_obli
     err_on, err_off = _heading_error_deg(on, boxes), _heading_error_deg(off, boxes)
     assert np.median(err_on) < 0.6 and np.median(err_on) < np.median(err_off)
     assert err_on.max() < 3.0
+
+
+def test_the_travel_target_in_a_steady_turn_is_the_heading_at_the_next_frame():
+    """Box centres on a circle at 8 m/s turning at 0.15 rad/s (a gentle curve): the chord through the window is the
+    heading at the window's middle time, 0.35 s behind the next frame; the target is the next frame's heading
+    (analytic), within the rounding of the half-chords."""
+    from tracker.config import MotionConfig
+    from tracker.strategies.travel import TravelHeading
+
+    speed, rate, dt = 8.0, 0.15, 0.1
+    radius = speed / rate
+    term = TravelHeading(MotionConfig(travel_weight=5.0))
+    for k in range(8):
+        heading = rate * k * dt
+        term.record(Box(radius * np.sin(heading), radius * (1.0 - np.cos(heading)), 0.0, heading, *BOX_SIZE), k * dt)
+    truth_next = rate * 8 * dt
+    target, weight = term.target(rate * 7 * dt, 0)
+    assert abs(target - truth_next) < np.deg2rad(0.05)
+    chord_lag = rate * (0.25 + dt)                          # what the plain chord direction would lag by
+    assert chord_lag > np.deg2rad(2.0)
+    assert 0.0 < weight < 5.0                                # faded (the window turns) but not off

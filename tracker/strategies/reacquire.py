@@ -13,7 +13,9 @@ track holds) or moves it, or ``recover_frames`` frames in a row had support. A s
 the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
 ``reacquired``) only on a candidate matched to
 one of the previous frame's candidates in position, size and motion: for a lost track a velocity within
-``velocity_gate`` of the predicted one; for a lost start a velocity along the start box's heading line (within
+``velocity_gate`` of the predicted one and a place on the object's path (not more than ``reach`` behind the box
+of the last supported frame along its heading, the way it moves: a hidden vehicle does not end up behind where
+it was lost, something it passed is there); for a lost start a velocity along the start box's heading line (within
 ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance travelled from the start box
 since the start.
 """
