@@ -367,7 +367,7 @@ class Tracker:
         sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
         r = c.reacquire
         candidates = cluster_candidates(points, self.box, sensor, r.cell, r.cluster_points, r.size_margin, time_s,
-                                        predicted=start is None)
+                                        centred=start is None)
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)
         if relock is None or (start is None and self._holds_against(relock, points, r.hold_distance)):
             if relock is not None:  # the candidate is where the track is: it holds
