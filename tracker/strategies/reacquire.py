@@ -15,7 +15,8 @@ the time since the start ahead and a third of that behind. The track re-locks (r
 one of the previous frame's candidates in position, size and motion: for a lost track a velocity within
 ``velocity_gate`` of the predicted one and a place on the object's path (not more than ``reach`` behind the box
 of the last supported frame along its heading, the way it moves: a hidden vehicle does not end up behind where
-it was lost, something it passed is there); for a lost start a velocity along the start box's heading line (within
+it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
+the predicted path: a vehicle a lane over is another one); for a lost start a velocity along the start box's heading line (within
 ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance travelled from the start box
 since the start.
 """
@@ -143,6 +144,11 @@ class ClusterReacquire(Reacquire):
         axis = np.array([np.cos(box.heading), np.sin(box.heading)])
         way = float(np.sign(predicted @ axis))
         if way != 0 and way * float((now.centre - self._held_at) @ axis) < -self.c.reach:
+            return None
+        # nor far across its predicted path: lanes change at a metre or two per second (a candidate a lane over is
+        # a vehicle beside it, e.g. the one that hid it, driving alongside)
+        across = abs(float((now.centre - box.center[:2]) @ np.array([-axis[1], axis[0]])))
+        if across > self.c.reach + self.c.lateral_growth * max(now.time_s - self._held_s, 0.0):
             return None
         return Relock(now.centre, predicted.copy())
 
