@@ -138,7 +138,7 @@ def test_a_far_sparse_start_that_approaches_is_found_before_it_is_within_30_m():
 
 
 def test_reacquire_is_deterministic_per_seed():
-    boxes = _straight(24, (10.0, 4.0), 0.0, 1.0, side_shift=(10, 3.0))
+    boxes = _straight(24, (10.0, 4.0), 0.0, 1.0, side_shift=(10, 3.0, 1))
     seq = _scene(boxes, 0, hidden=range(8, 14))
     config = get_preset("full", seed=3, **REACQUIRE, **{"motion.travel_weight": 5.0})
     runs = [track(seq, boxes[0], 0, len(seq) - 1, config) for _ in range(2)]
