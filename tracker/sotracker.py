@@ -369,24 +369,26 @@ class Tracker:
         candidates = cluster_candidates(points, self.box, sensor, r.cell, r.cluster_points, r.size_margin, time_s,
                                         centred=start is None)
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)
-        if relock is None or (start is None and self._holds_against(relock, points, r.hold_distance)):
-            if relock is not None:  # the candidate is where the track is: it holds
+        confirms = (relock is not None and start is None
+                    and float(np.linalg.norm(relock.centre - self.box.center[:2])) < r.hold_distance)
+        if relock is None or confirms or (start is None and self._holds_against(relock, points)):
+            if confirms:  # the candidate is where the track is: it holds, the search ends
                 s.reacquire.reset(time_s, self.box.center)
             coasting = ("coasting",) if relock is None and "prior_only" in estimate.flags else ()
             return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
                            time_ms=(time.perf_counter() - t0) * 1e3)
         return self._relock(frame, relock, start is None, t0)
 
-    def _holds_against(self, relock: Relock, points: np.ndarray, hold_distance: float) -> bool:
-        """Whether a lost track's box holds against a confirmed candidate: the candidate is within
-        ``hold_distance`` of it, or the box placed there would hold no more of the region's non-ground ``points``
-        than the box does (the frame's points already support the track where it is; a candidate is only a
-        part of the object, e.g. the top of one that re-appears from behind an occluder)."""
+    def _holds_against(self, relock: Relock, points: np.ndarray) -> bool:
+        """Whether a lost track's box stays where it is against a confirmed candidate (the search goes on): the
+        box placed there would hold fewer of the region's non-ground ``points`` than the box does (the frame's
+        points support the track where it is better; a candidate is only a part of the object, e.g. the top of
+        one that re-appears from behind an occluder). On a tie (a far car's few points fit in both boxes) the
+        candidate wins: it is centred on them."""
         box = self.box
         moved = Box(float(relock.centre[0]), float(relock.centre[1]), box.z, box.heading, box.length, box.width,
                     box.height)
-        return bool(float(np.linalg.norm(relock.centre - box.center[:2])) < hold_distance
-                    or points_in_box(points, moved, 1.0).sum() <= points_in_box(points, box, 1.0).sum())
+        return bool(points_in_box(points, moved, 1.0).sum() < points_in_box(points, box, 1.0).sum())
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
         """Restart the track at a confirmed candidate, its velocity seeding the motion model; with
