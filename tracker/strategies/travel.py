@@ -2,11 +2,13 @@
 heading, so the direction of travel of the track's own recent box centres is a target for the per-frame
 heading.
 
-:class:`TravelHeading` keeps the last ``motion.travel_frames`` + 1 centres with their times (at least 3). The direction of
-travel is the chord from the first to the last. In a turn the chord lags the heading, so the term fades out as
-the window turns: the direction of its second half-chord less its first's, the weight x (1 - that /
-``travel_max_turn``), none beyond (a turn measured from the positions only: the motion model's turn rate, which a
-rotating box feeds, would feed the rotation back). Its
+:class:`TravelHeading` keeps the last ``motion.travel_frames`` + 1 centres with their times (at least 3). The
+direction of travel is the chord from the first to the last: in a steady turn, the heading at the window's middle
+time. The half-chords' directions (headings half a span apart) give the window's turn rate, which carries the
+chord's direction to the next frame's time (a turn measured from the positions only: the motion model's turn
+rate, which a rotating box feeds, would feed the rotation back); the term still fades out as the window turns
+(x (1 - the half-chords' turn / ``travel_max_turn``), none beyond): entering or leaving a turn the rate changes
+within the window. Its
 weight is ``travel_weight`` x a speed factor (0 below ``travel_min_speed``, rising to 1 at twice that speed) x a
 sparseness factor ``travel_points`` / (``travel_points`` + the previous frame's object points): few points (a far
 or partial view) pin the heading weakly. In
