@@ -5,8 +5,8 @@
 ``python tests/tracker/golden_boxes.py`` writes tests/tracker/golden/dev_tracks_boxes.npz (made with the code
 before the configuration was nested; tests/tracker/test_golden_boxes.py checks that today's code gives the same
 boxes); ``python tests/tracker/golden_boxes.py full`` remakes only the named presets' entries (a preset that was
-changed on purpose) and keeps the others' as they are. The file holds, per (preset, seed, track): the (K, 7) float64 boxes x, y, z, heading, l, w, h, and the
-flags of each frame joined by ',' (a fixed-width unicode array).
+changed on purpose) and keeps the others' as they are. The file holds, per (preset, seed, track): the (K, 7)
+float64 boxes x, y, z, heading, l, w, h, and the flags of each frame joined by ',' (a fixed-width unicode array).
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ _EGO = make_transform(rotation_z(0.0), np.array([0.0, 0.0, 1.0]))   # a parked e
 
 
 def _scene(boxes: list[Box], seed: int, hidden: range = range(0), density=lambda r: 80.0,
-           ground_centre=(20.0, 4.0), ground_half=16.0, others: list[list[Box]] = ()) -> SyntheticSequence:
+           ground_centre=(20.0, 4.0), ground_half=16.0, others: tuple[list[Box], ...] = ()) -> SyntheticSequence:
     """The car at ``boxes`` seen from the parked ego (``density(range)`` points per m^2 of a face toward the
     sensor, none where it is 0), no car points in ``hidden`` frames, a road around ``ground_centre``; ``others``:
     the boxes of other cars, always seen (80 points per m^2)."""
@@ -93,7 +93,7 @@ def test_a_car_in_the_next_lane_does_not_capture_a_hidden_track():
     boxes = _straight(30, (10.0, 4.0), 0.0, 1.0)
     beside = _straight(30, (10.0, 7.5), 0.0, 1.0)
     hidden = range(8, 23)
-    seq = _scene(boxes, 0, hidden=hidden, ground_half=24.0, others=[beside])
+    seq = _scene(boxes, 0, hidden=hidden, ground_half=24.0, others=(beside,))
     result = _track(seq, **REACQUIRE)
     assert all("coasting" in result.estimates[k].flags for k in hidden[1:])
     assert _iou(result, boxes)[1:].min() > 0.7
@@ -111,7 +111,7 @@ def test_a_car_the_hidden_target_passed_does_not_capture_the_track(occluder_velo
     vx, vy = occluder_velocity
     occluder = [Box(11.0 + 0.1 * vx * k, 2.5 + 0.1 * vy * k, 0.0, 0.0, *BOX_SIZE) for k in range(40)]
     hidden = range(10, 30)
-    seq = _scene(boxes, 0, hidden=hidden, others=[occluder])
+    seq = _scene(boxes, 0, hidden=hidden, others=(occluder,))
     result = _track(seq, **REACQUIRE)
     estimates = result.estimates
     centre_error = np.array([np.linalg.norm(e.box.center[:2] - b.center[:2]) for e, b in zip(estimates, boxes,
