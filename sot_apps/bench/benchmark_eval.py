@@ -15,19 +15,53 @@ from __future__ import annotations
 import dataclasses
 from collections import defaultdict
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 import numpy as np
 
 from ..benchmark.profile_scores import pool_figures, tracklet_figures
 from ..errors import InputError
+from ..text_table import format_table, format_value
 
 if TYPE_CHECKING:   # imported by `sot-apps bench --help` (module discovery): the libraries load when a run starts
     from ..benchmark.lists import SequenceResolver, Tracklet
     from ..evaluation.tracker import EvalConfig, TrackSpec
     from ..io.cached_source import CachedSource
 
-__all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
+__all__ = ["BenchmarkList", "open_benchmark", "BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
+
+
+@dataclass(frozen=True)
+class BenchmarkList:
+    """A benchmark's tracklets, where they were read from, and how a tracklet finds its sequence."""
+
+    source: Path
+    tracklets: list[Tracklet]
+    resolve: SequenceResolver
+
+
+def open_benchmark(benchmark: str, lists: str | Path | None = None, data_dir: str | Path | None = None,
+                   first: int | None = None) -> BenchmarkList:
+    """The tracklet list ``benchmark`` names: a list file (benchmark.json of ``benchmark make``, bench_list.json
+    of ``benchmark build``) or folder, or ``"lidar-sot"`` with ``lists`` (LiDAR-SOT's list folder) and
+    ``data_dir`` (the Waymo data directory). Sequences are found next to the list, else under ``data_dir``.
+    ``first``: only the list's first N tracklets (a generated list is ordered copy by copy)."""
+    from ..benchmark.lists import default_resolver, read_lists
+
+    if benchmark == "lidar-sot":
+        if not lists or data_dir is None:
+            raise InputError(None, "--benchmark lidar-sot needs --lists DIR and the Waymo DATA_DIR as SEQUENCE")
+        source = Path(lists)
+    else:
+        source = Path(benchmark)
+    tracklets = read_lists(source)
+    if first is not None:
+        if first < 1:
+            raise InputError(None, f"--first must be >= 1, not {first}")
+        tracklets = tracklets[:first]
+    list_dir = source if source.is_dir() else source.parent
+    return BenchmarkList(source, tracklets, default_resolver(list_dir, Path(data_dir) if data_dir else None))
 
 
 @dataclass(frozen=True)
@@ -61,7 +95,7 @@ class BenchmarkRun:
             ms = np.concatenate([self.records[(preset, seed, k)][1] for k in keys])
             per_seed.append({"acc": pooled.acc, "rob": pooled.rob, "shape": pooled.shape, "success": pooled.success,
                              "precision": pooled.precision, "ms": float(np.mean(ms)) if ms.size else float("nan")})
-        for seed, row in zip(self.seeds, per_seed):
+        for seed, row in zip(self.seeds, per_seed, strict=True):
             row.update(pool_figures(self.figures.get((preset, seed, k), {}) for k in keys))
         mean = {k: _nan_mean([s.get(k, float("nan")) for s in per_seed]) for k in per_seed[0]}
         mean["acc_std"] = float(np.std([s["acc"] for s in per_seed]))
@@ -99,7 +133,7 @@ def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSp
     frames = tuple(range(a, b + 1))
     boxes = tuple(tracks[t.id].box_at(k) for k in frames)
     if any(box is None for box in boxes):
-        missing = [k for k, box in zip(frames, boxes) if box is None]
+        missing = [k for k, box in zip(frames, boxes, strict=True) if box is None]
         raise InputError(seq.root, f"tracklet {t.id}: no box at frame {missing[0]} of {a}..{b}")
     n = min(config.selection.difficulty_frames, len(frames))
     mean10 = mean_points_in_boxes(source, frames[:n], boxes[:n])
@@ -125,9 +159,10 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
     parameters (default ``EvalConfig()``)."""
     from tracker import get_preset, track
 
-    from ..evaluation.tracker import EvalConfig, refined_modes, score_result
+    from ..evaluation.tracker import EvalConfig, score_result
     from ..io import open_sequence
     from ..io.cached_source import CachedSource
+    from .sequence_eval import refined_modes
 
     config = config if config is not None else EvalConfig()
     overrides = dict(overrides or {})
@@ -170,10 +205,6 @@ _EXTRA_COLUMNS = (("relock_share", "ReLock3", 100.0, ".0f"), ("found_near_share"
                   ("heading_err_last_med_deg", "Hdg@last", 1.0, ".1f"))
 
 
-def _fmt(v: float, spec: str) -> str:
-    return "—" if v is None or not np.isfinite(v) else format(v, spec)
-
-
 def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
     """One table per preset: rows = all / easy / medium / hard / each motion profile."""
     out = [title] if title else []
@@ -188,14 +219,11 @@ def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
                  if any(k in m for _, m in summaries)]
         header += [title for _, title, _, _ in extra]
         for name, m in summaries:
-            acc = _fmt(100 * m["acc"], ".1f") + (f" ± {100 * m['acc_std']:.1f}" if n_seeds > 1 else "")
-            rows.append([name, str(m["n"]), acc, _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f"),
-                         _fmt(m["success"], ".1f"), _fmt(m["precision"], ".1f"), _fmt(m["ms"], ".1f")]
-                        + [_fmt(scale * m[k], spec) if k in m else "" for k, _, scale, spec in extra])
-        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-        line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
-                                       for i, (c, w) in enumerate(zip(cells, widths)))
-        out += [line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows] + [""]
+            acc = format_value(100 * m["acc"], ".1f") + (f" ± {100 * m['acc_std']:.1f}" if n_seeds > 1 else "")
+            rows.append([name, str(m["n"]), acc, format_value(100 * m["rob"], ".1f"), format_value(m["shape"], ".3f"),
+                         format_value(m["success"], ".1f"), format_value(m["precision"], ".1f"), format_value(m["ms"], ".1f")]
+                        + [format_value(scale * m[k], spec) if k in m else "" for k, _, scale, spec in extra])
+        out += [format_table(header, rows), ""]
     out.append("Acc, Rob in %; Success, Precision: 100 x AUC; Shape: mean Chamfer to the pseudo-ground-truth shape; "
                "difficulty by mean GT-box points over the first 10 frames (hard < 38.2 <= medium < 808.3 <= easy).")
     if any(k in run.summary(p, keys) for p in run.presets for _, keys in run.groups() for k, *_ in _EXTRA_COLUMNS):

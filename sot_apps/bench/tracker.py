@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import text_table
 from . import format_machine, machine_description, pin_one_core
 
 __all__ = ["register", "add_arguments", "run", "run_benchmark", "format_table"]
@@ -123,9 +124,10 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
                   lags: list[int] | None = None, offline: bool = False) -> dict[str, Any]:
     from tracker import get_preset
 
-    from ..evaluation.tracker import prepare_tracks, resolve_presets, select_moving_vehicle_tracks
+    from ..evaluation.tracker import prepare_tracks, select_moving_vehicle_tracks
     from ..io import open_sequence
     from ..io.cached_source import CachedSource
+    from .sequence_eval import resolve_presets
 
     pinned = pin_one_core()
     sequence = open_sequence(sequence_path)
@@ -162,7 +164,7 @@ def _timing_row(name: str, specs, timed: list, ground_ms: np.ndarray) -> dict[st
     from tracker import pool_metrics, score_tracklet
 
     pooled = pool_metrics([score_tracklet(spec.track_id, boxes, np.array([b.to_array() for b in spec.boxes]))
-                           for spec, (boxes, _, _) in zip(specs, timed)])
+                           for spec, (boxes, _, _) in zip(specs, timed, strict=True)])
     w_all, c_all = np.concatenate([w for _, w, _ in timed]), np.concatenate([c for _, _, c in timed])
     c_later = np.concatenate([c[1:] for _, _, c in timed])
     return {"row": name, "acc": pooled.acc, "rob": pooled.rob, "frames": int(c_all.size),
@@ -228,12 +230,10 @@ def format_table(result: dict[str, Any]) -> str:
     body = [[r["row"], *(f"{r[key]:.1f}" if key in r else "-" for key in timing),
              *(f"{r[key]:.2f}" if key in r else "-" for key in ratios),
              f"{100 * r['acc']:.1f}", f"{100 * r['rob']:.1f}"] for r in result["rows"]]
-    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(header)]
-    fmt = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))  # noqa: E731
     lines = [f"sequence: {result['sequence']}",
              f"tracks: {len(result['tracks'])} ({', '.join(t[:8] for t in result['tracks'])}); "
              f"{result['frames_per_preset']} tracked frames per preset (k >= 1)",
-             "", fmt(header), "  ".join("-" * w for w in widths)] + [fmt(b) for b in body]
+             "", text_table.format_table(header, body)]
     lines += ["", "ms per frame = CPU time of the tracking thread in Tracker.step (crop, ground removal, association,",
               "optimisation; sweeps are read before timing), frames k >= 1 with frame 1's wide search included;",
               "'wall' = wall-clock time of the step (inflated when other processes share the cores).",
