@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..evaluation.tracker import format_report
     from ..io.atomic import write_json
+    from ..provenance import invoked_command, provenance_record
 
     if any(n < 1 for n in args.lag):
         raise InputError(None, f"--lag must be at least 1, not {min(args.lag)}")
@@ -110,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         print("set: " + " ".join(f"{k}={v}" for k, v in args.overrides.items()))
     print(format_report(report, per_track=not args.no_per_track))
     if args.json:
-        write_json(args.json, report.to_dict())
+        write_json(args.json, report.to_dict() | {"provenance": provenance_record([invoked_command()])})
     return 0
 
 
@@ -120,6 +121,7 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
     from ..bench.benchmark_eval import evaluate_tracklets, format_benchmark, open_benchmark
     from ..errors import InputError
     from ..io.atomic import write_json
+    from ..provenance import invoked_command, provenance_record
 
     if args.tracks or args.all_moving:
         raise InputError(None, "--benchmark takes its tracklets from the list: drop --tracks/--all-moving")
@@ -142,5 +144,5 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
         title += "; set " + " ".join(f"{k}={v}" for k, v in args.overrides.items())
     print(format_benchmark(run, title))
     if args.json:
-        write_json(args.json, run.to_dict())
+        write_json(args.json, run.to_dict() | {"provenance": provenance_record([invoked_command()])})
     return 0
