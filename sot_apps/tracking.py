@@ -40,7 +40,8 @@ from .io.tracks import FrameRecord, Size, TrackFile, write_track
 __all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read_shape_growth", "parse_init_box",
            "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence",
            "refine_track_fixed_lag", "refine_track_offline", "track_result_to_trackfile",
-           "write_track_result", "first_box_with_points", "TrackStart", "annotated_track_start", "TrackingFailed", "MIN_INIT_POINTS", "StartSearch",
+           "write_track_result", "first_box_with_points", "TrackStart", "annotated_track_start",
+           "TrackingFailed", "MIN_INIT_POINTS", "StartSearch",
            "ShapeRecorder", "ObjectRequest", "ObjectTrack", "PassTimes", "track_objects", "sweep_ground_once"]
 
 MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box

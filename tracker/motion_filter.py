@@ -32,7 +32,8 @@ from .geometry import Box, wrap_angle
 from .motion import MotionPrior
 from .terms import apply_motion
 
-__all__ = ["CTRVParams", "CTRVFilter", "ctrv_arc", "ctrv_predict_state", "travel_heading", "HeightFilter", "CTRVMotion", "AverageMotion"]
+__all__ = ["CTRVParams", "CTRVFilter", "ctrv_arc", "ctrv_predict_state", "travel_heading", "HeightFilter",
+           "CTRVMotion", "AverageMotion"]
 
 
 @dataclass(frozen=True)

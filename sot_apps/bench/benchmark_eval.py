@@ -22,7 +22,8 @@ import numpy as np
 
 from ..benchmark.profile_scores import pool_figures, tracklet_figures
 from ..errors import InputError
-from ..text_table import format_table, format_value
+from ..text_table import format_table
+from ..text_table import format_value as _fmt
 
 if TYPE_CHECKING:   # imported by `sot-apps bench --help` (module discovery): the libraries load when a run starts
     from ..benchmark.lists import SequenceResolver, Tracklet
@@ -219,10 +220,10 @@ def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
                  if any(k in m for _, m in summaries)]
         header += [title for _, title, _, _ in extra]
         for name, m in summaries:
-            acc = format_value(100 * m["acc"], ".1f") + (f" ± {100 * m['acc_std']:.1f}" if n_seeds > 1 else "")
-            rows.append([name, str(m["n"]), acc, format_value(100 * m["rob"], ".1f"), format_value(m["shape"], ".3f"),
-                         format_value(m["success"], ".1f"), format_value(m["precision"], ".1f"), format_value(m["ms"], ".1f")]
-                        + [format_value(scale * m[k], spec) if k in m else "" for k, _, scale, spec in extra])
+            acc = _fmt(100 * m["acc"], ".1f") + (f" ± {100 * m['acc_std']:.1f}" if n_seeds > 1 else "")
+            rows.append([name, str(m["n"]), acc, _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f"),
+                         _fmt(m["success"], ".1f"), _fmt(m["precision"], ".1f"), _fmt(m["ms"], ".1f")]
+                        + [_fmt(scale * m[k], spec) if k in m else "" for k, _, scale, spec in extra])
         out += [format_table(header, rows), ""]
     out.append("Acc, Rob in %; Success, Precision: 100 x AUC; Shape: mean Chamfer to the pseudo-ground-truth shape; "
                "difficulty by mean GT-box points over the first 10 frames (hard < 38.2 <= medium < 808.3 <= easy).")

@@ -92,7 +92,8 @@ def frame_gap_figures(preset: str, scenes: int, seeds: int, overrides: dict[str,
             offset = est.box.center[:2] - boxes[12].center[:2]
             along.append(abs(offset @ [np.cos(boxes[12].heading), np.sin(boxes[12].heading)]))
             total.append(float(np.hypot(*offset)))
-    return f"frame gap, {len(total)} runs: along-track error at most {max(along):.3f} m, in all at most {max(total):.3f} m"
+    return (f"frame gap, {len(total)} runs: along-track error at most {max(along):.3f} m, in all at most "
+            f"{max(total):.3f} m")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -50,7 +50,8 @@ from ..io.cached_source import CachedSource
 from ..io.jsonable import json_safe
 from ..io.sequence import Sequence as LidarSequence
 from ..objects.selection import DEFAULT_SELECTION, Selection, annotated_span
-from ..text_table import format_table, format_value
+from ..text_table import format_table
+from ..text_table import format_value as _fmt
 
 __all__ = [
     "EvalConfig",
@@ -283,8 +284,8 @@ def score_result(spec: TrackSpec, result: TrackResult, config: EvalConfig) -> Tr
 # ---------------------------------------------------------------------------------------------------
 
 def _metric_cells(m: dict[str, float]) -> list[str]:
-    return [format_value(100 * m["acc"], ".1f"), format_value(100 * m["rob"], ".1f"), format_value(m["shape"], ".3f"),
-            format_value(m["success"], ".1f"), format_value(m["precision"], ".1f"), format_value(m["centre_error"], ".3f")]
+    return [_fmt(100 * m["acc"], ".1f"), _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f"),
+            _fmt(m["success"], ".1f"), _fmt(m["precision"], ".1f"), _fmt(m["centre_error"], ".3f")]
 
 
 def format_report(report: EvalReport, per_track: bool = True) -> str:
@@ -296,8 +297,8 @@ def format_report(report: EvalReport, per_track: bool = True) -> str:
            f"frames scored: {report.rows[0].pooled['n_frames']:.0f}, seeds: {n_seeds}" if report.rows else "",
            ""]
     header = ["preset", "Acc", "Rob", "Shape(m)", "Success", "Prec", "CE(m)", "ms/f med", "ms/f mean", "ms/f p90"]
-    rows = [[r.name] + _metric_cells(r.pooled) + [format_value(r.timing["median_ms"], ".1f"), format_value(r.timing["mean_ms"], ".1f"),
-                                                  format_value(r.timing["p90_ms"], ".1f")] for r in report.rows]
+    rows = [[r.name] + _metric_cells(r.pooled) + [_fmt(r.timing["median_ms"], ".1f"), _fmt(r.timing["mean_ms"], ".1f"),
+                                                  _fmt(r.timing["p90_ms"], ".1f")] for r in report.rows]
     out += ["All tracks (pooled over frames; Shape = mean Chamfer over tracks)", format_table(header, rows), ""]
     dheader = ["preset"] + [f"{d} {m}" for d in DIFFICULTIES if d in (report.rows[0].by_difficulty if report.rows else {})
                             for m in ("Acc", "Rob", "Shape")]
@@ -307,7 +308,7 @@ def format_report(report: EvalReport, per_track: bool = True) -> str:
         for d in DIFFICULTIES:
             if d in r.by_difficulty:
                 m = r.by_difficulty[d]
-                cells += [format_value(100 * m["acc"], ".1f"), format_value(100 * m["rob"], ".1f"), format_value(m["shape"], ".3f")]
+                cells += [_fmt(100 * m["acc"], ".1f"), _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f")]
         drows.append(cells)
     out += ["By difficulty (mean GT-box points over the first 10 frames: hard < 38.2 <= medium < 808.3 <= easy)",
             format_table(dheader, drows), ""]
@@ -315,10 +316,10 @@ def format_report(report: EvalReport, per_track: bool = True) -> str:
         theader = ["track", "diff", "pts10"] + [r.name for r in report.rows]
         trows = []
         for spec in report.tracks:
-            cells = [spec.track_id[:8], spec.difficulty, format_value(spec.mean_points_first10, ".0f")]
+            cells = [spec.track_id[:8], spec.difficulty, _fmt(spec.mean_points_first10, ".0f")]
             for r in report.rows:
                 m = r.by_track[spec.track_id]
-                cells.append(f"{format_value(100 * m['acc'], '.1f')}/{format_value(100 * m['rob'], '.1f')}/{format_value(m['centre_error'], '.2f')}")
+                cells.append(f"{_fmt(100 * m['acc'], '.1f')}/{_fmt(100 * m['rob'], '.1f')}/{_fmt(m['centre_error'], '.2f')}")
             trows.append(cells)
         out += ["Per track: Acc / Rob / centre error (m)", format_table(theader, trows), ""]
     out.append("Acc, Rob in %; Success, Precision: 100 x AUC; CE: mean 3D centre error; ms/f: tracker time per frame "
