@@ -25,7 +25,7 @@ from tracker import Box, wrap_angle
 
 from ..io.atomic import write_bytes, write_json, write_npz, write_text
 from ..io.ply import write_ply_points
-from ..sensor.scan import Scan, range_image
+from ..sensor.scan import Scan
 from .visibility import Visibility
 
 __all__ = ["write_scan_npz", "write_bin", "write_pcd", "write_ply", "kitti_label_lines", "write_boxes",
@@ -103,7 +103,3 @@ def write_boxes(out_dir: Path, boxes: list[Box], labels: list[str], bank_ids: li
     write_json(out_dir / "boxes.json", doc)
     lines = kitti_label_lines(boxes, labels, visibility)
     write_text(out_dir / "labels_kitti.txt", "\n".join(lines) + ("\n" if lines else ""))
-
-
-def range_image_of(scan: Scan) -> np.ndarray:
-    return range_image(scan)

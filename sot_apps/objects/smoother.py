@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker import wrap_angle
+from tracker import ctrv_arc, wrap_angle
 
 __all__ = ["SmootherConfig", "ObjectTrack", "Kinematics", "smooth_track", "ctrv_transition",
            "central_difference_kinematics"]
@@ -148,12 +148,6 @@ class Kinematics:
     def __len__(self) -> int:
         return len(self.frames)
 
-    @property
-    def signed_speed(self) -> np.ndarray:
-        """Velocity component along the heading (negative when reversing)."""
-        c, s = np.cos(self.heading), np.sin(self.heading)
-        return self.velocity_x * c + self.velocity_y * s
-
     def sample(self, i: int) -> dict:
         """Sample i as plain Python values (None for NaN), for JSON messages."""
         def f(value: float) -> float | None:
@@ -173,30 +167,17 @@ class Kinematics:
         }
 
 
-def _f1_f2(a: float) -> tuple[float, float, float, float]:
-    """f1 = sin(a)/a, f2 = (1 - cos a)/a and their derivatives (series near 0)."""
-    if abs(a) < 1e-3:
-        a2 = a * a
-        return 1.0 - a2 / 6.0, a / 2.0 - a * a2 / 24.0, -a / 3.0 + a * a2 / 30.0, 0.5 - a2 / 8.0
-    s, c = np.sin(a), np.cos(a)
-    return s / a, (1.0 - c) / a, (a * c - s) / (a * a), (a * s - (1.0 - c)) / (a * a)
-
-
 def ctrv_transition(state: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """CTRV prediction of a state over ``dt`` seconds: (next state, Jacobian d next / d state)."""
+    """CTRV prediction of a state over ``dt`` seconds (:func:`tracker.ctrv_arc` along heading + slip, z at
+    constant vertical speed): (next state, Jacobian d next / d state)."""
     x, y, th, v, w, z, vz, beta = state
-    f1, f2, d1, d2 = _f1_f2(w * dt)
-    c, s = np.cos(th + beta), np.sin(th + beta)
-    dx = v * dt * (c * f1 - s * f2)
-    dy = v * dt * (s * f1 + c * f2)
+    (dx, dy), arc = ctrv_arc(th + beta, v, w, dt)
     out = np.array([x + dx, y + dy, th + w * dt, v, w, z + vz * dt, vz, beta])
     F = np.eye(_NX)
-    F[_IX, _ITH] = F[_IX, _IB] = -dy
-    F[_IY, _ITH] = F[_IY, _IB] = dx
-    F[_IX, _IV] = dt * (c * f1 - s * f2)
-    F[_IY, _IV] = dt * (s * f1 + c * f2)
-    F[_IX, _IW] = v * dt * dt * (c * d1 - s * d2)
-    F[_IY, _IW] = v * dt * dt * (s * d1 + c * d2)
+    F[_IX, _ITH] = F[_IX, _IB] = arc[0, 0]
+    F[_IY, _ITH] = F[_IY, _IB] = arc[1, 0]
+    F[_IX, _IV], F[_IY, _IV] = arc[0, 1], arc[1, 1]
+    F[_IX, _IW], F[_IY, _IW] = arc[0, 2], arc[1, 2]
     F[_ITH, _IW] = dt
     F[_IZ, _IVZ] = dt
     return out, F
