@@ -42,14 +42,17 @@ def rotation_z(theta: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def rotation_zyx(heading: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
-    """3x3 rotation Rz(heading) @ Ry(pitch) @ Rx(roll); exactly :func:`rotation_z` when pitch = roll = 0."""
-    if pitch == 0.0 and roll == 0.0:
-        return rotation_z(heading)
+def rotation_zyx(heading: float | np.ndarray, pitch: float | np.ndarray = 0.0,
+                 roll: float | np.ndarray = 0.0) -> np.ndarray:
+    """3x3 rotation Rz(heading) @ Ry(pitch) @ Rx(roll); exactly :func:`rotation_z` when pitch = roll = 0.
+    Arrays of angles (broadcast together) give (..., 3, 3) rotations."""
+    if np.ndim(heading) == np.ndim(pitch) == np.ndim(roll) == 0 and pitch == 0.0 and roll == 0.0:
+        return rotation_z(float(heading))
     cy, sy, cp, sp, cr, sr = np.cos(heading), np.sin(heading), np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
+    cy, sy, cp, sp, cr, sr = np.broadcast_arrays(cy, sy, cp, sp, cr, sr)
+    return np.stack([np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], axis=-1),
+                     np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], axis=-1),
+                     np.stack([-sp, cp * sr, cp * cr], axis=-1)], axis=-2)
 
 
 def zyx_angles(rotation: np.ndarray) -> tuple[float, float, float]:

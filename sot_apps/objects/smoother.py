@@ -85,7 +85,8 @@ class ObjectTrack:
     """Per-frame box states of one object (the smoother's input).
 
     ``states`` (N, 4) WORLD [x, y, z, heading]; ``valid`` (N,) False where the measurement must not
-    be used (``flags[i]`` says why). ``size`` is (length, width, height).
+    be used (``flags[i]`` says why). ``size`` is (length, width, height). ``tilts`` (N, 2) ``[roll, pitch]``
+    of boxes that are not level in the world (None: level); they are carried through, not smoothed.
     """
 
     object_id: str
@@ -99,6 +100,7 @@ class ObjectTrack:
     source: str = ""
     shape_points: np.ndarray | None = None  # (M, 3) object-frame points, optional
     config: dict = field(default_factory=dict)
+    tilts: np.ndarray | None = None         # (N, 2) [roll, pitch]; None: level
 
     def __post_init__(self) -> None:
         self.frames = np.asarray(self.frames, dtype=np.int64).reshape(-1)
@@ -115,6 +117,11 @@ class ObjectTrack:
         if n > 1 and (np.any(np.diff(self.frames) <= 0) or np.any(np.diff(self.timestamps_ns) <= 0)):
             raise ValueError(f"{self.object_id}: frames and timestamps must be strictly increasing")
         self.valid = self.valid & np.isfinite(self.states).all(axis=1)
+        if self.tilts is not None:
+            self.tilts = np.asarray(self.tilts, dtype=np.float64).reshape(-1, 2)
+            if len(self.tilts) != n:
+                raise ValueError(f"{self.object_id}: tilts has {len(self.tilts)} rows for {n} frames")
+            self.valid = self.valid & np.isfinite(self.tilts).all(axis=1)
 
 
 @dataclass
@@ -144,6 +151,7 @@ class Kinematics:
     source: str = ""
     shape_points: np.ndarray | None = None
     config: dict = field(default_factory=dict)
+    tilts: np.ndarray | None = None   # (N, 2) [roll, pitch] of the input boxes (NaN where invalid); None: level
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -248,6 +256,11 @@ def _ekf_rts(t: np.ndarray, meas: np.ndarray, valid: np.ndarray, r_scale: np.nda
     return xs_s, ps_s
 
 
+def _valid_tilts(track: ObjectTrack) -> np.ndarray | None:
+    """The track's [roll, pitch] at its valid frames (NaN elsewhere), or None for a level track."""
+    return None if track.tilts is None else np.where(track.valid[:, None], track.tilts, np.nan)
+
+
 def smooth_track(track: ObjectTrack, config: SmootherConfig = TRACKER_SMOOTHER,
                  measurement_sigma_scale: np.ndarray | None = None) -> Kinematics:
     """Smoothed kinematics of ``track`` at its frame times (see the module docstring)."""
@@ -293,7 +306,8 @@ def smooth_track(track: ObjectTrack, config: SmootherConfig = TRACKER_SMOOTHER,
     return Kinematics(object_id=track.object_id, label=track.label, size=tuple(float(s) for s in track.size),
                       frames=track.frames.copy(), timestamps_ns=track.timestamps_ns.copy(), valid=valid,
                       flags=[list(f) for f in track.flags], source=track.source, shape_points=track.shape_points,
-                      config={**track.config, "smoother": {"model": "CTRV EKF + RTS", **config.to_dict()}}, **out)
+                      config={**track.config, "smoother": {"model": "CTRV EKF + RTS", **config.to_dict()}},
+                      tilts=_valid_tilts(track), **out)
 
 
 def central_difference_kinematics(track: ObjectTrack) -> Kinematics:
@@ -332,4 +346,5 @@ def central_difference_kinematics(track: ObjectTrack) -> Kinematics:
                       x=mask(st[:, 0]), y=mask(st[:, 1]), z=mask(st[:, 2]), heading=mask(wrap_angle(st[:, 3])),
                       velocity_x=vx, velocity_y=vy, speed=speed, acceleration=acc, yaw_rate=w,
                       position_std=nan.copy(), heading_std=nan.copy(), speed_std=nan.copy(), yaw_rate_std=nan.copy(),
-                      source=track.source, config={"smoother": {"model": "central differences"}})
+                      source=track.source, config={"smoother": {"model": "central differences"}},
+                      tilts=_valid_tilts(track))

@@ -92,9 +92,11 @@ class Trajectory:
         return cls(times_ns, states, end, None if max_extrapolation_ns is None else int(max_extrapolation_ns), tilts)
 
     @classmethod
-    def static(cls, x: float, y: float, z: float, heading: float) -> "Trajectory":
+    def static(cls, x: float, y: float, z: float, heading: float, roll: float = 0.0, pitch: float = 0.0
+               ) -> "Trajectory":
         """A fixed pose (one sample, held at every time)."""
-        return cls(np.zeros(1, dtype=np.int64), np.array([[x, y, z, heading]], dtype=np.float64))
+        return cls(np.zeros(1, dtype=np.int64), np.array([[x, y, z, heading]], dtype=np.float64),
+                   tilts=np.array([[roll, pitch]], dtype=np.float64))
 
     @property
     def is_static(self) -> bool:
@@ -131,6 +133,16 @@ class Trajectory:
     def state_at(self, time_ns: int) -> np.ndarray | None:
         """[x, y, z, heading] at ``time_ns`` (heading unwrapped), or None outside the covered span."""
         return self.states_at(int(time_ns)) if self.covers(time_ns) else None
+
+    def poses_at(self, times_ns: np.ndarray | int) -> np.ndarray:
+        """(..., 4, 4) ``world_from_object`` at the given times, with the tilts (the ``end`` mode outside the
+        samples, no coverage check)."""
+        states = self.states_at(times_ns)
+        out = world_from_object(states)
+        if self.tilts is not None:
+            tilts = self.tilts_at(times_ns)
+            out[..., :3, :3] = rotation_zyx(states[..., 3], tilts[..., 1], tilts[..., 0])
+        return out
 
     def world_from_object_at(self, time_ns: int) -> np.ndarray | None:
         state = self.state_at(time_ns)
