@@ -65,6 +65,7 @@ class DetectorConfig:
     link_slope: float = 0.008
     link_max: float = 0.6
     split_factors: tuple[float, ...] = (0.6, 0.4)
+    resplit_keep: tuple[str, ...] = ("car", "van")   # other types are split again when that gives >= 2 boxes
     min_points: int = 8
     heading_steps: int = 90             # over [0, 90) degrees
     contour_arc: float = 0.1            # the L-shape is fitted to the nearest point per azimuth bin this wide
@@ -80,7 +81,7 @@ class DetectorConfig:
     min_travel: float = 0.6             # a moving cluster's heading follows its travel when it moved this far
     min_score: float = 0.05             # candidates scored lower are not reported
     # logistic score: bias, then one weight per FEATURES entry (python -m sot_apps.detection.calibrate)
-    score_weights: tuple[float, ...] = (-2.227, -0.311, -1.591, -0.005, -1.673, 2.331, 7.114, -0.027, 0.061)
+    score_weights: tuple[float, ...] = (-2.663, -0.269, -1.416, 0.029, -1.671, 2.5, 7.061, -0.148, 0.154)
 
 
 @dataclass(frozen=True)
@@ -278,15 +279,14 @@ def frame_candidates(sweeps: list[tuple[np.ndarray, np.ndarray]], config: Detect
     oldest_tree = cKDTree(oldest_xy) if len(oldest_xy) >= 5 else None
     if len(pts) < config.min_points:
         return []
-    out: list[Candidate] = []
-    queue = [(np.arange(len(pts)), 1.0, 0)]   # (point indices, radius factor, split depth)
-    while queue:
-        members, factor, depth = queue.pop()
+
+    def candidates(members: np.ndarray, factor: float, depth: int) -> list[Candidate]:
         labels = cluster_bev(pts[members, :2], sensor_xy, config.link_base * factor, config.link_slope * factor,
                              config.link_max * factor)
         order = np.argsort(labels, kind="stable")
         counts = np.bincount(labels)
         bounds = np.r_[0, np.cumsum(counts)]
+        found: list[Candidate] = []
         for lab in np.flatnonzero(counts >= config.min_points):
             idx = members[order[bounds[lab]:bounds[lab + 1]]]
             current = age[idx] == 0
@@ -298,11 +298,18 @@ def frame_candidates(sweeps: list[tuple[np.ndarray, np.ndarray]], config: Detect
                       if moving_share >= 0.3 else None)
             fitted = _fit_cluster(pts[idx], n_current, moving_share, travel, float(np.median(ground_z[idx])),
                                   sensor_xy, config)
-            if isinstance(fitted, Candidate):
-                out.append(fitted)
-            elif fitted == "split" and depth < len(config.split_factors):
-                queue.append((idx, config.split_factors[depth], depth + 1))
-    return out
+            finer = depth < len(config.split_factors)
+            if isinstance(fitted, Candidate) and finer and fitted.vehicle_type not in config.resplit_keep:
+                # larger than a van: two cars close together look like a truck; split if it yields >= 2
+                parts = candidates(idx, config.split_factors[depth], depth + 1)
+                found += parts if len(parts) >= 2 else [fitted]
+            elif isinstance(fitted, Candidate):
+                found.append(fitted)
+            elif fitted == "split" and finer:
+                found += candidates(idx, config.split_factors[depth], depth + 1)
+        return found
+
+    return candidates(np.arange(len(pts)), 1.0, 0)
 
 
 def boxes_to_world(boxes_ego: np.ndarray, world_from_ego: np.ndarray) -> np.ndarray:
