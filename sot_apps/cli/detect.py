@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.out and not args.evaluate:
         raise InputError(None, "nothing to do: give --out FILE and/or --evaluate")
     sequence = load_sequence(args)
+    frames = _in_sequence(args.frames, sequence)
     progress = lambda frames: tqdm(frames, desc="detect", unit="frame", file=sys.stderr, leave=False)  # noqa: E731
     detections = load_detections(args, sequence)
     if detections is None and args.simulate:
@@ -61,10 +62,9 @@ def run(args: argparse.Namespace) -> int:
     elif detections is None:
         from ..detection.detector import detect_sequence
 
-        detections = detect_sequence(sequence, frames=_in_sequence(args.frames, sequence), progress=progress)
-    if args.frames is not None:
-        wanted = set(_in_sequence(args.frames, sequence))
-        detections = {k: d for k, d in detections.items() if k in wanted}
+        detections = detect_sequence(sequence, frames=frames, progress=progress)
+    if frames is not None:
+        detections = {k: d for k, d in detections.items() if k in set(frames)}
     if args.out:
         path = write_detections(args.out, detections, sequence.id)
         source = f" (read from --detections {args.detections}, written in our JSON format)" if args.detections else ""
@@ -80,8 +80,7 @@ def run(args: argparse.Namespace) -> int:
 
         if not sequence.annotations:
             raise InputError(sequence.root, "--evaluate needs annotations")
-        truth = ground_truth_frames(sequence, DEFAULT_SELECTION.vehicle_labels(sequence),
-                                    _in_sequence(args.frames, sequence))
+        truth = ground_truth_frames(sequence, DEFAULT_SELECTION.vehicle_labels(sequence), frames)
         rows = ap_table(detections, truth, kinds=("bev", "3d") if args.three_d else ("bev",))
         print(format_ap_table(rows))
         point = operating_point(detections, truth)
