@@ -4,14 +4,16 @@ boxes completed with vehicle size priors, and a score calibrated on exact ground
 No learned network. Per frame k (ego frame of k, boxes moved to the world at the end):
 
 1. the sweeps k, k-1, ..., k-``sweeps``+1 in the ego frame of k (:mod:`.accumulate`), within ``max_range``;
-2. ground removal on the stacked cloud (GPF per cell, :func:`tracker.ground_mask`); points between
-   ``min_height`` and ``max_height`` above the local ground (median ground height per ``ground_cell``);
+2. ground removal on the current sweep (GPF per cell, :func:`tracker.ground_mask`); points of every sweep
+   between ``min_height`` and ``max_height`` above the local ground (median ground height per ``ground_cell``);
 3. sweep-to-sweep differences: a current point with no point of the oldest sweep near it is MOVING; an
    earlier point is kept only where the current sweep has a point near it (static surfaces densified,
    moving objects not smeared);
 4. clustering in bird's-eye view with a range-adaptive link radius (:mod:`.clustering`); a cluster larger
-   than any vehicle is split again with a smaller radius (``split_factors``: parked cars in a row);
-5. per cluster a rectangle: heading from the L-shape fit (:mod:`.lshape`, Zhang et al. 2017); the longer
+   than any vehicle is split again with a smaller radius (``split_factors``: parked cars in a row), and so is
+   one typed truck or bus, whose parts replace it when they give >= 2 boxes;
+5. per cluster a rectangle: heading from the L-shape fit (:mod:`.lshape`, Zhang et al. 2017) on the visible
+   contour (:func:`visible_contour`); the longer
    side is the length, except for a short single face (<= ``max_face_width``): then the length runs along the
    axis nearer the line of sight (the rear or front of a vehicle seen end-on); a MOVING cluster's heading
    is the L-shape axis nearer its direction of travel when that travel is measurable (see ``_motion``);
