@@ -21,9 +21,11 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser = add_subcommand(
         subparsers, "detect", help="detect vehicles (model-free, or simulated from ground truth) and score them",
         description="Write vehicle detections of every frame (WORLD boxes, data_schema/detections.schema.json). "
-                    "Default: the model-free detector (ground removal, BEV clustering, L-shape boxes, size gates; no "
-                    "learned weights). --simulate PROFILE: ground truth with a detector's errors (docs/detection.md). "
-                    "--evaluate prints BEV AP at IoU 0.5 / 0.7 by range band against the annotations (vehicles); "
+                    "Default: the model-free detector (3 accumulated sweeps, ground removal, range-adaptive BEV "
+                    "clustering, L-shape boxes with size priors, a score calibrated on synthetic ground truth; no "
+                    "learned network). --simulate PROFILE: ground truth with a detector's errors (docs/detection.md). "
+                    "--evaluate prints BEV AP at IoU 0.5 / 0.7 by range band against the annotations (vehicles) and the "
+                    "recall / precision at score >= 0.5 within 40 m; "
                     "with --detections FILE it scores that file instead of detecting, and --out writes it in our "
                     "JSON format (e.g. KITTI or nuScenes detections converted).",
         examples=["sot-apps detect ../shared/data/pandaset_002 --out dets.json --evaluate",
