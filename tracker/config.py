@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-from .ground import GroundParams
+from .ground_params import GroundParams
 
 __all__ = ["TrackerConfig", "GroundConfig", "SearchConfig", "RegistrationConfig", "RansacConfig", "ShapeConfig",
            "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "ReacquireConfig", "DetectionConfig",

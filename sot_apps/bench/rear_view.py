@@ -13,9 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-if TYPE_CHECKING:
+if TYPE_CHECKING:   # numpy and the tracker load when a run starts (`sot-apps --help` imports this module)
     from tracker import Box, LidarFrame
 
 __all__ = ["rear_view_sequence", "rear_view_figures", "frame_gap_figures", "register"]
@@ -25,6 +23,8 @@ def rear_view_sequence(n: int, speed: float = 10.0, heading: float = 0.4, seed: 
                        ) -> tuple[list[LidarFrame], list[Box]]:
     """``n`` frames (10 Hz) of a box driving straight along ``heading``, seen only from behind (its rear face,
     from a sensor following it), with the true boxes."""
+    import numpy as np
+
     from tracker import Box, LidarFrame, invert_transform, make_transform, rotation_z, transform_points
 
     rng = np.random.default_rng(seed)
@@ -48,6 +48,8 @@ def rear_view_sequence(n: int, speed: float = 10.0, heading: float = 0.4, seed: 
 
 def rear_view_figures(preset: str, scenes: int, seeds: int, overrides: dict[str, Any]) -> str:
     """Heading error of a 40-frame straight drive seen only from behind, and the sideways error of the box."""
+    import numpy as np
+
     from tracker import Tracker, get_preset, wrap_angle
 
     heading, sideways, first_sideways = [], [], []
@@ -78,6 +80,8 @@ def rear_view_figures(preset: str, scenes: int, seeds: int, overrides: dict[str,
 
 def frame_gap_figures(preset: str, scenes: int, seeds: int, overrides: dict[str, Any]) -> str:
     """Position error after a 4-frame gap (12 m/s): along the track and in all."""
+    import numpy as np
+
     from tracker import Tracker, get_preset
 
     along, total = [], []
