@@ -19,12 +19,10 @@ pass lost, with the dense frames' shape and motion to hold it:
    fixed lag, m = k + ``backward_lag_lead`` (the newest frame when the forward pass has held it that long). The
    tracker sees the vehicle driving forwards in mirrored time with its box turned by pi (its frame-1 search and
    motion model look ahead along the heading); the headings are turned back;
-3. fusion: the frames of the run take the backward states. Where the backward pass had no points it is dead
-   reckoning, and its drift shows as the mismatch at s between the backward state and the forward one
-   (reliable there): that mismatch is spread over the frames where the pass coasted, accumulating from the
-   anchor back to s (all of it at s) — a two-ended interpolation where neither pass saw the object. A pass
-   that held the object throughout is left as it is: its mismatch at s is where the anchor box sits on the
-   object (a constant offset of the whole run), which the offline solve's gauge corrects;
+3. fusion: the frames of the run that the forward pass held keep their forward states; each stretch of lost
+   frames takes the backward states, moved by the mismatch between the two passes at the held frames on
+   either side, blended linearly across the stretch, so the fused track meets the forward one at both ends
+   (where the backward pass had no points either, a two-ended interpolation);
 4. the refinement that follows (offline: :func:`~tracker.offline.refine_offline`; fixed lag:
    :class:`~tracker.fixed_lag.FixedLagSmoother`) takes the fused states as its data (its initial states and
    the anchors of its weak pull), and gathers each frame's points around the fused box.
@@ -126,35 +124,53 @@ def reversed_motion(earlier: FrameEstimate | None, later: FrameEstimate | None) 
     return out
 
 
-def fuse_backward(forward: np.ndarray, backward: np.ndarray, coasted: np.ndarray, reliable_end: bool) -> np.ndarray:
-    """States (n, 4) of a weak run from the backward pass ``backward`` (rows: frames s..k-1 in time order, row 0
-    at s) and the forward states ``forward`` (same rows). With ``reliable_end`` the mismatch at s (forward -
-    backward) is dead-reckoning drift of the frames where the backward pass had no points (``coasted``): row j
-    gets the share of it accumulated from the anchor back to j (the coasted rows j..n-1 over all coasted rows),
-    all of it at s; a pass that never coasted is left as it is (its mismatch at s is where the anchor box sits
-    on the object, which the solve's gauge corrects)."""
-    out = backward.copy()
-    coasted = np.asarray(coasted, dtype=np.float64)
-    if reliable_end and len(out) and coasted.sum() > 0:
-        mismatch = forward[0] - backward[0]
-        mismatch[3] = wrap_angle(mismatch[3])
-        share = np.cumsum(coasted[::-1])[::-1] / coasted.sum()  # 1 at s, 0 after the last coasted row
-        out += share[:, None] * mismatch[None, :]
+def fuse_backward(forward: np.ndarray, backward: np.ndarray, lost: np.ndarray) -> np.ndarray:
+    """Fused states (rows: frames s..k in time order; row 0 the run's start s, the last the anchor k) of the
+    forward states ``forward`` and the backward pass's ``backward``: rows where the forward pass held the object
+    (``lost`` False) keep the forward state; each stretch of lost rows takes the backward states, moved by the
+    mismatch (forward - backward) at the held rows on either side of it, blended linearly across the stretch, so
+    the fused track meets the forward one at both ends (where the backward pass coasted, it is a two-ended
+    interpolation). A stretch that begins at row 0 (row 0 lost: a final frame of a window) takes the mismatch of
+    its other end throughout."""
+    out = forward.copy()
+    lost = np.asarray(lost, dtype=bool)
+    mismatch = forward - backward
+    mismatch[:, 3] = wrap_angle(mismatch[:, 3])
+    j = 0
+    while j < len(out):
+        if not lost[j]:
+            j += 1
+            continue
+        a = j
+        while j < len(out) and lost[j]:
+            j += 1
+        before = mismatch[a - 1] if a > 0 else None
+        after = mismatch[j] if j < len(out) else None
+        before = after if before is None else before
+        after = before if after is None else after
+        if before is None or after is None:
+            break  # no held row at all: nothing to tie the backward pass to
+        t = (np.arange(a, j) - (a - 1)) / (j - (a - 1))  # 0 at the held row before, 1 at the one after
+        out[a:j] = backward[a:j] + (1.0 - t)[:, None] * before[None, :] + t[:, None] * after[None, :]
     out[:, 3] = wrap_angle(out[:, 3])
     return out
 
 
 def backward_run(frames: list[LidarFrame], start: FrameEstimate, motion: np.ndarray | None,
                  forward: list[FrameEstimate], config: TrackerConfig, size: np.ndarray,
-                 reliable_end: bool) -> list[FrameEstimate]:
-    """Fused estimates of a weak run s .. k - 1 (``forward``: their current estimates, time order). ``frames``:
-    the frames from the backward pass's ``start`` (the anchor k, or a frame after it) backwards down to s.
-    Returns the fused estimates of s + 1 .. k - 1 (s keeps its own)."""
-    back = backward_states(frames, start.box, config, motion)[::-1][:len(forward)]  # time order: s .. k - 1
-    coasted = np.array([bool(_LOST_FLAGS.intersection(b.flags)) for b in back])
-    fused = fuse_backward(np.array([e.state.to_array() for e in forward]),
-                          np.array([b.state.to_array() for b in back]), coasted, reliable_end)
-    return [_replaced(e, f, size, b) for e, f, b in zip(forward[1:], fused[1:], back[1:], strict=True)]
+                 start_lost: bool = False) -> list[FrameEstimate]:
+    """Fused estimates of a weak run. ``forward``: the current estimates of s .. k (time order, the anchor k
+    last); ``frames``: the frames from the backward pass's ``start`` (the anchor, or a frame after it) backwards
+    down to s. Returns the estimates of s + 1 .. k - 1: the forward ones where the forward pass held the object,
+    the fused backward ones (flag ``backward``) where it lost it. ``start_lost``: s itself is lost (a final frame
+    of a window: no mismatch there)."""
+    n = len(forward)
+    back = backward_states(frames, start.box, config, motion)[::-1]  # time order: s .. (pass start) - 1
+    states = [b.state.to_array() for b in back] + [start.state.to_array()]
+    lost = np.array([is_lost(e, config.refinement.backward_lost_points) for e in forward])
+    lost[0], lost[-1] = start_lost, False
+    fused = fuse_backward(np.array([e.state.to_array() for e in forward]), np.array(states[:n]), lost)
+    return [_replaced(forward[j], fused[j], size, back[j]) if lost[j] else forward[j] for j in range(1, n - 1)]
 
 
 def _replaced(est: FrameEstimate, state: np.ndarray, size: np.ndarray, back: FrameEstimate) -> FrameEstimate:
@@ -192,7 +208,7 @@ def fused_result(source: FrameSource, result: TrackResult, config: TrackerConfig
         after = estimates[m + 1] if m + 1 < len(estimates) else None
         motion = reversed_motion(estimates[m], after) if after is not None else reversed_motion(estimates[m - 1],
                                                                                                  estimates[m])
-        estimates[s + 1:k] = backward_run(frames, estimates[m], motion, estimates[s:k], config, size, True)
+        estimates[s + 1:k] = backward_run(frames, estimates[m], motion, estimates[s:k + 1], config, size)
     return dataclasses.replace(result, estimates=estimates)
 
 

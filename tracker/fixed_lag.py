@@ -151,9 +151,9 @@ class FixedLagTracker:
 class BackwardWindow:
     """Bidirectional refinement in the window (``refinement.backward="both"``, tracker/bidirectional.py): once the
     forward pass has held the object ``backward_lag_lead`` frames from an anchor on (so the pass starts with an
-    established motion), a backward pass from the newest frame revises the smoother's frames of the anchor's weak
-    run that are not final yet (down to the run's start, or to the last final frame); its drift (the mismatch with
-    the state before them) is spread over its coasting frames when that state is the run's start."""
+    established motion), a backward pass from the newest frame revises the lost frames of the anchor's weak run
+    that are not final yet (fused as in tracker/bidirectional.py, down to the run's start or the last final
+    frame)."""
 
     def __init__(self, smoother: FixedLagSmoother) -> None:
         from .bidirectional import AnchorDetector
@@ -181,12 +181,13 @@ class BackwardWindow:
         if k - end < 2 or is_lost(estimate, r.backward_lost_points):
             return
         current = [dataclasses.replace(sm.online[j], state=State.from_array(sm.states[j]),
-                                       box=_box(sm.states[j], sm.size)) for j in range(end, k)]
+                                       box=_box(sm.states[j], sm.size)) for j in range(end, k + 1)]
         frames = [frame_at(j) for j in range(c, end - 1, -1)]
         fused = backward_run(frames, estimate, reversed_motion(previous, estimate), current, sm.config, sm.size,
-                             end == s)
+                             end > s)
         for j, est in zip(range(end + 1, k), fused, strict=True):
-            sm.revise(j, est, frame_at(j))
+            if "backward" in est.flags:
+                sm.revise(j, est, frame_at(j))
         if end > s:  # the final frames before the revised ones are lost: no window reaches back to them
             sm.floor = end + 1
 

@@ -85,12 +85,15 @@ def test_anchors_are_dense_or_relocked_frames_after_a_weak_run_with_a_lost_frame
     assert [detector.add(e) for e in estimates][5] == (1, 5)             # causal: known when frame 5 arrives
 
 
-def test_fusion_spreads_the_mismatch_at_the_run_start_over_the_frames_the_backward_pass_coasted():
-    backward = np.array([[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.1], [2.0, 0.0, 0.0, 0.2], [3.0, 0.0, 0.0, 0.3]])
-    forward = backward + np.array([4.0, -2.0, 0.4, 0.2])  # only row 0 (the run's start) counts
-    coasted = np.array([True, True, False, True])          # rows s, s + 1 and k - 1 were dead reckoning
-    fused = fuse_backward(forward, backward, coasted, True)
-    np.testing.assert_allclose(fused[0], forward[0])
-    np.testing.assert_allclose(fused[:, 0] - backward[:, 0], [4.0, 4.0 * 2 / 3, 4.0 / 3, 4.0 / 3])
-    np.testing.assert_allclose(fuse_backward(forward, backward, coasted, False), backward)
-    np.testing.assert_allclose(fuse_backward(forward, backward, np.zeros(4, dtype=bool), True), backward)
+def test_fusion_fills_the_lost_frames_from_the_backward_pass_tied_to_the_held_frames_on_both_sides():
+    backward = np.array([[float(k), 0.0, 0.0, 0.0] for k in range(6)])
+    forward = backward + np.array([[2.0, 0.0, 0.0, 0.0]] * 6)           # a constant offset between the passes ...
+    forward[4:] += np.array([0.0, 1.0, 0.0, 0.1])                        # ... and another one after the stretch
+    lost = np.array([False, True, True, True, False, False])
+    fused = fuse_backward(forward, backward, lost)
+    np.testing.assert_allclose(fused[[0, 4, 5]], forward[[0, 4, 5]])     # held frames keep the forward states
+    np.testing.assert_allclose(fused[1:4, 0], backward[1:4, 0] + 2.0)
+    np.testing.assert_allclose(fused[1:4, 1], [0.25, 0.5, 0.75])         # blended across the stretch
+    np.testing.assert_allclose(fused[1:4, 3], [0.025, 0.05, 0.075])
+    lost_start = fuse_backward(forward, backward, np.array([True, True, True, True, False, False]))
+    np.testing.assert_allclose(lost_start[:4, 1], 1.0)                   # no held frame before: the other end's
