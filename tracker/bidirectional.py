@@ -28,8 +28,8 @@ pass lost, with the dense frames' shape and motion to hold it:
    the anchors of its weak pull), and gathers each frame's points around the fused box.
 
 With ``lag`` N (fixed lag) it is causal: an anchor is recognised from the frames so far, and the pass revises
-only the frames of the run still in the window (the mismatch is spread only when s is among them or is the last
-final frame). Deterministic for a given ``config.seed``. De-skew is not applied in the backward pass (mirrored
+only the lost frames of the run still in the window (when the frame before them is final and lost, the stretch
+takes the mismatch at the anchor throughout). Deterministic for a given ``config.seed``. De-skew is not applied in the backward pass (mirrored
 time would de-skew with the wrong sign).
 """
 
