@@ -1,11 +1,11 @@
 """Bidirectional refinement: once a track holds its object densely after frames it lost, track BACKWARDS from
-there through the lost frames and fuse the two passes ("once detected, never lost", as CTRL's idea).
+there through the lost frames and fuse the two passes (CTRL's "once detected, never lost").
 
 The forward (online) pass loses a far, sparse or hidden object and keeps a box that does not follow it (the
 start box held, or the motion model's prediction); once it is re-locked (``reacquired``) or dense, the object
 and its shape are known there, and the same tracker run on the frames in reverse order (time mirrored about the
-anchor frame, so the motion model sees the object drive backwards) follows it back into the frames the forward
-pass lost, with the dense frames' shape and motion to hold it:
+pass's first frame) follows it back into the frames the forward pass lost, with the dense frames' shape and
+motion to hold it:
 
 1. a frame is **lost** when the forward estimate had no support (flags ``prior_only``, ``coasting``,
    ``waiting``, ``no_sweep``, or fewer than ``backward_lost_points`` object points) and **weak** when it is
@@ -29,8 +29,8 @@ pass lost, with the dense frames' shape and motion to hold it:
 
 With ``lag`` N (fixed lag) it is causal: an anchor is recognised from the frames so far, and the pass revises
 only the lost frames of the run still in the window (when the frame before them is final and lost, the stretch
-takes the mismatch at the anchor throughout). Deterministic for a given ``config.seed``. De-skew is not applied in the backward pass (mirrored
-time would de-skew with the wrong sign).
+takes the mismatch at the anchor throughout). Deterministic for a given ``config.seed``. De-skew is not applied
+in the backward pass (mirrored time would de-skew with the wrong sign).
 """
 
 from __future__ import annotations
