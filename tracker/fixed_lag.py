@@ -212,7 +212,10 @@ def refine_fixed_lag(source: FrameSource, result: TrackResult, lag: int, config:
         world = getter(est.frame) if callable(getter) and not config.deskew else None
         frame = source.lidar_frame(est.frame)
         if window is not None:
-            window.add(est, lambda j, now=frame: now if j == len(smoother.online) else source.lidar_frame(frames[j]))
+            def frame_at(j: int, now: LidarFrame = frame) -> LidarFrame:
+                return now if j == len(smoother.online) else source.lidar_frame(frames[j])
+
+            window.add(est, frame_at)
         final += smoother.add(frame, est, world)
     final += smoother.finish()
     return TrackResult(final, np.asarray(result.size), smoother.shape, config, mode="lag", lag=lag)
