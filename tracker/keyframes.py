@@ -1,0 +1,249 @@
+"""Keyframe-assisted tracks: boxes given at some frames (an annotator's keyframes), the frames between from the points.
+
+Given boxes at keyframes k_0 < k_1 < ... (world frame):
+
+1. every gap [k_i, k_{i+1}] is tracked twice with the online tracker: forward from the box at k_i (a keyframe
+   re-initialises the tracker) and backward from the box at k_{i+1} (the sweeps in reverse order, the box turned
+   by pi so the vehicle drives forward again, as the motion model expects; turned back afterwards). Frame k of
+   the gap takes the two passes' states blended by time, w_backward = (k - k_i) / (k_{i+1} - k_i): each pass is
+   trusted most near the keyframe it started from. Frames before the first keyframe are tracked backward from
+   it, frames after the last forward from it;
+2. the offline solve (:func:`tracker.offline.refine_states`) re-estimates all states jointly against the shape
+   aggregated from every frame, with the blended states as its weak online pull and the keyframes as
+   :class:`~tracker.offline.Anchors`: held exactly (default) or, with ``sigma_xyz`` > 0, pulled with weight
+   1 / sigma^2;
+3. the size comes from the keyframes: a frame between two keyframes gets their sizes (and roll, pitch)
+   interpolated linearly; the solve uses the median keyframe size. A keyframe's own box is returned unchanged
+   (bit for bit).
+
+Baselines on the same keyframes: :func:`interpolate_linear` (what annotation tools do: centre, heading, size
+linear between keyframes) and :func:`interpolate_ctrv` (constant turn rate and speed: the arc from the first
+keyframe whose heading turns evenly to the second's; the part of the displacement an arc cannot explain is
+spread linearly, so both keyframes are met exactly). Frames outside the keyframes keep the nearest keyframe's box.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from .config import TrackerConfig
+from .frames import FrameSource, LidarFrame
+from .geometry import Box, State, points_in_box, wrap_angle
+from .offline import Anchors, _rebuild_shape, frame_region_points, refine_states
+from .sotracker import FrameEstimate, Tracker, TrackResult
+
+__all__ = ["KeyframeParams", "keyframe_schedule", "interpolate_linear", "interpolate_ctrv", "track_keyframes"]
+
+
+@dataclass(frozen=True)
+class KeyframeParams:
+    """How :func:`track_keyframes` uses the keyframes (metres, radians)."""
+
+    backward: bool = True       # also track every gap backward from its closing keyframe, and blend
+    refine: bool = True         # the offline solve with the keyframes as anchors (False: the blended passes)
+    sigma_xyz: float = 0.0      # 0: keyframes held exactly; > 0: pulled with weight 1 / sigma^2 (x, y, z)
+    sigma_heading: float = 0.0  # the heading's sigma of a soft keyframe (0 with sigma_xyz > 0: 0.02 rad)
+
+    def __post_init__(self) -> None:
+        if self.sigma_xyz < 0 or self.sigma_heading < 0:
+            raise ValueError(f"keyframe sigmas must be >= 0, not {self.sigma_xyz}, {self.sigma_heading}")
+
+    def anchor_sigma(self) -> np.ndarray | None:
+        """The (4,) sigma of soft keyframes, None for hard ones."""
+        if self.sigma_xyz <= 0 and self.sigma_heading <= 0:
+            return None
+        xyz = self.sigma_xyz if self.sigma_xyz > 0 else 0.01
+        return np.array([xyz, xyz, xyz, self.sigma_heading if self.sigma_heading > 0 else 0.02])
+
+
+def keyframe_schedule(start: int, end: int, every: int) -> list[int]:
+    """Frames start, start + every, ... and always ``end`` (an annotator closes the track with a keyframe)."""
+    if every < 1:
+        raise ValueError(f"the keyframe interval must be at least 1, not {every}")
+    return sorted(set(range(start, end + 1, every)) | {end})
+
+
+# ----------------------------------------------------------------------------------------- interpolation
+
+def _lerp_box(a: Box, b: Box, t: float, centre: np.ndarray | None = None, heading: float | None = None) -> Box:
+    """The box a fraction ``t`` of the way from ``a`` to ``b``: everything linear (heading the short way round),
+    unless ``centre`` / ``heading`` are given."""
+    if centre is None:
+        centre = (1.0 - t) * a.center + t * b.center
+    if heading is None:
+        heading = a.heading + t * float(wrap_angle(b.heading - a.heading))
+    size = (1.0 - t) * a.size + t * b.size
+    return Box(float(centre[0]), float(centre[1]), float(centre[2]), float(wrap_angle(heading)), float(size[0]),
+               float(size[1]), float(size[2]), roll=(1.0 - t) * a.roll + t * b.roll,
+               pitch=(1.0 - t) * a.pitch + t * b.pitch)
+
+
+def _gaps(frames: list[int], keyframes: Mapping[int, Box]):
+    """(frame, box a, box b, t) for every frame: between keyframes a and b at fraction t; outside them the
+    nearest keyframe (a = b); at a keyframe None (its box is used as given)."""
+    keys = sorted(keyframes)
+    if not keys:
+        raise ValueError("no keyframe")
+    for k in frames:
+        if k in keyframes:
+            yield k, None, None, 0.0
+        elif k < keys[0] or k > keys[-1]:
+            near = keyframes[keys[0] if k < keys[0] else keys[-1]]
+            yield k, near, near, 0.0
+        else:
+            i = int(np.searchsorted(keys, k))
+            a, b = keys[i - 1], keys[i]
+            yield k, keyframes[a], keyframes[b], (k - a) / (b - a)
+
+
+def interpolate_linear(frames: list[int], keyframes: Mapping[int, Box]) -> dict[int, Box]:
+    """Boxes at ``frames`` linear between the keyframes (see the module docstring)."""
+    return {k: keyframes[k] if a is None else _lerp_box(a, b, t) for k, a, b, t in _gaps(frames, keyframes)}
+
+
+def _ctrv_centre(a: Box, b: Box, t: float) -> np.ndarray:
+    """The centre at fraction ``t`` along the constant-turn-rate arc from ``a`` toward ``b`` (see the module
+    docstring)."""
+    turn = float(wrap_angle(b.heading - a.heading))
+
+    def arc(s: float) -> np.ndarray:  # displacement after fraction s of the gap at unit path length
+        if abs(turn) < 1e-6:
+            return np.array([np.cos(a.heading), np.sin(a.heading)]) * s
+        return np.array([np.sin(a.heading + turn * s) - np.sin(a.heading),
+                         np.cos(a.heading) - np.cos(a.heading + turn * s)]) / turn
+
+    full = arc(1.0)
+    chord = b.center[:2] - a.center[:2]
+    length = float(chord @ full) / max(float(full @ full), 1e-12)   # least-squares path length (signed)
+    residual = chord - length * full
+    xy = a.center[:2] + length * arc(t) + t * residual
+    return np.array([xy[0], xy[1], (1.0 - t) * a.z + t * b.z])
+
+
+def interpolate_ctrv(frames: list[int], keyframes: Mapping[int, Box]) -> dict[int, Box]:
+    """Boxes at ``frames`` on constant-turn-rate arcs between the keyframes (see the module docstring)."""
+    return {k: keyframes[k] if a is None else _lerp_box(a, b, t, centre=_ctrv_centre(a, b, t) if a is not b else None)
+            for k, a, b, t in _gaps(frames, keyframes)}
+
+
+# ------------------------------------------------------------------------------------------------ tracking
+
+def _turned(box: Box) -> Box:
+    """The same box with its length axis pointing the other way."""
+    return dataclasses.replace(box, heading=float(wrap_angle(box.heading + np.pi)), roll=-box.roll, pitch=-box.pitch)
+
+
+def _reversed_frame(frame: LidarFrame) -> LidarFrame:
+    """The frame on a reversed clock (time and per-point offsets negated), so that frames run forward in time."""
+    offsets = None if frame.point_time_offset_ns is None else -np.asarray(frame.point_time_offset_ns)
+    return dataclasses.replace(frame, timestamp_ns=-int(frame.timestamp_ns), point_time_offset_ns=offsets)
+
+
+def _pass(source: FrameSource, box: Box, frames: list[int], config: TrackerConfig) -> list[FrameEstimate]:
+    """The online tracker from ``box`` at ``frames[0]`` through ``frames`` in the order given (descending frames:
+    backward in time on the turned box; the estimates come back turned again)."""
+    backward = len(frames) > 1 and frames[1] < frames[0]
+    tracker = Tracker(config)
+    get = (lambda k: _reversed_frame(source.lidar_frame(k))) if backward else source.lidar_frame
+    out = [tracker.start(get(frames[0]), _turned(box) if backward else box)]
+    out += [tracker.step(get(k)) for k in frames[1:]]
+    if backward:
+        out = [dataclasses.replace(e, box=_turned(e.box), state=_turned(e.box).state) for e in out]
+    return out
+
+
+def _blend(forward: np.ndarray, backward: np.ndarray, w_backward: np.ndarray) -> np.ndarray:
+    """States (n, 4) blended with weights ``w_backward`` (n,) on the backward ones (headings the short way)."""
+    out = forward + w_backward[:, None] * (backward - forward)
+    out[:, 3] = forward[:, 3] + w_backward * wrap_angle(backward[:, 3] - forward[:, 3])
+    return out
+
+
+def _passes(source: FrameSource, keyframes: Mapping[int, Box], start: int, end: int, config: TrackerConfig,
+            both_ways: bool) -> tuple[dict[int, np.ndarray], dict[int, FrameEstimate]]:
+    """Per frame: the state (4,) from the passes (blended between keyframes) and one pass's estimate (for its
+    time, points count and flags; between keyframes the forward pass's, its time plus the backward pass's)."""
+    keys = sorted(keyframes)
+    states: dict[int, np.ndarray] = {}
+    estimates: dict[int, FrameEstimate] = {}
+
+    def keep(pass_estimates: list[FrameEstimate]) -> None:
+        for e in pass_estimates:
+            states[e.frame], estimates[e.frame] = e.state.to_array(), e
+
+    if start < keys[0]:
+        keep(_pass(source, keyframes[keys[0]], list(range(keys[0], start - 1, -1)), config)[1:])
+    for a, b in zip(keys[:-1], keys[1:], strict=True):
+        if b - a < 2:
+            continue
+        forward = _pass(source, keyframes[a], list(range(a, b)), config)[1:]
+        keep(forward)
+        if both_ways:
+            backward = _pass(source, keyframes[b], list(range(b, a, -1)), config)[1:][::-1]
+            w = (np.array([e.frame for e in forward], dtype=np.float64) - a) / (b - a)
+            blended = _blend(np.array([e.state.to_array() for e in forward]),
+                             np.array([e.state.to_array() for e in backward]), w)
+            for f, e, s in zip(forward, backward, blended, strict=True):
+                states[f.frame] = s
+                estimates[f.frame] = dataclasses.replace(f, time_ms=f.time_ms + e.time_ms)
+    if end > keys[-1]:
+        keep(_pass(source, keyframes[keys[-1]], list(range(keys[-1], end + 1)), config)[1:])
+    return states, estimates
+
+
+def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: int | None = None,
+                    end: int | None = None, config: TrackerConfig | None = None,
+                    params: KeyframeParams = KeyframeParams()) -> TrackResult:
+    """A track over ``start``..``end`` (default: the first to the last keyframe) through the keyframe boxes
+    (world frame, by frame index; see the module docstring). The result's mode is ``offline``; keyframe
+    estimates carry the flag ``keyframe``, the others ``keyframes`` (and ``offline`` when refined)."""
+    config = config or TrackerConfig()
+    keys = sorted(int(k) for k in keyframes)
+    if not keys:
+        raise ValueError("no keyframe")
+    start = keys[0] if start is None else int(start)
+    end = keys[-1] if end is None else int(end)
+    keyframes = {k: keyframes[k] for k in keys if start <= k <= end}
+    if not keyframes:
+        raise ValueError(f"no keyframe in frames {start}..{end}")
+    keys = sorted(keyframes)
+    frames = list(range(start, end + 1))
+    states, estimates = _passes(source, keyframes, start, end, config, params.backward)
+    sizes = interpolate_linear(frames, keyframes)   # each frame's size (and tilt) from its keyframes
+    size = np.median(np.array([keyframes[k].size for k in keys]), axis=0)
+    online = np.array([keyframes[k].state.to_array() if k in keyframes else states[k] for k in frames])
+    flags: dict[int, tuple[str, ...]] = {k: ("keyframe",) if k in keyframes else ("keyframes",) for k in frames}
+    extra_ms = 0.0   # the solve's time, spread over the frames
+    points: list[np.ndarray] | None = None
+    if params.refine and len(frames) > 2:
+        t0 = time.perf_counter()
+        offline = config.refinement.offline
+        points, previous = [], None
+        for k, state in zip(frames, online, strict=True):
+            frame = source.lidar_frame(k)
+            points.append(frame_region_points(frame, Box(*state, *size), config, offline, previous))
+            previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+        anchors = Anchors(np.array([frames.index(k) for k in keys]), np.array([online[frames.index(k)] for k in keys]),
+                          params.anchor_sigma())
+        online, shape = refine_states(points, online, size, offline, seed=config.seed, anchors=anchors)
+        flags = {k: f if k in keyframes else f + ("offline",) for k, f in flags.items()}
+        extra_ms = (time.perf_counter() - t0) * 1e3 / len(frames)
+    out: list[FrameEstimate] = []
+    for i, k in enumerate(frames):
+        box = keyframes[k] if k in keyframes else sizes[k].with_state(State.from_array(online[i]))
+        pts = points[i] if points is not None else np.zeros((0, 3))
+        obj = pts[points_in_box(pts, box, 1.0)] if len(pts) else pts
+        est = estimates.get(k)
+        out.append(FrameEstimate(k, box.state, box, len(obj) if points is not None else (est.num_points if est else 0),
+                                 est.quality if est else 1.0, flags[k],
+                                 (est.time_ms if est else 0.0) + extra_ms, obj))
+    if points is None:
+        shape = _rebuild_shape([e.points for e in estimates.values()],
+                               np.array([e.state.to_array() for e in estimates.values()]), size,
+                               config.refinement.offline.voxel) if estimates else np.zeros((0, 3))
+    return TrackResult(out, size, shape, config, mode="offline")
