@@ -37,7 +37,7 @@ from .geometry import Box, State, points_in_box, wrap_angle
 from .offline import Anchors, _rebuild_shape, frame_region_points, refine_states
 from .sotracker import FrameEstimate, Tracker, TrackResult
 
-__all__ = ["KeyframeParams", "keyframe_schedule", "interpolate_linear", "interpolate_ctrv", "track_keyframes"]
+__all__ = ["KeyframeParams", "KeyframePasses", "keyframe_passes", "keyframe_schedule", "interpolate_linear", "interpolate_ctrv", "track_keyframes"]
 
 
 @dataclass(frozen=True)
@@ -164,44 +164,142 @@ def _blend(forward: np.ndarray, backward: np.ndarray, w_backward: np.ndarray) ->
     return out
 
 
-def _passes(source: FrameSource, keyframes: Mapping[int, Box], start: int, end: int, config: TrackerConfig,
-            both_ways: bool) -> tuple[dict[int, np.ndarray], dict[int, FrameEstimate]]:
-    """Per frame: the state (4,) from the passes (blended between keyframes) and one pass's estimate (for its
-    time, points count and flags; between keyframes the forward pass's, its time plus the backward pass's)."""
+@dataclass(frozen=True)
+class KeyframePasses:
+    """The online passes of :func:`track_keyframes`, by frame: ``forward`` for every frame that is not a keyframe
+    (between keyframes and after the last: the pass from the keyframe before; before the first keyframe: the
+    backward pass from it), ``backward`` for the frames between two keyframes (the pass from the one after).
+    ``arrivals``: per gap (a, b), the states (4,) the forward pass reached at b and the backward pass at a (None
+    without backward passes): how far each pass drifted from the keyframe it ran into."""
+
+    forward: dict[int, FrameEstimate]
+    backward: dict[int, FrameEstimate]
+    arrivals: dict[tuple[int, int], tuple[np.ndarray, np.ndarray | None]]
+
+
+def keyframe_passes(source: FrameSource, keyframes: Mapping[int, Box], start: int, end: int, config: TrackerConfig,
+                    backward: bool = True) -> KeyframePasses:
+    """The online passes over ``start``..``end`` (see :class:`KeyframePasses`; ``backward=False``: no backward
+    passes between keyframes)."""
     keys = sorted(keyframes)
-    states: dict[int, np.ndarray] = {}
-    estimates: dict[int, FrameEstimate] = {}
-
-    def keep(pass_estimates: list[FrameEstimate]) -> None:
-        for e in pass_estimates:
-            states[e.frame], estimates[e.frame] = e.state.to_array(), e
-
+    forward_estimates: dict[int, FrameEstimate] = {}
+    backward_estimates: dict[int, FrameEstimate] = {}
+    arrivals: dict[tuple[int, int], tuple[np.ndarray, np.ndarray | None]] = {}
     if start < keys[0]:
-        keep(_pass(source, keyframes[keys[0]], list(range(keys[0], start - 1, -1)), config)[1:])
+        forward_estimates.update((e.frame, e) for e in _pass(source, keyframes[keys[0]],
+                                                              list(range(keys[0], start - 1, -1)), config)[1:])
     for a, b in zip(keys[:-1], keys[1:], strict=True):
         if b - a < 2:
             continue
-        forward = _pass(source, keyframes[a], list(range(a, b)), config)[1:]
-        keep(forward)
-        if both_ways:
-            backward = _pass(source, keyframes[b], list(range(b, a, -1)), config)[1:][::-1]
-            w = (np.array([e.frame for e in forward], dtype=np.float64) - a) / (b - a)
-            blended = _blend(np.array([e.state.to_array() for e in forward]),
-                             np.array([e.state.to_array() for e in backward]), w)
-            for f, e, s in zip(forward, backward, blended, strict=True):
-                states[f.frame] = s
-                estimates[f.frame] = dataclasses.replace(f, time_ms=f.time_ms + e.time_ms)
+        forward = _pass(source, keyframes[a], list(range(a, b + 1)), config)
+        forward_estimates.update((e.frame, e) for e in forward[1:-1])
+        back_arrival = None
+        if backward:
+            back = _pass(source, keyframes[b], list(range(b, a - 1, -1)), config)
+            backward_estimates.update((e.frame, e) for e in back[1:-1])
+            back_arrival = back[-1].state.to_array()
+        arrivals[(a, b)] = (forward[-1].state.to_array(), back_arrival)
     if end > keys[-1]:
-        keep(_pass(source, keyframes[keys[-1]], list(range(keys[-1], end + 1)), config)[1:])
-    return states, estimates
+        forward_estimates.update((e.frame, e) for e in _pass(source, keyframes[keys[-1]],
+                                                              list(range(keys[-1], end + 1)), config)[1:])
+    return KeyframePasses(forward_estimates, backward_estimates, arrivals)
+
+
+_CLOSURE_FLOOR = 0.05   # m: closure errors below this weigh as this (two good passes: the blend by time alone)
+
+
+def _closure(keyframe: Box, arrival: np.ndarray) -> tuple[np.ndarray, float]:
+    """The correction (4,) from a pass's arrival to the keyframe it ran into, and its size in metres (centre shift
+    plus the heading error times half the length: how far a corner moved)."""
+    delta = keyframe.state.to_array() - arrival
+    delta[3] = wrap_angle(delta[3])
+    return delta, float(np.linalg.norm(delta[:3]) + 0.5 * keyframe.length * abs(delta[3]))
+
+
+def _candidates(passes: KeyframePasses, keyframes: Mapping[int, Box], both_ways: bool) -> dict[int, np.ndarray]:
+    """Each frame's candidate states (m, 4) from the passes, the default first. Between keyframes a < k < b,
+    t = (k - a) / (b - a): the forward pass corrected by t x its closure error at b (the drift spread evenly over
+    the gap, as a loop closure does), the backward one by (1 - t) x its closure error at a; the default blends the
+    two with weights (1 - t) / e_forward and t / e_backward (e: the closure error's size, at least
+    ``_CLOSURE_FLOOR``: each pass is trusted near the keyframe it started from, and less the more it drifted);
+    then the raw passes blended by time alone, the corrected and the raw passes (a pass that lost the object
+    abruptly is right before it did, and its correction is then wrong there). Elsewhere the forward pass's state."""
+    out = {k: e.state.to_array()[None] for k, e in passes.forward.items()}
+    for (a, b), (forward_arrival, backward_arrival) in passes.arrivals.items():
+        frames = np.arange(a + 1, b)
+        t = (frames - a) / (b - a)
+        raw_f = np.array([passes.forward[k].state.to_array() for k in frames])
+        fix, error_f = _closure(keyframes[b], forward_arrival)
+        fixed_f = raw_f + t[:, None] * fix
+        rows = [fixed_f, raw_f]
+        if both_ways and backward_arrival is not None:
+            raw_b = np.array([passes.backward[k].state.to_array() for k in frames])
+            fix, error_b = _closure(keyframes[a], backward_arrival)
+            fixed_b = raw_b + (1.0 - t)[:, None] * fix
+            w_f, w_b = (1.0 - t) / max(error_f, _CLOSURE_FLOOR), t / max(error_b, _CLOSURE_FLOOR)
+            rows = [_blend(fixed_f, fixed_b, w_b / (w_f + w_b)), _blend(raw_f, raw_b, t), fixed_f, fixed_b, raw_f, raw_b]
+        stacked = np.stack(rows, axis=1)   # (frames, m, 4)
+        out.update(zip(frames.tolist(), stacked, strict=True))
+    return out
+
+
+def _object_frame(points: np.ndarray, state: np.ndarray) -> np.ndarray:
+    c, s = np.cos(state[3]), np.sin(state[3])
+    d = points - state[:3]
+    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+
+
+def _select(source: FrameSource, keyframes: Mapping[int, Box], candidates: dict[int, np.ndarray],
+            config: TrackerConfig, size: np.ndarray) -> dict[int, np.ndarray]:
+    """Per frame, the candidate whose box explains the most of the frame's points: points inside it (x 1.1) within
+    ``_INLIER_M`` of the shape seen at the keyframes (their points in their exact boxes, object frame). The default
+    (first) candidate is kept unless another explains ``_SELECT_MARGIN`` times as many points."""
+    from scipy.spatial import cKDTree
+
+    from .metrics import voxel_downsample_centres
+
+    offline = config.refinement.offline
+    seen = []
+    for k, box in keyframes.items():
+        pts = frame_region_points(source.lidar_frame(k), box, config, offline)
+        seen.append(_object_frame(pts[points_in_box(pts, box, 1.0)], box.state.to_array()))
+    shape = voxel_downsample_centres(np.vstack(seen), offline.voxel) if seen else np.zeros((0, 3))
+    chosen = {k: c[0] for k, c in candidates.items()}
+    if len(shape) < _MIN_SHAPE_POINTS:
+        return chosen
+    tree = cKDTree(shape)
+    half = 0.55 * np.asarray(size, dtype=np.float64)
+    for k, cands in candidates.items():
+        if len(cands) < 2:
+            continue
+        spread = float(np.max(np.linalg.norm(cands[:, :2] - cands[0, :2], axis=1)))
+        reach = Box(*cands[0], size[0] + 2 * spread + 1.0, size[1] + 2 * spread + 1.0, size[2])
+        pts = frame_region_points(source.lidar_frame(k), reach, config, offline)
+        counts = []
+        for state in cands:
+            local = _object_frame(pts, state)
+            local = local[np.all(np.abs(local) <= half, axis=1)]
+            counts.append(int(np.sum(tree.query(local, distance_upper_bound=_INLIER_M)[0] <= _INLIER_M))
+                          if len(local) else 0)
+        best = int(np.argmax(counts))
+        if counts[best] >= max(_SELECT_MARGIN * counts[0], counts[0] + _SELECT_MIN_GAIN):
+            chosen[k] = cands[best]
+    return chosen
+
+
+_INLIER_M = 0.1            # a frame point within this of the keyframes' shape is explained by the box
+_SELECT_MARGIN = 1.1       # another candidate replaces the default when it explains this many times the points ...
+_SELECT_MIN_GAIN = 5       # ... and at least this many more
+_MIN_SHAPE_POINTS = 30     # fewer keyframe shape points: no selection (the default candidates)
 
 
 def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: int | None = None,
                     end: int | None = None, config: TrackerConfig | None = None,
-                    params: KeyframeParams = KeyframeParams()) -> TrackResult:
+                    params: KeyframeParams = KeyframeParams(), passes: KeyframePasses | None = None) -> TrackResult:
     """A track over ``start``..``end`` (default: the first to the last keyframe) through the keyframe boxes
     (world frame, by frame index; see the module docstring). The result's mode is ``offline``; keyframe
-    estimates carry the flag ``keyframe``, the others ``keyframes`` (and ``offline`` when refined)."""
+    estimates carry the flag ``keyframe``, the others ``keyframes`` (and ``offline`` when refined). ``passes``: the
+    online passes when the caller has them (:func:`keyframe_passes` over the same frames and keyframes)."""
     config = config or TrackerConfig()
     keys = sorted(int(k) for k in keyframes)
     if not keys:
@@ -213,9 +311,14 @@ def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: in
         raise ValueError(f"no keyframe in frames {start}..{end}")
     keys = sorted(keyframes)
     frames = list(range(start, end + 1))
-    states, estimates = _passes(source, keyframes, start, end, config, params.backward)
-    sizes = interpolate_linear(frames, keyframes)   # each frame's size (and tilt) from its keyframes
+    if passes is None:
+        passes = keyframe_passes(source, keyframes, start, end, config, params.backward)
     size = np.median(np.array([keyframes[k].size for k in keys]), axis=0)
+    states = _select(source, keyframes, _candidates(passes, keyframes, params.backward), config, size)
+    estimates = {k: e if k not in passes.backward or not params.backward
+                 else dataclasses.replace(e, time_ms=e.time_ms + passes.backward[k].time_ms)
+                 for k, e in passes.forward.items()}
+    sizes = interpolate_linear(frames, keyframes)   # each frame's size (and tilt) from its keyframes
     online = np.array([keyframes[k].state.to_array() if k in keyframes else states[k] for k in frames])
     flags: dict[int, tuple[str, ...]] = {k: ("keyframe",) if k in keyframes else ("keyframes",) for k in frames}
     extra_ms = 0.0   # the solve's time, spread over the frames
