@@ -171,11 +171,15 @@ def format_table(title: str, summary: dict[str, dict], every: list[int], n_track
     header = ["row"] + [f"every {n}" for n in every]
     rows = [[name] + [f"{summary[name][n][0]:.1f} ({summary[name][n][1]:.1f})" for n in every]
             for name in KEYFRAME_ROWS + SINGLE_ROWS]
+    return "\n".join([f"{title}: {n_tracks} tracks, {n_frames} scored frames; Acc (Acc between keyframes)",
+                      _table(header, rows)])
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
     line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
                                    for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
-    return "\n".join([f"{title}: {n_tracks} tracks, {n_frames} scored frames; Acc (Acc between keyframes)",
-                      line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows])
+    return "\n".join([line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows])
 
 
 def format_profiles(records: list[tuple[KeyframeBenchTrack, dict[str, Any]]], every: list[int]) -> str:
@@ -191,11 +195,7 @@ def format_profiles(records: list[tuple[KeyframeBenchTrack, dict[str, Any]]], ev
         summary = summarise(by_profile[profile], every)
         rows.append([profile, str(len(by_profile[profile]))]
                     + ["/".join(f"{summary[r][n][0]:.1f}" for r in ("linear", "ctrv", "keyframes")) for n in every])
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-    line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
-                                   for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
-    return "\n".join(["Acc by motion profile (all SOURCEs)", line(header), "  ".join("-" * w for w in widths)]
-                     + [line(r) for r in rows])
+    return "\n".join(["Acc by motion profile (all SOURCEs)", _table(header, rows)])
 
 
 def run(args: argparse.Namespace) -> int:
