@@ -228,12 +228,12 @@ def _candidates(passes: KeyframePasses, keyframes: Mapping[int, Box], both_ways:
     for (a, b), (forward_arrival, backward_arrival) in passes.arrivals.items():
         frames = np.arange(a + 1, b)
         t = (frames - a) / (b - a)
-        raw_f = np.array([passes.forward[k].state.to_array() for k in frames])
+        raw_f = np.array([passes.forward[int(k)].state.to_array() for k in frames])
         fix, error_f = _closure(keyframes[b], forward_arrival)
         fixed_f = raw_f + t[:, None] * fix
         rows = [fixed_f, raw_f]
         if both_ways and backward_arrival is not None:
-            raw_b = np.array([passes.backward[k].state.to_array() for k in frames])
+            raw_b = np.array([passes.backward[int(k)].state.to_array() for k in frames])
             fix, error_b = _closure(keyframes[a], backward_arrival)
             fixed_b = raw_b + (1.0 - t)[:, None] * fix
             w_f, w_b = (1.0 - t) / max(error_f, _CLOSURE_FLOOR), t / max(error_b, _CLOSURE_FLOOR)
@@ -273,7 +273,9 @@ def _select(source: FrameSource, keyframes: Mapping[int, Box], candidates: dict[
         if len(cands) < 2:
             continue
         spread = float(np.max(np.linalg.norm(cands[:, :2] - cands[0, :2], axis=1)))
-        reach = Box(*cands[0], size[0] + 2 * spread + 1.0, size[1] + 2 * spread + 1.0, size[2])
+        x, y, z, heading = (float(v) for v in cands[0])
+        reach = Box(x, y, z, heading, float(size[0]) + 2 * spread + 1.0, float(size[1]) + 2 * spread + 1.0,
+                    float(size[2]))
         pts = frame_region_points(source.lidar_frame(k), reach, config, offline)
         counts = []
         for state in cands:
@@ -349,4 +351,4 @@ def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: in
         shape = _rebuild_shape([e.points for e in estimates.values()],
                                np.array([e.state.to_array() for e in estimates.values()]), size,
                                config.refinement.offline.voxel) if estimates else np.zeros((0, 3))
-    return TrackResult(out, size, shape, config, mode="offline")
+    return TrackResult(out, size, shape if shape is not None else np.zeros((0, 3)), config, mode="offline")
