@@ -48,6 +48,8 @@ class KeyframeParams:
     refine: bool = True         # the offline solve with the keyframes as anchors (False: the blended passes)
     sigma_xyz: float = 0.0      # 0: keyframes held exactly; > 0: pulled with weight 1 / sigma^2 (x, y, z)
     sigma_heading: float = 0.0  # the heading's sigma of a soft keyframe (0 with sigma_xyz > 0: 0.02 rad)
+    interpolation: bool = True  # the CTRV interpolation is the default candidate between keyframes: a tracked
+                                # state replaces it only where it explains clearly more points (see _select)
 
     def __post_init__(self) -> None:
         if self.sigma_xyz < 0 or self.sigma_heading < 0:
@@ -316,7 +318,12 @@ def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: in
     if passes is None:
         passes = keyframe_passes(source, keyframes, start, end, config, params.backward)
     size = np.median(np.array([keyframes[k].size for k in keys]), axis=0)
-    states = _select(source, keyframes, _candidates(passes, keyframes, params.backward), config, size)
+    candidates = _candidates(passes, keyframes, params.backward)
+    if params.interpolation:   # the CTRV arc first: the default, kept unless a tracked state explains more points
+        arcs = interpolate_ctrv(sorted(candidates), keyframes)
+        inside = [k for k in candidates if keys[0] < k < keys[-1]]
+        candidates.update({k: np.vstack([arcs[k].state.to_array()[None], candidates[k]]) for k in inside})
+    states = _select(source, keyframes, candidates, config, size)
     estimates = {k: e if k not in passes.backward or not params.backward
                  else dataclasses.replace(e, time_ms=e.time_ms + passes.backward[k].time_ms)
                  for k, e in passes.forward.items()}

@@ -9,9 +9,13 @@ keyframes, e.g. 0 and 39 on the benchmark's 40-frame tracklets at N = 40). Rows:
 - ``linear``, ``ctrv``: interpolation between the keyframes (:func:`tracker.keyframes.interpolate_linear`,
   :func:`~tracker.keyframes.interpolate_ctrv`);
 - ``keyframes fwd``: the online tracker restarted at every keyframe (forward passes only);
-- ``keyframes fwd+bwd``: + the backward pass from each next keyframe, blended by time;
-- ``keyframes``: + the offline solve with the keyframes held (:func:`tracker.keyframes.track_keyframes`, what
-  ``sot-apps track --keyframes`` runs);
+- ``keyframes fwd+bwd``: + the backward pass from each next keyframe, blended (closure-corrected, a per-frame
+  choice among the passes by the points they explain);
+- ``keyframes no-ctrv``: + the offline solve with the keyframes held;
+- ``keyframes no-solve``: fwd+bwd with the CTRV interpolation as the default candidate (a tracked state replaces
+  it only where it explains clearly more points);
+- ``keyframes``: both, then the solve (:func:`tracker.keyframes.track_keyframes`, what ``sot-apps track
+  --keyframes`` runs);
 - ``single box``, ``single box + offline``: the tracker from the first box only (no keyframe), online and
   refined offline; the same in every column.
 
@@ -33,7 +37,8 @@ import numpy as np
 
 __all__ = ["register", "add_arguments", "run", "KeyframeBenchTrack", "KEYFRAME_ROWS"]
 
-KEYFRAME_ROWS = ("linear", "ctrv", "keyframes fwd", "keyframes fwd+bwd", "keyframes")
+KEYFRAME_ROWS = ("linear", "ctrv", "keyframes fwd", "keyframes fwd+bwd", "keyframes no-ctrv", "keyframes no-solve",
+                 "keyframes")
 SINGLE_ROWS = ("single box", "single box + offline")
 
 
@@ -136,8 +141,10 @@ def evaluate_track(track: KeyframeBenchTrack, source, every: list[int], config) 
         keyframes = {k: boxes[k] for k in keys}
         passes = keyframe_passes(source, keyframes, frames[0], frames[-1], config)
         rows = {"linear": interpolate_linear(frames, keyframes), "ctrv": interpolate_ctrv(frames, keyframes)}
-        for name, params in (("keyframes fwd", KeyframeParams(backward=False, refine=False)),
-                             ("keyframes fwd+bwd", KeyframeParams(refine=False)), ("keyframes", KeyframeParams())):
+        for name, params in (("keyframes fwd", KeyframeParams(backward=False, refine=False, interpolation=False)),
+                             ("keyframes fwd+bwd", KeyframeParams(refine=False, interpolation=False)),
+                             ("keyframes no-ctrv", KeyframeParams(interpolation=False)),
+                             ("keyframes no-solve", KeyframeParams(refine=False)), ("keyframes", KeyframeParams())):
             result = track_keyframes(source, keyframes, frames[0], frames[-1], config, params, passes)
             rows[name] = {e.frame: e.box for e in result.estimates}
         record["every"][n] = {"keys": keys, "ious": {name: _ious(b, track) for name, b in rows.items()},
