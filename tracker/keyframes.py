@@ -2,17 +2,21 @@
 
 Given boxes at keyframes k_0 < k_1 < ... (world frame):
 
-1. every gap [k_i, k_{i+1}] is tracked twice with the online tracker: forward from the box at k_i (a keyframe
-   re-initialises the tracker) and backward from the box at k_{i+1} (the sweeps in reverse order, the box turned
-   by pi so the vehicle drives forward again, as the motion model expects; turned back afterwards). Frame k of
-   the gap takes the two passes' states blended by time, w_backward = (k - k_i) / (k_{i+1} - k_i): each pass is
-   trusted most near the keyframe it started from. Frames before the first keyframe are tracked backward from
-   it, frames after the last forward from it;
-2. the offline solve (:func:`tracker.offline.refine_states`) re-estimates all states jointly against the shape
-   aggregated from every frame, with the blended states as its weak online pull and the keyframes as
+1. passes (:func:`keyframe_passes`): every gap [a, b] is tracked twice with the online tracker, forward from the
+   box at a (a keyframe re-initialises the tracker) through b, and backward from the box at b through a (the sweeps
+   in reverse order on a reversed clock, the box turned by pi so the vehicle drives forward again, as the motion
+   model expects; turned back afterwards). Each pass ends on the other keyframe: its closure error there is known.
+   Frames before the first keyframe are tracked backward from it, frames after the last forward from it;
+2. candidates (:func:`_candidates`) per frame between keyframes: the CTRV interpolation (``interpolation``, the
+   default), the two passes corrected by their closure errors spread evenly over the gap and blended by time and
+   drift, the raw passes blended by time, each pass corrected and raw. :func:`_select` keeps the first candidate
+   unless another one's box explains clearly more of the frame's points (points within ``_INLIER_M`` of the
+   shape the keyframes see in their exact boxes);
+3. the offline solve (:func:`tracker.offline.refine_states`, ``refine``) re-estimates all states jointly against
+   the shape aggregated from every frame, with the chosen states as its weak online pull and the keyframes as
    :class:`~tracker.offline.Anchors`: held exactly (default) or, with ``sigma_xyz`` > 0, pulled with weight
    1 / sigma^2;
-3. the size comes from the keyframes: a frame between two keyframes gets their sizes (and roll, pitch)
+4. the size comes from the keyframes: a frame between two keyframes gets their sizes (and roll, pitch)
    interpolated linearly; the solve uses the median keyframe size. A keyframe's own box is returned unchanged
    (bit for bit).
 
