@@ -56,8 +56,9 @@ class KeyframeParams:
                                 # state replaces it only where it explains clearly more points (see _select)
 
     def __post_init__(self) -> None:
-        if self.sigma_xyz < 0 or self.sigma_heading < 0:
-            raise ValueError(f"keyframe sigmas must be >= 0, not {self.sigma_xyz}, {self.sigma_heading}")
+        if not (np.isfinite(self.sigma_xyz) and np.isfinite(self.sigma_heading)) or min(self.sigma_xyz,
+                                                                                         self.sigma_heading) < 0:
+            raise ValueError(f"keyframe sigmas must be finite and >= 0, not {self.sigma_xyz}, {self.sigma_heading}")
 
     def anchor_sigma(self) -> np.ndarray | None:
         """The (4,) sigma of soft keyframes, None for hard ones."""
