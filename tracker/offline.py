@@ -52,7 +52,8 @@ from .metrics import voxel_downsample_centres
 from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
 
-__all__ = ["OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states", "refine_offline"]
+__all__ = ["Anchors", "OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states",
+           "refine_offline"]
 
 
 @dataclass
@@ -62,6 +63,17 @@ class OfflineProblem:
     points: list[np.ndarray]
     states: np.ndarray
     size: np.ndarray
+
+
+@dataclass(frozen=True)
+class Anchors:
+    """Given states at some frames (keyframes) for :func:`refine_states`: ``frames`` (n,) indices into the
+    trajectory, ``states`` (n, 4) their x, y, z, heading. ``sigma`` None: held exactly (hard constraints; the
+    gauge is theirs, no re-gauging); else (4,) the sigma of a pull toward them (x, y, z, heading)."""
+
+    frames: np.ndarray
+    states: np.ndarray
+    sigma: np.ndarray | None = None
 
 
 def _box(state: np.ndarray, size: np.ndarray) -> Box:
@@ -291,7 +303,7 @@ class _Solver:
     """Gauss–Newton over all states with the shape (and its normals) held fixed."""
 
     def __init__(self, points: list[np.ndarray], online: np.ndarray, size: np.ndarray, params: OfflineParams,
-                 rng: np.random.Generator, fixed: int = 0) -> None:
+                 rng: np.random.Generator, fixed: int = 0, anchors: Anchors | None = None) -> None:
         self.params = params
         self.fixed = fixed
         self.size = size
@@ -305,6 +317,13 @@ class _Solver:
         self.h_prior = _prior_band(self.k, sig, anchor)  # variable order: 4 * frame + component
         self.sig = sig
         self.anchor = anchor
+        self.anchors = anchors
+        self.held = np.zeros(0, dtype=np.int64)  # variables (4 * frame + component) held by hard anchors
+        if anchors is not None and anchors.sigma is None:
+            self.held = (4 * np.asarray(anchors.frames, dtype=np.int64)[:, None] + np.arange(4)).ravel()
+        elif anchors is not None:
+            self.h_prior[_BANDS, (4 * np.asarray(anchors.frames)[:, None] + np.arange(4)).ravel()] += np.tile(
+                1.0 / np.asarray(anchors.sigma, dtype=np.float64) ** 2, len(anchors.frames))
         self._matched: tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._travel = (np.zeros(self.k), np.zeros(self.k))  # heading targets and weights (_travel_targets)
         self._object_cache: tuple[np.ndarray, np.ndarray] | None = None
@@ -459,6 +478,10 @@ class _Solver:
         dev = states - self.online
         cost = float(np.sum(diff2**2 / self.sig**2) + np.sum(dev**2 / self.anchor**2))
         grad = _second_difference_transpose(diff2 / self.sig**2, self.k) + dev / self.anchor**2
+        if self.anchors is not None and self.anchors.sigma is not None:  # soft anchors: a pull toward them
+            pull = (states[self.anchors.frames] - self.anchors.states) / np.asarray(self.anchors.sigma) ** 2
+            cost += float(np.sum(pull * (states[self.anchors.frames] - self.anchors.states)))
+            np.add.at(grad, self.anchors.frames, pull)
         return cost, grad
 
     def _travel_targets(self, states: np.ndarray) -> None:
@@ -508,6 +531,12 @@ class _Solver:
                 h[_BANDS + a - b, b::4] += blocks[:, a, b]
         h[_BANDS] += 1e-9 * (1.0 + h[_BANDS])
         g = (grads + grad_p).reshape(-1)
+        if len(self.held):  # hard anchors: their rows and columns become the identity, their steps zero
+            for d in range(_BANDS + 1):
+                h[_BANDS - d, self.held[self.held + d < h.shape[1]] + d] = 0.0
+                h[_BANDS - d, self.held] = 0.0
+            h[_BANDS, self.held] = 1.0
+            g[self.held] = 0.0
         delta = np.zeros(4 * self.k)
         first = 4 * self.fixed  # the free variables are the trailing ones: their block is a band too
         try:
@@ -554,29 +583,38 @@ def _regauge(states: np.ndarray, given_first: np.ndarray, heading_share: float =
 
 def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.ndarray,
                   params: OfflineParams = OfflineParams(), seed: int = 0, initial: np.ndarray | None = None,
-                  fixed: int = 0, with_shape: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+                  fixed: int = 0, with_shape: bool = True, anchors: Anchors | None = None
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
     """Jointly refined states (K, 4) and the shape rebuilt from them (object frame), given each frame's
     world points (``points[k]``) and the online states (the anchors).
 
     ``initial``: the states to start from (default: the online ones). ``fixed`` > 0: the first ``fixed``
     states are held (a sliding window behind final states); else state 0 (the given start box) is kept
     exactly, by re-gauging after each solve (see :func:`_regauge`) or by holding it (``gauge="fix_first"``).
-    ``with_shape=False``: the shape is not rebuilt (None)."""
+    ``with_shape=False``: the shape is not rebuilt (None). ``anchors``: states given at some frames (keyframes,
+    :class:`Anchors`): hard ones start there and are held exactly, soft ones pull; either way they fix the gauge
+    (no re-gauging, no ``fix_first``)."""
     online = np.asarray(online_states, dtype=np.float64).copy()
     online[:, 3] = np.unwrap(online[:, 3])
     states = online.copy() if initial is None else np.asarray(initial, dtype=np.float64).copy()
     states[:, 3] = online[:, 3] + wrap_angle(states[:, 3] - online[:, 3])
     size = np.asarray(size, dtype=np.float64)
+    if anchors is not None:  # headings on the unwrapped branch of the online ones; hard anchors start exact
+        given = np.asarray(anchors.states, dtype=np.float64).copy()
+        given[:, 3] = online[anchors.frames, 3] + wrap_angle(given[:, 3] - online[anchors.frames, 3])
+        anchors = dataclasses.replace(anchors, frames=np.asarray(anchors.frames, dtype=np.int64), states=given)
+        if anchors.sigma is None:
+            states[anchors.frames] = given
     if len(states) < 2:
         return states, _rebuild_shape(points, states, size, params.voxel)
-    regauge = fixed == 0 and params.gauge == "regauge"
-    if fixed == 0 and params.gauge == "fix_first":
+    regauge = fixed == 0 and params.gauge == "regauge" and anchors is None
+    if fixed == 0 and params.gauge == "fix_first" and anchors is None:
         fixed = 1
     heading_share = 1.0
     if regauge and params.gauge_heading_points > 0:
         first = points_in_box(points[0], _box(online[0], size), 1.0).sum() if len(points[0]) else 0
         heading_share = min(1.0, float(first) / params.gauge_heading_points)
-    solver = _Solver(points, online, size, params, np.random.default_rng(seed), fixed)
+    solver = _Solver(points, online, size, params, np.random.default_rng(seed), fixed, anchors)
     for _ in range(params.outer_iterations):
         if not solver.set_shapes(states):
             break

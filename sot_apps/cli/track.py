@@ -30,11 +30,14 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "sot-apps track ../shared/data/pandaset_002 --init-box -5.49,-6.11,0.43,0.77,4.73,1.97,1.55 "
                   "--start-frame 0 --end-frame 20 --preset full --out out/car",
                   "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --offline --out out/tracks/91aa5b5c",
-                  "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --lag 10 --out out/tracks/91aa5b5c_lag10"])
+                  "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --lag 10 --out out/tracks/91aa5b5c_lag10",
+                  "sot-apps track ../shared/data/pandaset_002 --keyframes keyframes.json --track-id 91aa5b5c "
+                  "--out out/tracks/91aa5b5c_keyframes"])
     add_sequence_argument(parser)
-    who = parser.add_mutually_exclusive_group(required=True)
+    who = parser.add_mutually_exclusive_group()
     who.add_argument("--track-id", metavar="ID", help="annotated track id (a unique prefix is enough); the start "
-                                                       "box is its annotation at the start frame")
+                                                       "box is its annotation at the start frame; with --keyframes: "
+                                                       "the track of the keyframe file")
     who.add_argument("--init-box", metavar="x,y,z,heading,length,width,height",
                      help="start box in the WORLD frame at the start frame (metres, radians; heading of the length axis)")
     parser.add_argument("--allow-any-size", action="store_true",
@@ -55,10 +58,17 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--lag", type=positive_int, metavar="N",
                         help="fixed-lag refinement: each state is re-optimised with the shape over a sliding window "
                              "and final N frames later (docs/tracker.md)")
+    parser.add_argument("--keyframes", metavar="FILE",
+                        help="boxes given at some frames (keyframes JSON, data_schema/keyframes.schema.json; KITTI "
+                             "label_02 .txt; AV2 annotations .feather): track between them, each reproduced exactly "
+                             "at its frame (docs/tracker.md, Keyframe-assisted tracks)")
+    parser.add_argument("--keyframe-sigma", metavar="M[,RAD]",
+                        help="with --keyframes: soft keyframes, pulled with weight 1/sigma^2 (centre sigma in metres, "
+                             "heading sigma in radians, default 0.02) instead of held exactly")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_detections_arguments(parser)
     parser.set_defaults(func=run)
-    declare_outputs(parser, dirs=("out",), inputs=("sequence", "detections", "kitti_calib"))
+    declare_outputs(parser, dirs=("out",), inputs=("sequence", "detections", "kitti_calib", "keyframes"))
     return parser
 
 
@@ -77,12 +87,20 @@ def run(args: argparse.Namespace) -> int:
 
     if args.lag is not None and args.offline:
         raise InputError(None, "--lag and --offline are exclusive (offline refines with all frames)")
+    if args.keyframes is None and args.track_id is None and args.init_box is None:
+        raise InputError(None, "give --track-id ID, --init-box BOX or --keyframes FILE")
+    if args.keyframes is not None and (args.init_box is not None or args.lag is not None):
+        raise InputError(None, "--keyframes is a track of its own: drop --init-box / --lag (it is refined offline)")
+    if args.keyframe_sigma is not None and args.keyframes is None:
+        raise InputError(None, "--keyframe-sigma needs --keyframes FILE")
 
     overrides = {"seed": args.seed}
     if args.deskew is not None:
         overrides["deskew"] = args.deskew
     config = get_preset(args.preset, **overrides)
     seq = load_sequence(args)
+    if args.keyframes is not None:
+        return _run_keyframes(args, seq, config)
     detections = load_detections(args, seq)
     if detections is None and args.preset in DETECTION_PRESETS:
         raise InputError(None, f"preset {args.preset!r} needs --detections FILE")
@@ -111,5 +129,46 @@ def run(args: argparse.Namespace) -> int:
     times = sorted(e.time_ms for e in result.estimates[1:]) or [0.0]
     print(f"tracked {object_id} frames {result.frames[0]}..{result.frames[-1]} ({len(result.frames)} frames, "
           f"{flagged} on the prior only), shape {len(result.shape)} points, median {times[len(times) // 2]:.1f} ms/frame")
+    print(f"wrote {path} and {path.parent / 'shape.ply'}")
+    return 0
+
+
+def keyframe_params(sigma: str | None):
+    """``--keyframe-sigma M[,RAD]`` as :class:`tracker.keyframes.KeyframeParams` (None: hard keyframes)."""
+    from tracker.keyframes import KeyframeParams
+
+    if sigma is None:
+        return KeyframeParams()
+    try:
+        values = [float(v) for v in sigma.split(",")]
+        if len(values) not in (1, 2):
+            raise ValueError("one or two numbers")
+        return KeyframeParams(sigma_xyz=values[0], sigma_heading=values[1] if len(values) > 1 else 0.0)
+    except ValueError as exc:
+        raise InputError(None, f"--keyframe-sigma {sigma!r}: expected M or M,RAD (non-negative numbers): {exc}") from None
+
+
+def _run_keyframes(args: argparse.Namespace, seq, config) -> int:
+    from tracker.keyframes import track_keyframes
+
+    from ..io.cached_source import CachedSource
+    from ..io.keyframes import pick_keyframe_track, read_keyframes
+    from ..tracking import resolve_span, write_track_result
+
+    params = keyframe_params(args.keyframe_sigma)
+    object_id, keyframes = pick_keyframe_track(read_keyframes(args.keyframes, seq, args.kitti_calib), args.track_id,
+                                               args.keyframes)
+    start = min(keyframes) if args.start_frame is None else args.start_frame
+    end = max(keyframes) if args.end_frame is None else args.end_frame
+    resolve_span(seq, start, end)
+    if not any(start <= k <= end for k in keyframes):
+        raise InputError(args.keyframes, f"track {object_id}: no keyframe in frames {start}..{end}")
+    label = seq.tracks()[object_id].label if seq.annotations and object_id in seq.tracks() else None
+    result = track_keyframes(CachedSource(seq), keyframes, start, end, config, params)
+    first = min(k for k in keyframes if start <= k <= end)
+    path = write_track_result(args.out, seq, result, object_id, keyframes[first], label, offline=True)
+    used = sum(1 for k in keyframes if start <= k <= end)
+    print(f"tracked {object_id} frames {start}..{end} ({len(result.frames)} frames) through {used} keyframes "
+          f"({'soft' if params.anchor_sigma() is not None else 'held exactly'}), shape {len(result.shape)} points")
     print(f"wrote {path} and {path.parent / 'shape.ply'}")
     return 0
