@@ -31,10 +31,10 @@ def _scene(boxes: list[Box], seed: int, hidden: range = range(0), density=lambda
         road = ground_points(rng, np.array(ground_centre), ground_half, per_m2=2.0)
         rng_m = float(np.linalg.norm(box.center[:2] - sensor[:2]))
         seen = k not in hidden and density(rng_m) > 0
-        car = car_points(rng, box, sensor, density(rng_m))
+        car = car_points(rng, box, sensor, density(rng_m)) if seen else np.zeros((0, 3))
         if k in rear_only:
             car = car[(car[:, :2] - box.center[:2]) @ np.array([np.cos(box.heading), np.sin(box.heading)]) < 0.0]
-        pts = np.vstack([road, car]) if seen else road
+        pts = np.vstack([road, car])
         pts = np.vstack([pts] + [car_points(rng, other[k], sensor) for other in others])
         pts = pts + rng.normal(0.0, 0.01, pts.shape)
         ego = transform_points(invert_transform(_EGO), pts).astype(np.float32)
