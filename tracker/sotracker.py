@@ -385,19 +385,22 @@ class Tracker:
         points support the track where it is better; a candidate is only a part of the object, e.g. the top of
         one that re-appears from behind an occluder). On a tie (a far car's few points fit in both boxes) the
         candidate wins: it is centred on them. With ``reacquire.supported_holds_ties``, while the frame's
-        ``estimate`` has support (``min_points`` object points, not continued on the prior) the box stays on a tie
-        too, both counted in the box scaled by ``search.crop_scale`` (the points on its faces, which a box that
-        fits them exactly splits by their noise): the normal step already holds the object again, and a candidate
+        ``estimate`` has support (``min_points`` object points, not continued on the prior) the box also stays
+        when the candidate would hold no more points than it with both counted in the box scaled by
+        ``search.crop_scale`` (the points on its faces count, which a box that fits them exactly splits by their
+        noise): the normal step already holds the object again, and a candidate
         centred on the same partial view of it is no better (which end of the object the points show is ambiguous
         for the candidate, not for the registration against the track's shape)."""
         box, r = self.box, self.config.reacquire
         moved = Box(float(relock.centre[0]), float(relock.centre[1]), box.z, box.heading, box.length, box.width,
                     box.height)
+        if points_in_box(points, moved, 1.0).sum() < points_in_box(points, box, 1.0).sum():
+            return True
         supported = estimate.num_points >= r.min_points and "prior_only" not in estimate.flags
-        if r.supported_holds_ties and supported:  # the points on the box's faces count (the ICP's crop)
-            scale = self.config.search.crop_scale
-            return bool(points_in_box(points, moved, scale).sum() <= points_in_box(points, box, scale).sum())
-        return bool(points_in_box(points, moved, 1.0).sum() < points_in_box(points, box, 1.0).sum())
+        if not (r.supported_holds_ties and supported):
+            return False
+        scale = self.config.search.crop_scale   # the points on the box's faces count (the ICP's crop)
+        return bool(points_in_box(points, moved, scale).sum() <= points_in_box(points, box, scale).sum())
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
         """Restart the track at a confirmed candidate, its velocity seeding the motion model; with
