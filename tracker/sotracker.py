@@ -388,9 +388,9 @@ class Tracker:
         ``estimate`` has support (``min_points`` object points, not continued on the prior) the box also stays
         when the candidate would hold no more points than it with both counted in the box scaled by
         ``search.crop_scale`` (the points on its faces count, which a box that fits them exactly splits by their
-        noise): the normal step already holds the object again, and a candidate
-        centred on the same partial view of it is no better (which end of the object the points show is ambiguous
-        for the candidate, not for the registration against the track's shape)."""
+        noise): the normal step already holds the object again, and a candidate centred on the same partial view
+        of it is no better (which end of the object the points show is ambiguous for the candidate, not for the
+        registration against the track's shape)."""
         box, r = self.box, self.config.reacquire
         moved = Box(float(relock.centre[0]), float(relock.centre[1]), box.z, box.heading, box.length, box.width,
                     box.height)

@@ -84,7 +84,8 @@ def test_a_car_hidden_for_k_frames_is_relocked_within_2_frames_where_the_motion_
 def test_a_car_that_reappears_half_seen_is_held_where_its_points_put_it(holds_ties):
     """Hidden for 5 frames, then only its rear half seen (an occluder hides the front): the normal step registers
     the half to the shape and holds the car at once, but the track is still lost and the search's candidate is
-    centred on the half (a quarter length, 1.1 m, behind), holding the same points as the box. With
+    centred on the half (a quarter length, 1.1 m, behind): it holds the same points as the box in the ICP's crop,
+    and more in the box itself (half the rear face's points fall just outside a box that fits it exactly). With
     ``supported_holds_ties`` the supported box stays (within 0.3 m of the truth); without it the track moves to
     the candidate."""
     boxes = _straight(20, (10.0, 4.0), 0.0, 1.0)
