@@ -265,6 +265,7 @@ class ReacquireConfig:
     lost_frames: int = 2                 # frames in a row without that support: the track is lost
     recover_frames: int = 10             # a lost track is held again after this many supported frames in a row
     hold_distance: float = 1.0           # m: a confirmed candidate this near the box confirms the track as it is
+    supported_holds_ties: bool = False   # a box with support stays against a candidate holding as many points
     start_points: int = 3                # a start box with fewer points is a lost start
     reach: float = 1.0                   # m: the lost track's region around the prediction at loss (each side)
     growth: float = 4.0                  # m/s: ... grows by this per second since the support was lost
