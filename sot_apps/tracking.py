@@ -40,7 +40,8 @@ from .io.tracks import FrameRecord, Size, TrackFile, write_track
 __all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read_shape_growth", "parse_init_box",
            "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence",
            "refine_track_fixed_lag", "refine_track_offline", "track_result_to_trackfile",
-           "write_track_result", "first_box_with_points", "TrackingFailed", "MIN_INIT_POINTS", "StartSearch",
+           "write_track_result", "first_box_with_points", "TrackStart", "annotated_track_start",
+           "TrackingFailed", "MIN_INIT_POINTS", "StartSearch",
            "ShapeRecorder", "ObjectRequest", "ObjectTrack", "PassTimes", "track_objects", "sweep_ground_once"]
 
 MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box
@@ -166,6 +167,41 @@ def first_box_with_points(seq: Sequence, annotated: list[tuple[int, Box]] | tupl
         if search.attempt(seq.lidar_frame(k)) is not None:
             return k, box
     raise search.failure()
+
+
+@dataclass(frozen=True)
+class TrackStart:
+    """Where tracking an annotated object starts: its id, label, start box and frame span (inclusive)."""
+
+    object_id: str
+    label: str
+    init_box: Box
+    start: int
+    end: int
+
+
+def annotated_track_start(seq: Sequence, track_id: str, config: TrackerConfig, start: int | None = None,
+                          end: int | None = None) -> TrackStart:
+    """The start of tracking the annotated object ``track_id`` (a unique prefix is enough). ``start`` /
+    ``end`` default to its first / last annotated frame; without ``start``, the first annotated box the tracker
+    can start on (:func:`first_box_with_points`, the pipeline's rule), or the first annotated box when none can.
+    A frame out of range, or a ``start`` without an annotated box, is an InputError."""
+    object_id = seq.resolve_track_id(track_id)
+    annotated = seq.tracks()[object_id]
+    first = annotated.frames[0] if start is None else start
+    last = annotated.frames[-1] if end is None else end
+    resolve_span(seq, first, last)   # both frames in range, first <= last
+    if start is None:
+        try:
+            first, _ = first_box_with_points(seq, [(k, annotated.box_at(k)) for k in annotated.frames if k <= last],
+                                             config)
+        except TrackingFailed:
+            pass   # none: start at the first annotated box anyway (it is flagged on the prior only)
+    init_box = annotated.box_at(first)
+    if init_box is None:
+        raise InputError(seq.root, f"track {object_id} has no box at frame {first} "
+                                   f"(annotated frames {annotated.frames[0]}..{annotated.frames[-1]})")
+    return TrackStart(object_id, annotated.label, init_box, first, last)
 
 
 def track_result_to_trackfile(seq: Sequence, result: TrackResult, object_id: str, init_box: Box,

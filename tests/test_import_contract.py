@@ -46,8 +46,9 @@ def _in(module: str, package: str) -> bool:
     return module == package or module.startswith(package + ".")
 
 
-def violations(rule: str, importer: str, imported: str) -> list[str]:
-    graph = imports_by_module()
+def violations(rule: str, importer: str, imported: str,
+               graph: dict[str, frozenset[str]] | None = None) -> list[str]:
+    graph = imports_by_module() if graph is None else graph
     return sorted(f"{m} imports {i} ({rule})" for m, found in graph.items() if _in(m, importer)
                   for i in found if _in(i, imported))
 
@@ -75,6 +76,33 @@ def test_evaluation_runs_no_app():
     assert [v for a in apps for v in violations("evaluation only scores", "sot_apps.evaluation", a)] == []
     # the measurements that run apps and score them live in bench (the checker sees them there)
     assert "sot_apps.flow.annotate" in imports_by_module()["sot_apps.bench.flow_quality"]
+
+
+TRACKER_RUNNERS = ("tracker.track", "tracker.Tracker", "tracker.sotracker", "tracker.refine_offline",
+                   "tracker.refine_fixed_lag", "tracker.FixedLagSmoother", "tracker.offline", "tracker.fixed_lag",
+                   "sot_apps.tracking")
+
+
+def test_evaluation_runs_no_tracker():
+    """Evaluation scores the results it is given: running the tracker (online, fixed lag, offline) belongs to bench
+    and the CLI (sot_apps.bench.sequence_eval, benchmark_eval, reference)."""
+    assert [v for r in TRACKER_RUNNERS for v in violations("evaluation only scores", "sot_apps.evaluation", r)] == []
+    # the runners import the scorers: the checker sees both sides
+    assert "tracker.track" in imports_by_module()["sot_apps.bench.sequence_eval"]
+    assert "sot_apps.evaluation.tracker" in imports_by_module()["sot_apps.bench.sequence_eval"]
+
+
+def test_the_contract_rules_catch_a_violation():
+    """Both evaluation rules fail on a module that breaks them (a rule that cannot fail proves nothing)."""
+    bad = {"sot_apps.evaluation.bad": frozenset({"tracker.track", "sot_apps.flow.dense"}),
+           "sot_apps.flow.bad": frozenset({"sot_apps.evaluation.tracker"})}
+    assert violations("x", "sot_apps.evaluation", "tracker.track", bad) == [
+        "sot_apps.evaluation.bad imports tracker.track (x)"]
+    assert violations("x", "sot_apps.evaluation", "sot_apps.flow", bad) == [
+        "sot_apps.evaluation.bad imports sot_apps.flow.dense (x)"]
+    assert violations("x", "sot_apps.flow", "sot_apps.evaluation", bad) == [
+        "sot_apps.flow.bad imports sot_apps.evaluation.tracker (x)"]
+    assert violations("x", "sot_apps.evaluation", "tracker.track") == []   # the real tree keeps the rule
 
 
 def test_apps_import_no_evaluation():

@@ -107,11 +107,6 @@ class RansacResult:
     translation: np.ndarray  # (2,)
     iterations: int
 
-    @property
-    def num_inliers(self) -> int:
-        return int(self.inliers.sum())
-
-
 def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, *, max_iterations: int = 200,
                     confidence: float = 0.99, sample_size: int = 3, threshold: float = 0.2,
                     batch_size: int = 50, max_score_pairs: int = 150, identity_first: bool = False,

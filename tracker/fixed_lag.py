@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -49,6 +50,9 @@ class FixedLagSmoother:
         self.emitted = 0
         self.shape = np.zeros((0, 3))
         self._previous: tuple[int, np.ndarray] | None = None
+        self._previous_of: list[tuple[int, np.ndarray] | None] = []  # each frame's previous pose (de-skew)
+        self.floor = 0  # windows start no earlier (set by a backward pass: the frames before it are lost, and the
+                        # window must not smooth the revised frames toward them)
 
     def add(self, frame: LidarFrame, estimate: FrameEstimate, world: np.ndarray | None = None,
             crop: LocalCrop | None = None) -> list[FrameEstimate]:
@@ -57,13 +61,15 @@ class FixedLagSmoother:
         t0 = time.perf_counter()
         self.points.append(frame_region_points(frame, estimate.box, self.config, self.params, self._previous, world,
                                                crop))
+        self._previous_of.append(self._previous)
         self._previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
         self.online.append(estimate)
         self.states = np.vstack([self.states, estimate.state.to_array()[None]])
         k = len(self.online)
         first_free = max(0, k - self.lag - 1)
-        begin = max(0, first_free - self.context)
-        if k >= 2:  # frames before first_free are final (held); with none, frame 0 is re-gauged as offline
+        begin = max(0, first_free - self.context, self.floor)
+        first_free = max(first_free, begin)
+        if k - begin >= 2:  # frames before first_free are final (held); with none, the first is re-gauged as offline
             online = np.array([e.state.to_array() for e in self.online[begin:]])
             refined, _ = refine_states(self.points[begin:], online, self.size, self.params,
                                        seed=self.config.seed + k, initial=self.states[begin:],
@@ -71,6 +77,15 @@ class FixedLagSmoother:
             self.states[first_free:] = refined[first_free - begin:]
         self.extra_ms.append((time.perf_counter() - t0) * 1e3)
         return self._emit(max(1, k - self.lag))  # the start box is final at once
+
+    def revise(self, j: int, estimate: FrameEstimate, frame: LidarFrame) -> None:
+        """Replace estimate j, not yet final, before the next :meth:`add`: its state (also the window's anchor
+        for it) and its points (gathered around the new box)."""
+        if j < self.emitted:
+            raise ValueError(f"estimate {j} is final already")
+        self.online[j] = estimate
+        self.states[j] = estimate.state.to_array()
+        self.points[j] = frame_region_points(frame, estimate.box, self.config, self.params, self._previous_of[j])
 
     def finish(self) -> list[FrameEstimate]:
         """The estimates not yet final (the last ``lag`` frames), as they stand; builds the shape (all frames)."""
@@ -103,15 +118,22 @@ class FixedLagTracker:
         self.config, self.lag, self.params, self.context = config, lag, params, context
         self.front = Tracker(config)
         self.final: list[FrameEstimate] = []
+        self.frames: list[LidarFrame] = []  # with refinement.backward: the frames not yet final (and the one before)
 
     def start(self, frame: LidarFrame, box: Box, previous_pose: tuple[int, np.ndarray] | None = None) -> list[FrameEstimate]:
         estimate = self.front.start(frame, box, previous_pose)
         self.smoother = FixedLagSmoother(self.config, self.lag, box.size, self.params, self.context)
         self.smoother._previous = previous_pose
-        return self._keep(self.smoother.add(frame, estimate, crop=self.front.last_crop))
+        self.backward = BackwardWindow(self.smoother) if self.config.refinement.backward == "both" else None
+        return self._add(frame, estimate)
 
     def step(self, frame: LidarFrame) -> list[FrameEstimate]:
-        estimate = self.front.step(frame)
+        return self._add(frame, self.front.step(frame))
+
+    def _add(self, frame: LidarFrame, estimate: FrameEstimate) -> list[FrameEstimate]:
+        if self.backward is not None:
+            self.frames = (self.frames + [frame])[-(self.lag + 2):]
+            self.backward.add(estimate, lambda j: self.frames[j - len(self.smoother.online) - 1])
         return self._keep(self.smoother.add(frame, estimate, crop=self.front.last_crop))
 
     def finish(self) -> list[FrameEstimate]:
@@ -126,20 +148,75 @@ class FixedLagTracker:
                            lag=self.lag)
 
 
+class BackwardWindow:
+    """Bidirectional refinement in the window (``refinement.backward="both"``, tracker/bidirectional.py): once the
+    forward pass has held the object ``backward_lag_lead`` frames from an anchor on (so the pass starts with an
+    established motion), a backward pass from the newest frame revises the lost frames of the anchor's weak run
+    that are not final yet (fused as in tracker/bidirectional.py, down to the run's start or the last final
+    frame)."""
+
+    def __init__(self, smoother: FixedLagSmoother) -> None:
+        from .bidirectional import AnchorDetector
+
+        self.smoother = smoother
+        self.detector = AnchorDetector(smoother.config)
+        self.previous: FrameEstimate | None = None  # the online estimate before (the backward motion's seed)
+        self.pending: tuple[int, int] | None = None  # (s, k) of an anchor waiting for its lead
+
+    def add(self, estimate: FrameEstimate, frame_at: Callable[[int], LidarFrame]) -> None:
+        """``estimate``: the online estimate about to be added (index c = the smoother's count);
+        ``frame_at(j)``: the LidarFrame of index j (c and the frames still free, and the one before them)."""
+        from .bidirectional import backward_run, is_lost, reversed_motion
+
+        sm, r = self.smoother, self.smoother.config.refinement
+        c = len(sm.online)
+        pair = self.detector.add(estimate)
+        previous, self.previous = self.previous, estimate
+        self.pending = pair or self.pending
+        if self.pending is None or c - self.pending[1] < r.backward_lag_lead:
+            return
+        s, k = self.pending
+        self.pending = None
+        end = max(s, sm.emitted - 1, 0)
+        if k - end < 2 or is_lost(estimate, r.backward_lost_points):
+            return
+        current = [dataclasses.replace(sm.online[j], state=State.from_array(sm.states[j]),
+                                       box=_box(sm.states[j], sm.size)) for j in range(end, k + 1)]
+        frames = [frame_at(j) for j in range(c, end - 1, -1)]
+        fused = backward_run(frames, estimate, reversed_motion(previous, estimate), current, sm.config, sm.size,
+                             end > s)
+        for j, est in zip(range(end + 1, k), fused, strict=True):
+            if "backward" in est.flags:
+                sm.revise(j, est, frame_at(j))
+        if end > s:  # the final frames before the revised ones are lost: no window reaches back to them
+            sm.floor = end + 1
+
+
 def refine_fixed_lag(source: FrameSource, result: TrackResult, lag: int, config: TrackerConfig | None = None,
-                     params: OfflineParams | None = None, context: int | None = None) -> TrackResult:
+                     params: OfflineParams | None = None, context: int | None = None,
+                     backward: bool | None = None) -> TrackResult:
     """The fixed-lag result of a finished online ``result`` (the same states as streaming with
-    :class:`FixedLagTracker`). ``params``, ``context``: default ``config.refinement.lag``, ``.lag_context``."""
+    :class:`FixedLagTracker`). ``params``, ``context``: default ``config.refinement.lag``, ``.lag_context``;
+    ``backward``: bidirectional refinement (:class:`BackwardWindow`), default ``config.refinement.backward == "both"``."""
     config = config or result.config
     smoother = FixedLagSmoother(config, lag, np.asarray(result.size), params, context)
+    on = config.refinement.backward == "both" if backward is None else backward
+    window = BackwardWindow(smoother) if on else None
     getter = getattr(source, "points_world", None)
     if config.deskew and result.estimates and result.estimates[0].frame > 0:
         before = source.lidar_frame(result.estimates[0].frame - 1)
         smoother._previous = (int(before.timestamp_ns), np.asarray(before.world_from_ego, dtype=np.float64))
     final: list[FrameEstimate] = []
+    frames = [e.frame for e in result.estimates]
     for est in result.estimates:
         world = getter(est.frame) if callable(getter) and not config.deskew else None
-        final += smoother.add(source.lidar_frame(est.frame), est, world)
+        frame = source.lidar_frame(est.frame)
+        if window is not None:
+            def frame_at(j: int, now: LidarFrame = frame) -> LidarFrame:
+                return now if j == len(smoother.online) else source.lidar_frame(frames[j])
+
+            window.add(est, frame_at)
+        final += smoother.add(frame, est, world)
     final += smoother.finish()
     return TrackResult(final, np.asarray(result.size), smoother.shape, config, mode="lag", lag=lag)
 

@@ -22,6 +22,7 @@ __all__ = [
     "rotation_zyx",
     "zyx_angles",
     "make_transform",
+    "interpolate_pose",
     "invert_transform",
     "transform_points",
     "points_in_box",
@@ -41,14 +42,17 @@ def rotation_z(theta: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def rotation_zyx(heading: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
-    """3x3 rotation Rz(heading) @ Ry(pitch) @ Rx(roll); exactly :func:`rotation_z` when pitch = roll = 0."""
-    if pitch == 0.0 and roll == 0.0:
-        return rotation_z(heading)
+def rotation_zyx(heading: float | np.ndarray, pitch: float | np.ndarray = 0.0,
+                 roll: float | np.ndarray = 0.0) -> np.ndarray:
+    """3x3 rotation Rz(heading) @ Ry(pitch) @ Rx(roll); exactly :func:`rotation_z` when pitch = roll = 0.
+    Arrays of angles (broadcast together) give (..., 3, 3) rotations."""
+    if np.ndim(heading) == np.ndim(pitch) == np.ndim(roll) == 0 and pitch == 0.0 and roll == 0.0:
+        return rotation_z(float(heading))
     cy, sy, cp, sp, cr, sr = np.cos(heading), np.sin(heading), np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
+    cy, sy, cp, sp, cr, sr = np.broadcast_arrays(cy, sy, cp, sp, cr, sr)
+    return np.stack([np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], axis=-1),
+                     np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], axis=-1),
+                     np.stack([-sp, cp * sr, cp * cr], axis=-1)], axis=-2)
 
 
 def zyx_angles(rotation: np.ndarray) -> tuple[float, float, float]:
@@ -67,6 +71,24 @@ def make_transform(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
     out[:3, :3] = rotation
     out[:3, 3] = translation
     return out
+
+
+def interpolate_pose(times_ns: np.ndarray, target_from_source: np.ndarray, time_ns: int) -> np.ndarray:
+    """SE(3) pose at ``time_ns`` from (N, 4, 4) poses at increasing ``times_ns`` (clamped at the ends): spherical
+    linear interpolation of the rotation and linear interpolation of the translation between the two neighbours."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    times = np.asarray(times_ns, dtype=np.int64)
+    poses = np.asarray(target_from_source, dtype=np.float64)
+    if len(times) == 1:
+        return poses[0].copy()
+    i = int(np.clip(np.searchsorted(times, time_ns) - 1, 0, len(times) - 2))
+    t0, t1 = int(times[i]), int(times[i + 1])
+    alpha = float(np.clip((time_ns - t0) / float(t1 - t0), 0.0, 1.0))
+    slerp = Slerp([0.0, 1.0], Rotation.from_matrix(poses[i:i + 2, :3, :3]))
+    rotation = slerp([alpha]).as_matrix()[0]
+    translation = (1.0 - alpha) * poses[i, :3, 3] + alpha * poses[i + 1, :3, 3]
+    return make_transform(rotation, translation)
 
 
 def invert_transform(target_from_source: np.ndarray) -> np.ndarray:

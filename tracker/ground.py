@@ -15,27 +15,11 @@ large scene) and each cell gets its own plane, so slopes and large scenes work. 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from .ground_params import GroundParams
+
 __all__ = ["GroundParams", "ground_mask", "remove_ground", "fit_plane"]
-
-
-@dataclass(frozen=True)
-class GroundParams:
-    lpr_count: int = 20
-    seed_threshold: float = 1.2
-    distance_threshold: float = 0.3
-    iterations: int = 10
-    segment_length: float = 8.0
-    outlier_depth: float = 0.5
-    min_cell_points: int = 30
-    max_fit_points: int = 2000  # planes are fitted on at most this many points (an even subsample)
-    bin_size: float = 2.0       # BEV bins of the robust first plane
-    low_quantile: float = 0.1   # a bin's low point: this quantile of its heights
-    max_slope_deg: float = 8.0
-    low_plane_fallback: bool = False  # GPF found no road plane (a vehicle filled the seeds): use the first plane
 
 
 def fit_plane(points: np.ndarray) -> tuple[np.ndarray, float]:

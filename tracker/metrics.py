@@ -3,11 +3,15 @@
 Definitions (``../shared/docs/paper-notes.md``, "Metrics"; all evaluated over frames 1..n-1 of a
 tracklet, i.e. the start frame, whose box is given, is never scored):
 
-- **IoU** of two upright boxes is exact: ``I = A_bev(a ∩ b) · max(0, min(top_a, top_b) − max(bottom_a,
-  bottom_b))`` and ``IoU = I / (V_a + V_b − I)``, where ``A_bev`` is the area of the intersection of the
-  two rotated rectangles in the x–y plane (convex polygon intersection, computed exactly) and
-  ``top = z + h/2``, ``bottom = z − h/2``. (The upstream implementation's height overlap is wrong when
-  the heights differ; this one is not.)
+- **IoU** ``= I / (V_a + V_b − I)`` with ``I`` the exact intersection volume. Of two level boxes (roll =
+  pitch = 0): ``I = A_bev(a ∩ b) · max(0, min(top_a, top_b) − max(bottom_a, bottom_b))``, where ``A_bev``
+  is the area of the intersection of the two rotated rectangles in the x–y plane (convex polygon
+  intersection, computed exactly) and ``top = z + h/2``, ``bottom = z − h/2``. (The upstream
+  implementation's height overlap is wrong when the heights differ; this one is not.) When either box has
+  a roll or pitch (boxes given as :class:`Box` or as (N, 9) arrays): ``I`` is the volume of the convex
+  hull of the intersection polytope's vertices — the corners of each box inside the other and the
+  crossings of each box's edges with the other's faces (every vertex of the intersection of two convex
+  polytopes is one of these). The bird's-eye-view IoU uses the heading footprint (roll, pitch ignored).
 - **Acc** = Σ_k Σ_j IoU_kj / Σ_k n_k: the mean IoU pooled over all scored frames of all tracklets.
 - **Rob**: for t in ``ROB_THRESHOLDS`` = {0, 0.05, …, 1}, ``l_k(t)`` = the number of scored frames
   *before* the first scored frame of tracklet k whose IoU < t (``n_k`` if there is none);
@@ -38,9 +42,9 @@ from dataclasses import asdict, dataclass, field
 from typing import Iterable, Sequence
 
 import numpy as np
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from .geometry import Box
+from .geometry import Box, rotation_zyx
 
 __all__ = [
     "ROB_THRESHOLDS",
@@ -92,16 +96,29 @@ def _trapz(y: np.ndarray, x: np.ndarray) -> float:
 # IoU
 # ---------------------------------------------------------------------------------------------------
 
+def _box_row(box: Box) -> np.ndarray:
+    return np.array([box.x, box.y, box.z, box.heading, box.length, box.width, box.height, box.roll, box.pitch],
+                    dtype=np.float64)
+
+
 def _as_boxes(boxes: np.ndarray | Sequence[Box] | Box) -> np.ndarray:
+    """(N, 9) [x, y, z, heading, length, width, height, roll, pitch] of Boxes or of (N, 7) / (N, 9) arrays
+    (7 columns: level boxes)."""
     if isinstance(boxes, Box):
-        return boxes.to_array()[None]
+        return _box_row(boxes)[None]
     if isinstance(boxes, np.ndarray):
         arr = boxes.astype(np.float64, copy=False)
     else:
         items = list(boxes)
-        arr = (np.array([b.to_array() for b in items], dtype=np.float64) if items and isinstance(items[0], Box)
+        arr = (np.array([_box_row(b) for b in items], dtype=np.float64) if items and isinstance(items[0], Box)
                else np.asarray(items, dtype=np.float64))
-    return arr.reshape(-1, 7)
+    columns = arr.shape[-1] if arr.ndim > 1 else arr.size
+    if arr.size == 0:
+        return np.zeros((0, 9))
+    if columns not in (7, 9):
+        raise ValueError(f"boxes need 7 or 9 values each, not {columns}")
+    arr = arr.reshape(-1, columns)
+    return arr if columns == 9 else np.concatenate([arr, np.zeros((len(arr), 2))], axis=1)
 
 
 def bev_corners_batch(boxes: np.ndarray) -> np.ndarray:
@@ -184,35 +201,94 @@ def iou_bev_batch(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
     return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
 
-def iou_3d_batch(boxes_a: np.ndarray | Sequence[Box], boxes_b: np.ndarray | Sequence[Box]) -> np.ndarray:
-    """Exact 3D IoU of paired upright boxes (N, 7) [x, y, z, heading, l, w, h] -> (N,) in [0, 1].
+_CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)], dtype=np.float64)
+_EDGES = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)   # corner pairs differing in one sign
+                   if np.sum(_CORNER_SIGNS[i] != _CORNER_SIGNS[j]) == 1])
 
-    ``IoU = A_bev(a ∩ b) · max(0, min(top) − max(bottom)) / (V_a + V_b − that)`` (true vertical
-    overlap, so boxes of unequal heights are handled correctly).
+
+def _inside_boxes(points: np.ndarray, centres: np.ndarray, rotations: np.ndarray, halves: np.ndarray,
+                  tolerance: np.ndarray) -> np.ndarray:
+    """(N, K) mask: points (N, K, 3) inside box n (within ``tolerance[n]``)."""
+    local = np.einsum("nkj,nji->nki", points - centres[:, None], rotations)   # R^T d
+    return np.all(np.abs(local) <= halves[:, None] + tolerance[:, None, None], axis=2)
+
+
+def _edge_face_crossings(corners: np.ndarray, centres: np.ndarray, rotations: np.ndarray, halves: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Crossings of the 12 edges of boxes (``corners`` (N, 8, 3)) with the 6 face planes of the other boxes:
+    (N, 72, 3) points and (N, 72) mask of the crossings within their edge."""
+    p0, p1 = corners[:, _EDGES[:, 0]], corners[:, _EDGES[:, 1]]                   # (N, 12, 3)
+    normals = np.concatenate([rotations, -rotations], axis=2).transpose(0, 2, 1)  # (N, 6, 3): the +-axes
+    offsets = np.einsum("nfj,nj->nf", normals, centres) + np.concatenate([halves, halves], axis=1)
+    start = np.einsum("nej,nfj->nef", p0, normals)                                # (N, 12, 6)
+    rate = np.einsum("nej,nfj->nef", p1 - p0, normals)
+    parallel = np.abs(rate) < 1e-12
+    t = (offsets[:, None, :] - start) / np.where(parallel, 1.0, rate)
+    ok = ~parallel & (t >= -_EPS) & (t <= 1.0 + _EPS)
+    points = p0[:, :, None] + np.clip(t, 0.0, 1.0)[..., None] * (p1 - p0)[:, :, None]
+    return points.reshape(len(corners), 72, 3), ok.reshape(len(corners), 72)
+
+
+def _polytope_intersection_volume(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Exact intersection volumes of paired (N, 9) boxes of any orientation: the convex hull of the
+    intersection's vertex candidates (corners inside the other box, edge-face crossings inside both)."""
+    n = len(a)
+    rot_a, rot_b = rotation_zyx(a[:, 3], a[:, 8], a[:, 7]), rotation_zyx(b[:, 3], b[:, 8], b[:, 7])
+    half_a, half_b = a[:, 4:7] / 2.0, b[:, 4:7] / 2.0
+    corners_a = a[:, None, :3] + np.einsum("nij,nkj->nki", rot_a, _CORNER_SIGNS[None] * half_a[:, None])
+    corners_b = b[:, None, :3] + np.einsum("nij,nkj->nki", rot_b, _CORNER_SIGNS[None] * half_b[:, None])
+    ab, ab_ok = _edge_face_crossings(corners_a, b[:, :3], rot_b, half_b)
+    ba, ba_ok = _edge_face_crossings(corners_b, a[:, :3], rot_a, half_a)
+    points = np.concatenate([corners_a, corners_b, ab, ba], axis=1)               # (N, 160, 3)
+    tolerance = 1e-9 * (1.0 + np.maximum(np.abs(a[:, :7]).max(axis=1), np.abs(b[:, :7]).max(axis=1)))
+    ok = (np.concatenate([np.ones((n, 16), dtype=bool), ab_ok, ba_ok], axis=1)
+          & _inside_boxes(points, a[:, :3], rot_a, half_a, tolerance)
+          & _inside_boxes(points, b[:, :3], rot_b, half_b, tolerance))
+    volumes = np.zeros(n)
+    for i in np.flatnonzero(ok.sum(axis=1) >= 4):   # one small hull per overlapping pair
+        try:
+            volumes[i] = ConvexHull(points[i, ok[i]]).volume
+        except QhullError:   # the candidates are flat (boxes touching): no volume
+            volumes[i] = 0.0
+    return volumes
+
+
+def iou_3d_batch(boxes_a: np.ndarray | Sequence[Box], boxes_b: np.ndarray | Sequence[Box]) -> np.ndarray:
+    """Exact 3D IoU of paired boxes -> (N,) in [0, 1]: :class:`Box` sequences, or arrays (N, 7)
+    [x, y, z, heading, l, w, h] (level) or (N, 9) [..., roll, pitch].
+
+    Level pairs: ``IoU = A_bev(a ∩ b) · max(0, min(top) − max(bottom)) / (V_a + V_b − that)`` (true
+    vertical overlap, so boxes of unequal heights are handled correctly). Pairs with a tilted box: the
+    intersection polytope's volume (see the module docstring).
     """
     a, b = _as_boxes(boxes_a), _as_boxes(boxes_b)
     if a.shape != b.shape:
         raise ValueError(f"iou_3d_batch: shapes differ: {a.shape} vs {b.shape}")
     if a.shape[0] == 0:
         return np.zeros(0)
-    # Pairs whose circumscribed circles do not meet cannot overlap; skip the polygon work for them.
+    tilted = np.any(a[:, 7:9] != 0.0, axis=1) | np.any(b[:, 7:9] != 0.0, axis=1)
+    # Pairs whose circumscribed circles (spheres, when tilted) do not meet cannot overlap: no polygon work.
     reach = np.hypot(a[:, 4], a[:, 5]) / 2.0 + np.hypot(b[:, 4], b[:, 5]) / 2.0
     near = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) <= reach + 1e-9
     overlap_h = np.clip(np.minimum(a[:, 2] + a[:, 6] / 2, b[:, 2] + b[:, 6] / 2)
                         - np.maximum(a[:, 2] - a[:, 6] / 2, b[:, 2] - b[:, 6] / 2), 0.0, None)
-    todo = near & (overlap_h > 0)
+    todo = near & (overlap_h > 0) & ~tilted
     inter = np.zeros(a.shape[0])
     if np.any(todo):
         area = bev_intersection_area_batch(bev_corners_batch(a[todo]), bev_corners_batch(b[todo]))
         inter[todo] = area * overlap_h[todo]
+    sphere = np.linalg.norm(a[:, 4:7], axis=1) / 2.0 + np.linalg.norm(b[:, 4:7], axis=1) / 2.0
+    todo = tilted & (np.linalg.norm(a[:, :3] - b[:, :3], axis=1) <= sphere + 1e-9)
+    if np.any(todo):
+        inter[todo] = _polytope_intersection_volume(a[todo], b[todo])
     union = np.prod(a[:, 4:7], axis=1) + np.prod(b[:, 4:7], axis=1) - inter
     iou = np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
     return np.clip(iou, 0.0, 1.0)
 
 
 def iou_3d(box_a: Box, box_b: Box) -> float:
-    """Exact 3D IoU of two upright boxes (see :func:`iou_3d_batch`)."""
-    return float(iou_3d_batch(box_a.to_array()[None], box_b.to_array()[None])[0])
+    """Exact 3D IoU of two boxes, with their roll and pitch (see :func:`iou_3d_batch`)."""
+    return float(iou_3d_batch([box_a], [box_b])[0])
 
 
 def centre_errors_batch(boxes_a: np.ndarray | Sequence[Box], boxes_b: np.ndarray | Sequence[Box]) -> np.ndarray:

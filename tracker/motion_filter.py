@@ -32,7 +32,8 @@ from .geometry import Box, wrap_angle
 from .motion import MotionPrior
 from .terms import apply_motion
 
-__all__ = ["CTRVParams", "CTRVFilter", "ctrv_predict_state", "travel_heading", "HeightFilter", "CTRVMotion", "AverageMotion"]
+__all__ = ["CTRVParams", "CTRVFilter", "ctrv_arc", "ctrv_predict_state", "travel_heading", "HeightFilter",
+           "CTRVMotion", "AverageMotion"]
 
 
 @dataclass(frozen=True)
@@ -44,16 +45,34 @@ class CTRVParams:
     initial_turn_sigma: float = 0.3   # rad/s
 
 
+def _f1_f2(a: float) -> tuple[float, float, float, float]:
+    """f1 = sin(a)/a, f2 = (1 - cos a)/a and their derivatives (series near 0)."""
+    if abs(a) < 1e-3:
+        a2 = a * a
+        return 1.0 - a2 / 6.0, a / 2.0 - a * a2 / 24.0, -a / 3.0 + a * a2 / 30.0, 0.5 - a2 / 8.0
+    s, c = np.sin(a), np.cos(a)
+    return s / a, (1.0 - c) / a, (a * c - s) / (a * a), (a * s - (1.0 - c)) / (a * a)
+
+
+def ctrv_arc(course: float, speed: float, turn_rate: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The CTRV model (constant turn rate and velocity): the displacement (dx, dy) after ``dt`` seconds of moving
+    at ``speed`` along ``course`` (the direction of travel at the start) while it turns at ``turn_rate`` (an
+    exact circular arc, a straight line at zero turn rate), and its (2, 3) Jacobian d(dx, dy)/d(course, speed,
+    turn_rate). The one CTRV model of the project (the tracker's filter and the motion export's smoother)."""
+    f1, f2, d1, d2 = _f1_f2(turn_rate * dt)
+    c, s = np.cos(course), np.sin(course)
+    along, across = c * f1 - s * f2, s * f1 + c * f2
+    dx, dy = speed * dt * along, speed * dt * across
+    jac = np.array([[-dy, dt * along, speed * dt * dt * (c * d1 - s * d2)],
+                    [dx, dt * across, speed * dt * dt * (s * d1 + c * d2)]])
+    return np.array([dx, dy]), jac
+
+
 def ctrv_predict_state(s: np.ndarray, dt: float) -> np.ndarray:
-    """The CTRV state after ``dt`` seconds (exact arc; straight line when the turn rate is ~0)."""
+    """The CTRV state [x, y, heading, speed, turn_rate] after ``dt`` seconds (:func:`ctrv_arc`)."""
     x, y, th, v, w = s
-    if abs(w) > 1e-6:
-        x2 = x + v / w * (np.sin(th + w * dt) - np.sin(th))
-        y2 = y + v / w * (np.cos(th) - np.cos(th + w * dt))
-    else:
-        x2 = x + v * np.cos(th) * dt
-        y2 = y + v * np.sin(th) * dt
-    return np.array([x2, y2, th + w * dt, v, w])
+    (dx, dy), _ = ctrv_arc(th, v, w, dt)
+    return np.array([x + dx, y + dy, th + w * dt, v, w])
 
 
 def _ctrv_jacobian(s: np.ndarray, dt: float) -> np.ndarray:

@@ -43,6 +43,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 from scipy.spatial import cKDTree
 
+from .bidirectional import fused_result
 from .config import OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
@@ -299,7 +300,8 @@ class _Solver:
         self.stacked = _stack_frames(points)
         self.rng = rng
         sig = np.array([params.smooth_sigma_xy, params.smooth_sigma_xy, params.smooth_sigma_z, params.smooth_sigma_heading])
-        anchor = np.array([params.anchor_sigma_xyz] * 3 + [params.anchor_sigma_heading])
+        sigma_z = params.anchor_sigma_z if params.anchor_sigma_z > 0 else params.anchor_sigma_xyz
+        anchor = np.array([params.anchor_sigma_xyz] * 2 + [sigma_z, params.anchor_sigma_heading])
         self.h_prior = _prior_band(self.k, sig, anchor)  # variable order: 4 * frame + component
         self.sig = sig
         self.anchor = anchor
@@ -524,13 +526,20 @@ class _Solver:
         return states
 
 
-def _regauge(states: np.ndarray, given_first: np.ndarray) -> np.ndarray:
+def _regauge(states: np.ndarray, given_first: np.ndarray, heading_share: float = 1.0) -> np.ndarray:
     """Apply to every pose the same OBJECT-frame correction that maps refined pose 0 onto the given one.
 
     The joint problem fixes the trajectory only up to where the shape sits in the object frame; the start
-    box is given, so pose_k <- pose_k o delta with delta = pose_0^-1 o given_0 (4-DOF).
+    box is given, so pose_k <- pose_k o delta with delta = pose_0^-1 o given_0 (4-DOF). ``heading_share`` < 1:
+    only that share of delta's rotation (refined pose 0's heading is pinned by frame 0's points alone, and a
+    sparse frame 0 would turn the whole trajectory); its centre still maps onto the given one. 0: no
+    correction at all (frame 0 has no points: refined pose 0 is where the smoothness put it, not a measurement).
     """
+    if heading_share <= 0.0:
+        return states
     d_theta = given_first[3] - states[0, 3]
+    if heading_share < 1.0:
+        d_theta = heading_share * wrap_angle(d_theta)
     c, s = np.cos(states[0, 3]), np.sin(states[0, 3])
     diff = given_first[:3] - states[0, :3]
     d_t = np.array([c * diff[0] + s * diff[1], -s * diff[0] + c * diff[1], diff[2]])
@@ -563,6 +572,10 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
     regauge = fixed == 0 and params.gauge == "regauge"
     if fixed == 0 and params.gauge == "fix_first":
         fixed = 1
+    heading_share = 1.0
+    if regauge and params.gauge_heading_points > 0:
+        first = points_in_box(points[0], _box(online[0], size), 1.0).sum() if len(points[0]) else 0
+        heading_share = min(1.0, float(first) / params.gauge_heading_points)
     solver = _Solver(points, online, size, params, np.random.default_rng(seed), fixed)
     for _ in range(params.outer_iterations):
         if not solver.set_shapes(states):
@@ -573,8 +586,10 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
         for _ in range(params.gn_iterations):
             states = solver.step(states)
         if regauge:
-            states = _regauge(states, online[0])
+            states = _regauge(states, online[0], heading_share)
     out = states.copy()
+    if heading_share < 1.0:
+        out[0] = online[0]  # the start box, exact
     out[:, 3] = wrap_angle(out[:, 3])
     return out, _rebuild_shape(points, states, size, params.voxel) if with_shape else None
 
@@ -582,10 +597,17 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
 def refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig | None = None,
                    params: OfflineParams | None = None, points: list[np.ndarray] | None = None) -> TrackResult:
     """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
-    ``config.refinement.offline``. ``points``: each frame's region points as :func:`gather_frame_points` gives
+    ``config.refinement.offline``. With ``config.refinement.backward`` (and a ``source``) the states of backward
+    passes from the track's anchors replace its weak runs first (tracker/bidirectional.py). ``points``: each frame's region points as :func:`gather_frame_points` gives
     them, when the caller gathered them while tracking (then ``source`` is not read and may be None)."""
     config = config or result.config
     params = params or config.refinement.offline
+    if config.refinement.backward != "none" and source is not None:  # bidirectional: the fused states are the data
+        fused = fused_result(source, result, config)
+        if points is not None:
+            points = [p if a is b else frame_region_points(source.lidar_frame(b.frame), b.box, config, params)
+                      for p, a, b in zip(points, result.estimates, fused.estimates, strict=True)]
+        result = fused
     if points is None:
         if source is None:
             raise ValueError("refine_offline needs a source to read when no points are given")

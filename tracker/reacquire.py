@@ -60,12 +60,14 @@ class Candidate:
 
 
 def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: float, min_points: int,
-                       size_margin: float, time_s: float) -> list[Candidate]:
+                       size_margin: float, time_s: float, centred: bool = False) -> list[Candidate]:
     """The clusters of ``points`` (non-ground, world) on a BEV grid of ``cell`` metres (8-connected cells) that
     hold at least ``min_points`` points and fit ``box``'s length and width + ``size_margin``, each with ``box``
     placed on it: along an axis where the cluster is shorter than the box and the line of sight from ``sensor``
     is within 60 degrees of the axis, the box's face toward the sensor meets the points (the visible face, as in
-    :func:`start_shift`); else the box is centred on the cluster's extent."""
+    :func:`start_shift`); else, or with ``centred``, the box is centred on the cluster's extent (which end of the
+    object a short cluster shows is ambiguous for a track that was lost: the near end seen, the near end hidden by
+    an occluder, the roof of a far car; centred, the box is off by at most half the unseen length)."""
     if len(points) < min_points:
         return []
     c, s = np.cos(box.heading), np.sin(box.heading)
@@ -96,6 +98,6 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     placed = np.where(toward, low[keep] + half, high[keep] - half)
     sight = sensor_uv - mid
     faced = np.abs(sight) > 0.5 * np.linalg.norm(sight, axis=1, keepdims=True)  # that face is seen, not edge-on
-    placed = np.where(faced & (extent[keep] < 2.0 * half), placed, mid)
+    placed = np.where(faced & (extent[keep] < 2.0 * half) & (not centred), placed, mid)
     world = box.center[:2] + placed[:, :1] * np.array([c, s]) + placed[:, 1:] * np.array([-s, c])
     return [Candidate(world[i], extent[k], int(sizes[k]), time_s) for i, k in enumerate(keep)]

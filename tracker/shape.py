@@ -1,4 +1,5 @@
-"""The object's shape: voxel downsampling, key-frame aggregation and the sub-shape of recent frames.
+"""The object's shape: key-frame aggregation and the sub-shape of recent frames (voxelised at voxel centres,
+:func:`tracker.metrics.voxel_downsample_centres`).
 
 All points here are in the OBJECT frame (x along the box length, origin at the box centre).
 """
@@ -12,12 +13,7 @@ import numpy as np
 from .geometry import Box, transform_points
 from .metrics import voxel_downsample_centres
 
-__all__ = ["voxel_downsample", "to_object_frame", "to_world_frame", "ShapeModel", "SubShape"]
-
-
-def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
-    """One point per occupied voxel, at the voxel centre (sorted by voxel index: deterministic)."""
-    return voxel_downsample_centres(points, voxel_size)
+__all__ = ["to_object_frame", "to_world_frame", "ShapeModel", "SubShape"]
 
 
 def to_object_frame(points_world: np.ndarray, box: Box) -> np.ndarray:
@@ -38,7 +34,7 @@ class ShapeModel:
     def add(self, points_object: np.ndarray) -> None:
         if len(points_object) == 0:
             return
-        self.points = voxel_downsample(np.vstack([self.points, points_object]), self.voxel_size)
+        self.points = voxel_downsample_centres(np.vstack([self.points, points_object]), self.voxel_size)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -54,7 +50,7 @@ class SubShape:
 
     def add(self, points_object: np.ndarray) -> None:
         if self._enabled:
-            self._frames.append(voxel_downsample(points_object, self.voxel_size))
+            self._frames.append(voxel_downsample_centres(points_object, self.voxel_size))
 
     @property
     def points(self) -> np.ndarray:

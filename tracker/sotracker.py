@@ -143,7 +143,7 @@ class Tracker:
         self._start_points = obj  # the Finder's source (first_frame.search="finder")
         self._waiting = c.first_frame.reacquire and len(obj) < c.search.min_target_points  # see _reacquire
         time_s = int(frame.timestamp_ns) * 1e-9
-        self.strategies.reacquire.reset(time_s)
+        self.strategies.reacquire.reset(time_s, box.center)
         self._lost_start = self.strategies.reacquire.lost_start(len(obj))  # see _search
         self.strategies.travel.reset()
         self.strategies.travel.record(box, time_s)
@@ -183,7 +183,8 @@ class Tracker:
         x = self.strategies.height.motion(x, self.box, self._ground_points, fit=not coasting)
         x = self._update_motion(x, local, coasting)
         estimate = self._finish_step(frame, x, local, flags, t0)
-        if self.strategies.reacquire.holds(estimate.num_points, coasting, int(frame.timestamp_ns) * 1e-9):
+        if self.strategies.reacquire.holds(estimate.num_points, coasting, int(frame.timestamp_ns) * 1e-9,
+                                           estimate.box.center):
             return estimate
         return self._search(frame, estimate, prior[:2] / self._last_dt, None, t0)
 
@@ -374,26 +375,43 @@ class Tracker:
         points = points[points_in_box(points, region, 1.0)]
         sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
         r = c.reacquire
-        candidates = cluster_candidates(points, self.box, sensor, r.cell, r.cluster_points, r.size_margin, time_s)
+        candidates = cluster_candidates(points, self.box, sensor, r.cell, r.cluster_points, r.size_margin, time_s,
+                                        centred=start is None)
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)
-        if relock is None or (start is None and float(np.linalg.norm(relock.centre - self.box.center[:2]))
-                              < r.hold_distance):
-            if relock is not None:  # the candidate is where the track is: it holds
-                s.reacquire.reset(time_s)
+        confirms = (relock is not None and start is None
+                    and float(np.linalg.norm(relock.centre - self.box.center[:2])) < r.hold_distance)
+        if relock is None or confirms or (start is None and self._holds_against(relock, points)):
+            if confirms:  # the candidate is where the track is: it holds, the search ends
+                s.reacquire.reset(time_s, self.box.center)
             coasting = ("coasting",) if relock is None and "prior_only" in estimate.flags else ()
             return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
                            time_ms=(time.perf_counter() - t0) * 1e3)
-        return self._relock(frame, relock, t0)
+        return self._relock(frame, relock, start is None, t0)
 
-    def _relock(self, frame: LidarFrame, relock: Relock, t0: float) -> FrameEstimate:
-        """Restart the track at a confirmed candidate, its velocity seeding the motion model."""
-        prev = self.box
+    def _holds_against(self, relock: Relock, points: np.ndarray) -> bool:
+        """Whether a lost track's box stays where it is against a confirmed candidate (the search goes on): the
+        box placed there would hold fewer of the region's non-ground ``points`` than the box does (the frame's
+        points support the track where it is better; a candidate is only a part of the object, e.g. the top of
+        one that re-appears from behind an occluder). On a tie (a far car's few points fit in both boxes) the
+        candidate wins: it is centred on them."""
+        box = self.box
+        moved = Box(float(relock.centre[0]), float(relock.centre[1]), box.z, box.heading, box.length, box.width,
+                    box.height)
+        return bool(points_in_box(points, moved, 1.0).sum() < points_in_box(points, box, 1.0).sum())
+
+    def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
+        """Restart the track at a confirmed candidate, its velocity seeding the motion model; with
+        ``keep_motion`` (a lost track, whose prediction found the candidate) the motion model goes on as it was
+        (its turn rate too: a vehicle that re-appears mid-turn keeps turning)."""
+        prev, motion_model = self.box, self.motion
         box = Box(float(relock.centre[0]), float(relock.centre[1]), prev.z, prev.heading, prev.length, prev.width,
                   prev.height)
         motion = np.array([relock.velocity[0] * _NOMINAL_DT, relock.velocity[1] * _NOMINAL_DT, 0.0, 0.0])
         first_box, previous = self.first_box, self._previous_pose
         estimate = self.start(frame, box, previous, motion)
         self.first_box, self._lost_start = first_box, False
+        if keep_motion:
+            self.motion = motion_model
         return replace(estimate, flags=tuple(f for f in estimate.flags if f != "init") + ("reacquired",),
                        time_ms=(time.perf_counter() - t0) * 1e3)
 

@@ -102,26 +102,17 @@ def pin_one_core() -> str:
     return "not pinned (no sched_setaffinity)"
 
 
-def _cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as handle:
-            for line in handle:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def machine_description() -> dict[str, str]:
     """CPU model, core count, load, Python and library versions, thread settings."""
     import numpy
     import scipy
 
+    from ..provenance import cpu_model
+
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {
-        "cpu": _cpu_model(),
+        "cpu": cpu_model(),
         "cores": f"{os.cpu_count()} logical ({affinity} usable by this process)",
         "load_average": " ".join(f"{v:.2f}" for v in load) + " (1/5/15 min; other processes share the machine)",
         "python": sys.version.split()[0],

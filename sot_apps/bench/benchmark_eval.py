@@ -15,19 +15,54 @@ from __future__ import annotations
 import dataclasses
 from collections import defaultdict
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 import numpy as np
 
 from ..benchmark.profile_scores import pool_figures, tracklet_figures
 from ..errors import InputError
+from ..text_table import format_table
+from ..text_table import format_value as _fmt
 
 if TYPE_CHECKING:   # imported by `sot-apps bench --help` (module discovery): the libraries load when a run starts
     from ..benchmark.lists import SequenceResolver, Tracklet
     from ..evaluation.tracker import EvalConfig, TrackSpec
     from ..io.cached_source import CachedSource
 
-__all__ = ["BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
+__all__ = ["BenchmarkList", "open_benchmark", "BenchmarkRun", "evaluate_tracklets", "format_benchmark"]
+
+
+@dataclass(frozen=True)
+class BenchmarkList:
+    """A benchmark's tracklets, where they were read from, and how a tracklet finds its sequence."""
+
+    source: Path
+    tracklets: list[Tracklet]
+    resolve: SequenceResolver
+
+
+def open_benchmark(benchmark: str, lists: str | Path | None = None, data_dir: str | Path | None = None,
+                   first: int | None = None) -> BenchmarkList:
+    """The tracklet list ``benchmark`` names: a list file (benchmark.json of ``benchmark make``, bench_list.json
+    of ``benchmark build``) or folder, or ``"lidar-sot"`` with ``lists`` (LiDAR-SOT's list folder) and
+    ``data_dir`` (the Waymo data directory). Sequences are found next to the list, else under ``data_dir``.
+    ``first``: only the list's first N tracklets (a generated list is ordered copy by copy)."""
+    from ..benchmark.lists import default_resolver, read_lists
+
+    if benchmark == "lidar-sot":
+        if not lists or data_dir is None:
+            raise InputError(None, "--benchmark lidar-sot needs --lists DIR and the Waymo DATA_DIR as SEQUENCE")
+        source = Path(lists)
+    else:
+        source = Path(benchmark)
+    tracklets = read_lists(source)
+    if first is not None:
+        if first < 1:
+            raise InputError(None, f"--first must be >= 1, not {first}")
+        tracklets = tracklets[:first]
+    list_dir = source if source.is_dir() else source.parent
+    return BenchmarkList(source, tracklets, default_resolver(list_dir, Path(data_dir) if data_dir else None))
 
 
 @dataclass(frozen=True)
@@ -125,9 +160,10 @@ def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, pre
     parameters (default ``EvalConfig()``)."""
     from tracker import get_preset, track
 
-    from ..evaluation.tracker import EvalConfig, refined_modes, score_result
+    from ..evaluation.tracker import EvalConfig, score_result
     from ..io import open_sequence
     from ..io.cached_source import CachedSource
+    from .sequence_eval import refined_modes
 
     config = config if config is not None else EvalConfig()
     overrides = dict(overrides or {})
@@ -170,15 +206,6 @@ _EXTRA_COLUMNS = (("relock_share", "ReLock3", 100.0, ".0f"), ("found_near_share"
                   ("heading_err_last_med_deg", "Hdg@last", 1.0, ".1f"))
 
 
-def _fmt(v: float, spec: str) -> str:
-    return "—" if v is None or not np.isfinite(v) else format(v, spec)
-
-
-def _table_line(cells: list[str], widths: list[int]) -> str:
-    """One table row: the first cell left-aligned, the others right-aligned, to ``widths``."""
-    return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
-
-
 def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
     """One table per preset: rows = all / easy / medium / hard / each motion profile."""
     out = [title] if title else []
@@ -197,9 +224,7 @@ def format_benchmark(run: BenchmarkRun, title: str = "") -> str:
             rows.append([name, str(m["n"]), acc, _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f"),
                          _fmt(m["success"], ".1f"), _fmt(m["precision"], ".1f"), _fmt(m["ms"], ".1f")]
                         + [_fmt(scale * m[k], spec) if k in m else "" for k, _, scale, spec in extra])
-        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-        out += ([_table_line(header, widths), "  ".join("-" * w for w in widths)]
-                + [_table_line(r, widths) for r in rows] + [""])
+        out += [format_table(header, rows), ""]
     out.append("Acc, Rob in %; Success, Precision: 100 x AUC; Shape: mean Chamfer to the pseudo-ground-truth shape; "
                "difficulty by mean GT-box points over the first 10 frames (hard < 38.2 <= medium < 808.3 <= easy).")
     if any(k in run.summary(p, keys) for p in run.presets for _, keys in run.groups() for k, *_ in _EXTRA_COLUMNS):

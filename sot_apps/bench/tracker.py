@@ -25,6 +25,7 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
+from .. import text_table
 from . import format_machine, machine_description, pin_one_core
 
 if TYPE_CHECKING:   # numpy loads when a benchmark runs (`sot-apps --help` imports this module)
@@ -128,9 +129,10 @@ def run_benchmark(sequence_path: str, presets: list[str], tracks: list[str] | No
                   lags: list[int] | None = None, offline: bool = False) -> dict[str, Any]:
     from tracker import get_preset
 
-    from ..evaluation.tracker import prepare_tracks, resolve_presets, select_moving_vehicle_tracks
+    from ..evaluation.tracker import prepare_tracks, select_moving_vehicle_tracks
     from ..io import open_sequence
     from ..io.cached_source import CachedSource
+    from .sequence_eval import resolve_presets
 
     pinned = pin_one_core()
     sequence = open_sequence(sequence_path)
@@ -238,13 +240,10 @@ def format_table(result: dict[str, Any]) -> str:
     body = [[r["row"], *(f"{r[key]:.1f}" if key in r else "-" for key in timing),
              *(f"{r[key]:.2f}" if key in r else "-" for key in ratios),
              f"{100 * r['acc']:.1f}", f"{100 * r['rob']:.1f}"] for r in result["rows"]]
-    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(header)]
-    fmt = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
-                                  for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
     lines = [f"sequence: {result['sequence']}",
              f"tracks: {len(result['tracks'])} ({', '.join(t[:8] for t in result['tracks'])}); "
              f"{result['frames_per_preset']} tracked frames per preset (k >= 1)",
-             "", fmt(header), "  ".join("-" * w for w in widths)] + [fmt(b) for b in body]
+             "", text_table.format_table(header, body)]
     lines += ["", "ms per frame = CPU time of the tracking thread in Tracker.step (crop, ground removal, association,",
               "optimisation; sweeps are read before timing), frames k >= 1 with frame 1's wide search included;",
               "'wall' = wall-clock time of the step (inflated when other processes share the cores).",

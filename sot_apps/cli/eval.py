@@ -75,9 +75,11 @@ def register(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from ..bench.sequence_eval import checked_overrides, evaluate, resolve_presets
     from ..errors import InputError
-    from ..evaluation.tracker import evaluate, format_report, resolve_presets
+    from ..evaluation.tracker import format_report
     from ..io.atomic import write_json
+    from ..provenance import invoked_command, provenance_record
 
     if any(n < 1 for n in args.lag):
         raise InputError(None, f"--lag must be at least 1, not {min(args.lag)}")
@@ -86,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     if args.detections and args.simulate_detections:
         raise InputError(None, "give --detections or --simulate-detections, not both")
     presets = resolve_presets(args.preset, with_detections=bool(args.detections or args.simulate_detections))
-    args.overrides = parse_overrides(args.overrides, presets)
+    args.overrides = checked_overrides(args.overrides, presets)
     if args.benchmark:
         return _run_benchmark(args, presets)
     if args.sequence is None or not (args.tracks or args.all_moving):
@@ -109,37 +111,23 @@ def run(args: argparse.Namespace) -> int:
         print("set: " + " ".join(f"{k}={v}" for k, v in args.overrides.items()))
     print(format_report(report, per_track=not args.no_per_track))
     if args.json:
-        write_json(args.json, report.to_dict())
+        write_json(args.json, report.to_dict() | {"provenance": provenance_record([invoked_command()])})
     return 0
 
 
 def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
-    from pathlib import Path
-
     from tqdm import tqdm
 
-    from ..bench.benchmark_eval import evaluate_tracklets, format_benchmark
-    from ..benchmark.lists import default_resolver, read_lists
+    from ..bench.benchmark_eval import evaluate_tracklets, format_benchmark, open_benchmark
     from ..errors import InputError
     from ..io.atomic import write_json
+    from ..provenance import invoked_command, provenance_record
 
     if args.tracks or args.all_moving:
         raise InputError(None, "--benchmark takes its tracklets from the list: drop --tracks/--all-moving")
     if args.detections:
         raise InputError(None, "--benchmark spans several sequences: use --simulate-detections, not --detections")
-    if args.benchmark == "lidar-sot":
-        if not args.lists or args.sequence is None:
-            raise InputError(None, "--benchmark lidar-sot needs --lists DIR and the Waymo DATA_DIR as SEQUENCE")
-        source = Path(args.lists)
-    else:
-        source = Path(args.benchmark)
-    tracklets = read_lists(source)
-    if args.first is not None:
-        if args.first < 1:
-            raise InputError(None, f"--first must be >= 1, not {args.first}")
-        tracklets = tracklets[: args.first]
-    list_dir = source if source.is_dir() else source.parent
-    resolve = default_resolver(list_dir, Path(args.sequence) if args.sequence else None)
+    bench = open_benchmark(args.benchmark, args.lists, args.sequence, args.first)
 
     def progress(total: int):
         bar = tqdm(total=total, desc="eval", unit="run", file=sys.stderr, leave=False)
@@ -149,32 +137,12 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
     if args.simulate_detections:
         check_profile(args.simulate_detections)
         detections = lambda seq, seed: simulated_detections(seq, args.simulate_detections, seed)  # noqa: E731
-    run = evaluate_tracklets(tracklets, resolve, presets, range(args.seeds), progress=progress, detections=detections,
-                             overrides=args.overrides, lags=args.lag, offline=args.offline)
-    title = f"benchmark: {source} ({len(tracklets)} tracklets)"
+    run = evaluate_tracklets(bench.tracklets, bench.resolve, presets, range(args.seeds), progress=progress,
+                             detections=detections, overrides=args.overrides, lags=args.lag, offline=args.offline)
+    title = f"benchmark: {bench.source} ({len(bench.tracklets)} tracklets)"
     if args.overrides:
         title += "; set " + " ".join(f"{k}={v}" for k, v in args.overrides.items())
     print(format_benchmark(run, title))
     if args.json:
-        write_json(args.json, run.to_dict())
+        write_json(args.json, run.to_dict() | {"provenance": provenance_record([invoked_command()])})
     return 0
-
-
-def parse_overrides(items: list[str], presets: list[str]) -> dict:
-    """``PATH=VALUE`` strings as {dotted TrackerConfig path: typed value} (:func:`tracker.parse_overrides`); an
-    unknown path, a bad value, or a result a preset rejects is an InputError."""
-    from tracker import get_preset
-    from tracker import parse_overrides as parse
-
-    from ..errors import InputError
-
-    try:
-        out = parse(items)
-    except ValueError as exc:
-        raise InputError(None, f"--set {exc} (settings: docs/tracker.md)") from None
-    for preset in presets:
-        try:
-            get_preset(preset, **out)
-        except ValueError as exc:
-            raise InputError(None, f"--set: preset {preset}: {exc}") from None
-    return out

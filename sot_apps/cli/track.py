@@ -65,14 +65,12 @@ def register(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from ..io.bounds import check_box_values
     from ..tracking import (
-        TrackingFailed,
+        annotated_track_start,
         check_vehicle_size,
-        first_box_with_points,
         init_points,
         parse_init_box,
         refine_track_fixed_lag,
         refine_track_offline,
-        resolve_span,
         track_sequence,
         write_track_result,
     )
@@ -88,31 +86,16 @@ def run(args: argparse.Namespace) -> int:
     detections = load_detections(args, seq)
     if detections is None and args.preset in DETECTION_PRESETS:
         raise InputError(None, f"preset {args.preset!r} needs --detections FILE")
-    label = None
     if args.track_id is not None:
-        object_id = seq.resolve_track_id(args.track_id)
-        annotated = seq.tracks()[object_id]
-        label = annotated.label
-        start = annotated.frames[0] if args.start_frame is None else args.start_frame
-        end = annotated.frames[-1] if args.end_frame is None else args.end_frame
-        resolve_span(seq, start, end)   # both frames in range, start <= end
-        if args.start_frame is None:   # the pipeline's rule: the first annotated box the tracker can start on
-            boxes = [(k, annotated.box_at(k)) for k in annotated.frames if k <= end]
-            try:
-                start, _ = first_box_with_points(seq, boxes, config)
-            except TrackingFailed:
-                pass   # none: start at the first annotated box anyway (the warning below says it is empty)
-        init_box = annotated.box_at(start)
-        if init_box is None:
-            raise InputError(seq.root, f"track {object_id} has no box at frame {start} "
-                                       f"(annotated frames {annotated.frames[0]}..{annotated.frames[-1]})")
+        begin = annotated_track_start(seq, args.track_id, config, args.start_frame, args.end_frame)
+        object_id, label, init_box, start, end = begin.object_id, begin.label, begin.init_box, begin.start, begin.end
     else:
         init_box = parse_init_box(args.init_box)
         warning = check_vehicle_size(init_box, "--init-box", args.allow_any_size)
         check_box_values(init_box.to_array(), None, "--init-box")
         if warning:
             sys.stderr.write(warning + "\n")
-        object_id = "custom"
+        object_id, label = "custom", None
         start = 0 if args.start_frame is None else args.start_frame
         end = args.end_frame
     result = track_sequence(seq, init_box, start, end, config, progress=not args.quiet, detections=detections)

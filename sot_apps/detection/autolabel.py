@@ -40,7 +40,7 @@ from tracker import (
     iou_bev_batch,
     points_in_box,
     track,
-    voxel_downsample,
+    voxel_downsample_centres,
     wrap_angle,
 )
 
@@ -221,7 +221,7 @@ def fit_to_points(source: FrameSource, boxes: dict[int, Box], fit: PointFit = Po
             bottoms.append(ground)
         keep = inside & (local[:, 2] > ground + fit.ground_clearance) & (local[:, 2] <= box.height / 2.0 + fit.margin)
         pooled.append(local[keep])
-    points = voxel_downsample(np.vstack(pooled), fit.voxel) if pooled else np.zeros((0, 3))
+    points = voxel_downsample_centres(np.vstack(pooled), fit.voxel) if pooled else np.zeros((0, 3))
     if len(points) < fit.min_points:
         return boxes
     first = next(iter(boxes.values()))

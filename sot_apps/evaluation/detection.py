@@ -20,7 +20,8 @@ from tracker import FrameDetections, iou_3d_batch, iou_bev_batch
 
 from ..objects.box_points import count_points_in_boxes
 
-__all__ = ["APConfig", "GroundTruthFrame", "ground_truth_frames", "average_precision", "ap_table", "identity_coverage"]
+__all__ = ["APConfig", "GroundTruthFrame", "ground_truth_frames", "average_precision", "ap_table", "identity_coverage",
+           "operating_point"]
 
 
 @dataclass(frozen=True)
@@ -121,6 +122,37 @@ def ap_table(detections: Mapping[int, FrameDetections], truth: Mapping[int, Grou
                 r = average_precision(detections, truth, thr, kind, band, config.min_points, config.recall_points)
                 rows.append({"kind": kind, "iou": thr, "band": f"{band[0]:g}-{band[1]:g} m", **r})
     return rows
+
+
+def operating_point(detections: Mapping[int, FrameDetections], truth: Mapping[int, GroundTruthFrame],
+                    min_score: float = 0.5, iou_threshold: float = 0.5, max_range: float = 40.0,
+                    min_points: int = 50, kind: str = "bev") -> dict[str, float]:
+    """Recall and precision of the detections scored >= ``min_score``. Recall: share of the ground-truth
+    boxes within ``max_range`` of the ego with >= ``min_points`` points that such a detection overlaps at
+    IoU >= the threshold. Precision: share of such detections within ``max_range`` that overlap ANY
+    ground-truth box (whatever its points) at IoU >= the threshold (one detection per box, best score first)."""
+    found = wanted = true = kept = 0
+    for k, gt in truth.items():
+        det = detections.get(k, FrameDetections.empty())
+        confident = det.scores >= min_score
+        boxes, scores = det.boxes[confident], det.scores[confident]
+        iou = _pairwise_iou(boxes, gt.boxes, kind)
+        gd = np.hypot(gt.boxes[:, 0] - gt.ego_xy[0], gt.boxes[:, 1] - gt.ego_xy[1])
+        dd = np.hypot(boxes[:, 0] - gt.ego_xy[0], boxes[:, 1] - gt.ego_xy[1])
+        want = (gd < max_range) & (gt.points >= min_points)
+        wanted += int(want.sum())
+        found += int(((iou >= iou_threshold).any(axis=0) & want).sum()) if len(boxes) else 0
+        taken = np.zeros(len(gt.boxes), dtype=bool)
+        for i in np.argsort(-scores, kind="stable"):
+            if dd[i] >= max_range:
+                continue
+            kept += 1
+            candidates = np.where(~taken & (iou[i] >= iou_threshold), iou[i], -1.0)
+            if len(candidates) and candidates.max() >= 0:
+                taken[int(np.argmax(candidates))] = True
+                true += 1
+    return {"recall": found / wanted if wanted else float("nan"), "precision": true / kept if kept else float("nan"),
+            "n_gt": wanted, "n_det": kept}
 
 
 def identity_coverage(tracks: Mapping[str, Mapping[int, np.ndarray]], truth: Mapping[int, GroundTruthFrame],

@@ -1,31 +1,26 @@
-"""Frame-by-frame comparison of our tracker with reference boxes (e.g. the authors' implementation).
+"""Frame-by-frame comparison of tracked boxes with reference boxes (e.g. the authors' implementation).
 
 A reference file is JSON ``{track_id_prefix: {frame: [x, y, z, heading, length, width, height]}}`` in
-the world frame (``../shared/data/upstream_lidar_sot/*.json``). For every track that both the reference
-and the sequence hold, :func:`compare_with_reference` runs a preset from the ground-truth start box and
-records per frame: IoU with the ground truth (ours and the reference's), IoU between ours and the
-reference, and the BEV centre distance and heading difference between them.
-
-``python -m sot_apps.evaluation.reference SEQUENCE REFERENCE.json [--preset P] [--seed S] [--frames]``
-prints the per-track summary (and per-frame rows with ``--frames``).
+the world frame (``../shared/data/upstream_lidar_sot/*.json``). :func:`compare_boxes` scores a tracked run
+given to it, per frame the reference holds: IoU with the ground truth (ours and the reference's), IoU between
+ours and the reference, and the BEV centre distance and heading difference between them.
+``sot-apps bench reference`` (:mod:`sot_apps.bench.reference`) runs a preset and prints the comparison.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 
-from tracker import Box, accuracy, get_preset, iou_3d_batch, parse_overrides, robustness, track, wrap_angle
+from tracker import Box, accuracy, iou_3d_batch, robustness, wrap_angle
 
 from ..errors import InputError
 
-__all__ = ["ReferenceComparison", "load_reference", "compare_with_reference", "format_comparison"]
+__all__ = ["ReferenceComparison", "load_reference", "compare_boxes", "format_comparison"]
 
 
 @dataclass(frozen=True)
@@ -60,21 +55,18 @@ def load_reference(path: str | Path) -> dict[str, dict[int, np.ndarray]]:
         raise InputError(path, f"not a reference box file ({exc})") from exc
 
 
-def compare_with_reference(source, track_id: str, gt_boxes: Sequence[Box], frames: Sequence[int],
-                           reference: dict[int, np.ndarray], preset: str = "faithful", seed: int = 0,
-                           overrides: dict[str, Any] | None = None) -> ReferenceComparison:
-    """Track ``track_id`` with ``preset`` (dotted paths replaced by ``overrides``) from ``gt_boxes[0]`` over
-    ``frames`` and compare with ``reference`` on the frames the reference holds."""
-    config = get_preset(preset, seed=seed, **(overrides or {}))
-    result = track(source, gt_boxes[0], frames[0], frames[-1], config)
+def compare_boxes(track_id: str, frames: Sequence[int], ours: Sequence[Box], gt_boxes: Sequence[Box],
+                  reference: dict[int, np.ndarray]) -> ReferenceComparison:
+    """Our boxes ``ours`` and the ground truth ``gt_boxes`` (both one per frame of ``frames``; the first, the
+    start frame, is never scored) against ``reference`` on the frames the reference holds."""
     keep = [i for i, k in enumerate(frames) if i > 0 and k in reference]
-    ours = np.array([result.boxes[i].to_array() for i in keep])
+    mine = np.array([ours[i].to_array() for i in keep])
     gt = np.array([gt_boxes[i].to_array() for i in keep])
     ref = np.array([reference[frames[i]] for i in keep])
-    return ReferenceComparison(track_id, np.array([frames[i] for i in keep]), iou_3d_batch(ours, gt),
-                               iou_3d_batch(ref, gt), iou_3d_batch(ours, ref),
-                               np.linalg.norm(ours[:, :2] - ref[:, :2], axis=1),
-                               np.asarray(wrap_angle(ours[:, 3] - ref[:, 3])))
+    return ReferenceComparison(track_id, np.array([frames[i] for i in keep]), iou_3d_batch(mine, gt),
+                               iou_3d_batch(ref, gt), iou_3d_batch(mine, ref),
+                               np.linalg.norm(mine[:, :2] - ref[:, :2], axis=1),
+                               np.asarray(wrap_angle(mine[:, 3] - ref[:, 3])))
 
 
 def format_comparison(rows: list[ReferenceComparison], per_frame: bool = False) -> str:
@@ -93,45 +85,3 @@ def format_comparison(rows: list[ReferenceComparison], per_frame: bool = False) 
     lines.append(f"pooled    {100 * accuracy(ours):5.1f}/{100 * robustness(ours):5.1f}"
                  f"  {100 * accuracy(refs):5.1f}/{100 * robustness(refs):5.1f}")
     return "\n".join(lines)
-
-
-def main(argv: Sequence[str] | None = None) -> None:
-    from ..io import open_sequence
-    from ..objects.selection import annotated_span
-    from .tracker import CachedSource
-
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("sequence")
-    parser.add_argument("reference")
-    parser.add_argument("--preset", default="faithful")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--tracks", default=None, help="comma-separated prefixes (default: all in the reference)")
-    parser.add_argument("--frames", action="store_true", help="print per-frame rows")
-    parser.add_argument("--set", nargs="*", default=[], metavar="PATH=VALUE",
-                        help="override settings of the preset (dotted TrackerConfig paths, e.g. motion.alpha=0.6)")
-    args = parser.parse_args(argv)
-    overrides = parse_overrides(args.set)
-    sequence = open_sequence(args.sequence)
-    reference = load_reference(args.reference)
-    source = CachedSource(sequence)
-    tracks = sequence.tracks()
-    rows = []
-    for prefix in (args.tracks.split(",") if args.tracks else reference):
-        tid = sequence.resolve_track_id(prefix)
-        ref = next((v for k, v in reference.items() if tid.startswith(k)), None)
-        if ref is None:
-            raise InputError(args.reference, f"no reference boxes for track {tid}")
-        start, end = annotated_span(tracks[tid].frames)
-        end = min(end, max(ref))
-        frames = list(range(start, end + 1))
-        rows.append(compare_with_reference(source, prefix, [tracks[tid].box_at(k) for k in frames], frames, ref,
-                                           args.preset, args.seed, overrides))
-    print(format_comparison(rows, args.frames))
-
-
-if __name__ == "__main__":
-    try:
-        main()
-    except InputError as exc:
-        print(f"error: {exc.one_line()}", file=sys.stderr)
-        sys.exit(2)

@@ -1,10 +1,11 @@
-"""LiDAR-SOT-style evaluation of tracker presets on a sequence's annotated tracks.
+"""LiDAR-SOT-style scoring of tracker results on a sequence's annotated tracks.
 
-For every selected track, each preset (and seed) tracks from the track's first ground-truth box over
-its annotated span (the first contiguous run of annotated frames), and the metrics of
-:mod:`tracker.metrics` are computed against the ground-truth boxes (frames 1..n-1 of the span) and a
-pseudo-ground-truth shape (:mod:`tracker.pseudo_gt`). Results are pooled over tracks, per difficulty
-(easy/medium/hard) and per track; with several seeds every figure is the mean over seeds.
+This module scores results it is given; it never runs the tracker (:mod:`sot_apps.bench.sequence_eval` runs the
+presets for ``sot-apps eval`` and :mod:`sot_apps.bench.benchmark_eval` over a benchmark's tracklet list).
+For every selected track, the evaluated span is the first contiguous run of annotated frames (:class:`TrackSpec`);
+a result is scored with the metrics of :mod:`tracker.metrics` against the ground-truth boxes (frames 1..n-1 of
+the span) and a pseudo-ground-truth shape (:mod:`tracker.pseudo_gt`). Results are pooled over tracks, per
+difficulty (easy/medium/hard) and per track; with several seeds every figure is the mean over seeds.
 
 The evaluation's own parameters are data (:class:`EvalConfig`, written into the JSON report), in the
 spirit of nuscenes-devkit's ``DetectionConfig``.
@@ -19,33 +20,27 @@ the number of tracked frames to each frame.
 from __future__ import annotations
 
 import dataclasses
-import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
 from tracker import (
-    DETECTION_PRESETS,
     DIFFICULTIES,
     DIFFICULTY_THRESHOLDS,
     PRECISION_THRESHOLDS,
     ROB_THRESHOLDS,
     SUCCESS_THRESHOLDS,
     Box,
-    Detections,
     PooledMetrics,
     TrackerConfig,
     TrackletScores,
     TrackResult,
     chamfer_distance,
     difficulty,
-    get_preset,
     mean_points_in_boxes,
     pool_metrics,
-    preset_names,
     pseudo_gt_shape,
-    refine_fixed_lag,
     score_tracklet,
     tracklet_metrics,
 )
@@ -55,6 +50,8 @@ from ..io.cached_source import CachedSource
 from ..io.jsonable import json_safe
 from ..io.sequence import Sequence as LidarSequence
 from ..objects.selection import DEFAULT_SELECTION, Selection, annotated_span
+from ..text_table import format_table
+from ..text_table import format_value as _fmt
 
 __all__ = [
     "EvalConfig",
@@ -65,10 +62,9 @@ __all__ = [
     "EvalReport",
     "select_moving_vehicle_tracks",
     "prepare_tracks",
-    "evaluate",
-    "refined_modes",
+    "summarise_row",
+    "flag_counts",
     "format_report",
-    "resolve_presets",
 ]
 
 @dataclass(frozen=True)
@@ -226,7 +222,7 @@ def _mean_over_seeds(dicts: list[dict[str, float]]) -> tuple[dict[str, float], d
     return mean, std
 
 
-def _summarise_row(name: str, preset: str, offline: bool, seeds: Sequence[int], records: list[RunRecord],
+def summarise_row(name: str, preset: str, offline: bool, seeds: Sequence[int], records: list[RunRecord],
                    specs: list[TrackSpec]) -> ResultRow:
     by_seed = {s: [r for r in records if r.seed == s] for s in seeds}
     pooled_runs = [_metrics_dict(pool_metrics([r.scores for r in by_seed[s]])) for s in seeds]
@@ -265,7 +261,7 @@ def _summarise_row(name: str, preset: str, offline: bool, seeds: Sequence[int], 
     return ResultRow(name, preset, offline, tuple(seeds), pooled, pooled_std, by_difficulty, by_track, timing)
 
 
-def _flag_counts(result: TrackResult) -> dict[str, int]:
+def flag_counts(result: TrackResult) -> dict[str, int]:
     counts: dict[str, int] = {}
     for est in result.estimates[1:]:
         for f in est.flags:
@@ -283,126 +279,9 @@ def score_result(spec: TrackSpec, result: TrackResult, config: EvalConfig) -> Tr
     return dataclasses.replace(scores, shape_cd=cd)
 
 
-def resolve_presets(names: Sequence[str] | None, with_detections: bool = False) -> list[str]:
-    """Preset names, with ``all`` expanded (the detection presets only ``with_detections``); unknown names,
-    and a detection preset without detections, raise InputError."""
-    names = list(names or ["full"])
-    out: list[str] = []
-    for name in names:
-        expanded = ([p for p in preset_names() if with_detections or p not in DETECTION_PRESETS] if name == "all"
-                    else [name])
-        for n in expanded:
-            if n not in preset_names():
-                raise InputError(None, f"unknown preset {n!r}; known: {', '.join(preset_names())}, all")
-            if n in DETECTION_PRESETS and not with_detections:
-                raise InputError(None, f"preset {n!r} needs detections (--detections FILE or --simulate-detections)")
-            if n not in out:
-                out.append(n)
-    return out
-
-
-def refined_modes(source, result: TrackResult, config: TrackerConfig, lags: Sequence[int] = (),
-                  offline: bool = False, refine: Callable[..., TrackResult] | None = None
-                  ) -> list[tuple[str, TrackResult, np.ndarray]]:
-    """The fixed-lag and offline results of one online ``result``: (row suffix ``+lagN`` / ``+offline``, result,
-    ms per frame k >= 1). Fixed lag: the online step plus the window solve; offline: the online step plus the
-    refinement's time spread over the frames. ``refine`` overrides :func:`tracker.offline.refine_offline`."""
-    online_ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
-    out = []
-    for n in lags:
-        smoothed = refine_fixed_lag(source, result, int(n), config)
-        out.append((f"+lag{n}", smoothed, np.array([e.time_ms for e in smoothed.estimates[1:]], dtype=np.float64)))
-    if offline:
-        if refine is None:
-            from tracker import refine_offline as refine
-        t0 = time.perf_counter()
-        better = refine(source, result, config)
-        extra = (time.perf_counter() - t0) * 1e3 / max(len(online_ms), 1)
-        out.append(("+offline", better, online_ms + extra))
-    return out
-
-
-def _track_all(source: CachedSource, specs: Sequence[TrackSpec], config: TrackerConfig,
-               detections: Detections | None) -> list[TrackResult]:
-    """Every spec's online track from its first annotated box, all in one pass over the sweeps
-    (:func:`sot_apps.tracking.track_objects`: the results of :func:`tracker.track` per object, bit for bit,
-    each sweep read and grounded once). A track whose tracking raised raises here."""
-    from ..tracking import ObjectRequest, track_objects
-
-    requests = [ObjectRequest(spec.track_id, spec.boxes[0], int(spec.frames[0]), int(spec.frames[-1]))
-                for spec in specs]
-    outcomes, _ = track_objects(source, requests, config, mode="online", detections=detections, min_points=None)
-    for outcome in outcomes:
-        if outcome.result is None:
-            raise RuntimeError(f"track {outcome.object_id}: {outcome.error}")
-    return [outcome.result for outcome in outcomes]
-
-
-def evaluate(sequence: LidarSequence, track_ids: Sequence[str] | None = None, presets: Sequence[str] = ("full",),
-             offline: bool = False, seeds: Sequence[int] = (0,), config: EvalConfig = EvalConfig(),
-             end_frame: int | None = None, progress: Callable[[Iterable], Iterable] | None = None,
-             refine: Callable[..., TrackResult] | None = None, with_shape: bool = True,
-             detections: Detections | Callable[[int], Detections] | None = None,
-             lags: Sequence[int] = (), overrides: Mapping[str, Any] | None = None) -> EvalReport:
-    """Evaluate ``presets`` (online, plus fixed-lag rows ``preset+lagN`` for each N in ``lags`` (ms/frame: the
-    online step plus the window solve) and offline-refined rows when ``offline``) on ``track_ids``
-    (default: all moving vehicle tracks). ``refine(source, result, config) -> TrackResult`` overrides the
-    offline refinement (default: :func:`tracker.offline.refine_offline`). ``detections``: per-frame
-    detections for the Det / Det+SOT presets, or a function seed -> detections (e.g. simulated per seed).
-    ``overrides``: TrackerConfig fields replaced in every preset (``sot-apps eval --set``)."""
-    overrides = dict(overrides or {})
-    per_seed: dict[int, Detections | None] = {}
-
-    def detections_for(seed: int) -> Detections | None:
-        if seed not in per_seed:
-            per_seed[seed] = detections(seed) if callable(detections) else detections
-        return per_seed[seed]
-
-    source = CachedSource(sequence)
-    ids = list(track_ids) if track_ids else select_moving_vehicle_tracks(sequence, config, source)
-    if not ids:
-        raise InputError(sequence.root, "no track to evaluate (no moving vehicle track matches the selection)")
-    specs = prepare_tracks(sequence, ids, source, config, end_frame, with_shape)
-    jobs = [(p, s) for p in presets for s in seeds]
-    online: dict[str, list[RunRecord]] = {p: [] for p in presets}
-    moded: dict[str, list[RunRecord]] = {}  # row name (PRESET+lagN, PRESET+offline) -> records
-    tracker_configs: dict[str, dict[str, Any]] = {}
-    for preset, seed in (progress(jobs) if progress else jobs):
-        tconfig = get_preset(preset, seed=int(seed), **overrides)
-        tracker_configs[preset] = get_preset(preset, **overrides).to_dict()
-        for spec, result in zip(specs, _track_all(source, specs, tconfig, detections_for(int(seed))), strict=True):
-            ms = np.array([e.time_ms for e in result.estimates[1:]], dtype=np.float64)
-            online[preset].append(RunRecord(preset, int(seed), spec.track_id, score_result(spec, result, config),
-                                            ms, _flag_counts(result)))
-            for suffix, refined, refined_ms in refined_modes(source, result, tconfig, lags, offline, refine):
-                moded.setdefault(preset + suffix, []).append(RunRecord(
-                    preset + suffix, int(seed), spec.track_id, score_result(spec, refined, config), refined_ms,
-                    _flag_counts(refined)))
-    rows = []
-    for preset in presets:
-        rows.append(_summarise_row(preset, preset, False, seeds, online[preset], specs))
-        for n in lags:
-            rows.append(_summarise_row(f"{preset}+lag{n}", preset, False, seeds, moded[f"{preset}+lag{n}"], specs))
-        if offline:
-            rows.append(_summarise_row(f"{preset}+offline", preset, True, seeds, moded[f"{preset}+offline"], specs))
-    return EvalReport(str(sequence.root), config, specs, rows, tracker_configs)
-
-
 # ---------------------------------------------------------------------------------------------------
 # Tables
 # ---------------------------------------------------------------------------------------------------
-
-def _fmt(value: float, spec: str) -> str:
-    return "—" if value is None or not np.isfinite(value) else format(value, spec)
-
-
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
-    line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
-                                   for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
-    sep = "  ".join("-" * w for w in widths)
-    return "\n".join([line(header), sep] + [line(r) for r in rows])
-
 
 def _metric_cells(m: dict[str, float]) -> list[str]:
     return [_fmt(100 * m["acc"], ".1f"), _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f"),
@@ -420,7 +299,7 @@ def format_report(report: EvalReport, per_track: bool = True) -> str:
     header = ["preset", "Acc", "Rob", "Shape(m)", "Success", "Prec", "CE(m)", "ms/f med", "ms/f mean", "ms/f p90"]
     rows = [[r.name] + _metric_cells(r.pooled) + [_fmt(r.timing["median_ms"], ".1f"), _fmt(r.timing["mean_ms"], ".1f"),
                                                   _fmt(r.timing["p90_ms"], ".1f")] for r in report.rows]
-    out += ["All tracks (pooled over frames; Shape = mean Chamfer over tracks)", _table(header, rows), ""]
+    out += ["All tracks (pooled over frames; Shape = mean Chamfer over tracks)", format_table(header, rows), ""]
     dheader = ["preset"] + [f"{d} {m}" for d in DIFFICULTIES if d in (report.rows[0].by_difficulty if report.rows else {})
                             for m in ("Acc", "Rob", "Shape")]
     drows = []
@@ -432,7 +311,7 @@ def format_report(report: EvalReport, per_track: bool = True) -> str:
                 cells += [_fmt(100 * m["acc"], ".1f"), _fmt(100 * m["rob"], ".1f"), _fmt(m["shape"], ".3f")]
         drows.append(cells)
     out += ["By difficulty (mean GT-box points over the first 10 frames: hard < 38.2 <= medium < 808.3 <= easy)",
-            _table(dheader, drows), ""]
+            format_table(dheader, drows), ""]
     if per_track:
         theader = ["track", "diff", "pts10"] + [r.name for r in report.rows]
         trows = []
@@ -442,7 +321,7 @@ def format_report(report: EvalReport, per_track: bool = True) -> str:
                 m = r.by_track[spec.track_id]
                 cells.append(f"{_fmt(100 * m['acc'], '.1f')}/{_fmt(100 * m['rob'], '.1f')}/{_fmt(m['centre_error'], '.2f')}")
             trows.append(cells)
-        out += ["Per track: Acc / Rob / centre error (m)", _table(theader, trows), ""]
+        out += ["Per track: Acc / Rob / centre error (m)", format_table(theader, trows), ""]
     out.append("Acc, Rob in %; Success, Precision: 100 x AUC; CE: mean 3D centre error; ms/f: tracker time per frame "
                "(frames >= 1, frame 1's wide search included; offline rows add the refinement amortised per frame).")
     return "\n".join(out)

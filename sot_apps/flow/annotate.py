@@ -25,13 +25,12 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from tracker import invert_transform, transform_points
+from tracker import interpolate_pose, invert_transform, transform_points
 
 from ..errors import InputError
 from ..io.atomic import write_bytes, write_json
 from ..io.images import read_color_image
 from ..io.sequence import Camera, Sequence
-from ..objects.trajectory import interpolate_pose
 from .camera import CameraModel
 from .dense import RayCache, dense_flow
 from .flo_io import write_flo

@@ -20,7 +20,7 @@ from tracker import points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence
-from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample
+from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample_means
 from ..objects.selection import DEFAULT_SELECTION
 from ..objects.shapes import ShapeParams, TrackBoxes, box_capture_time, object_points_by_frame
 from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
@@ -148,7 +148,7 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
     for tid, tb in boxes.items():
         size = np.median(np.array([b.size for b in tb.boxes]), axis=0)
         parts = [points[tid][k] for k in sorted(points[tid])]
-        shape = voxel_downsample(np.concatenate(parts) if parts else np.zeros((0, 3)), voxel)
+        shape = voxel_downsample_means(np.concatenate(parts) if parts else np.zeros((0, 3)), voxel)
         out.append(TrackedObject(tid, tracks[tid].label, trajectories[tid], shape,
                                  mesh_for(shape, size, mesh_method, extend_to_ground), size, "annotations"))
     return out

@@ -6,9 +6,9 @@ import math
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
-from tracker.geometry import Box, make_transform, zyx_angles
+from tracker.geometry import Box, interpolate_pose, make_transform, zyx_angles
 
 from ..errors import InputError, not_a_file
 
@@ -72,9 +72,7 @@ def pose_at(times_ns: np.ndarray, poses: np.ndarray, time_ns: int, path: Path, m
     t0, t1 = int(times_ns[i - 1]), int(times_ns[i])
     if t1 - t0 > max_gap_ns:
         raise InputError(path, f"no ego pose within {max_gap_ns * 1e-6:.0f} ms of time {time_ns} ns")
-    alpha = (time_ns - t0) / (t1 - t0)
-    rotation = Slerp([0.0, 1.0], Rotation.from_matrix(poses[i - 1:i + 1, :3, :3]))([alpha]).as_matrix()[0]
-    return make_transform(rotation, (1 - alpha) * poses[i - 1, :3, 3] + alpha * poses[i, :3, 3])
+    return interpolate_pose(times_ns[i - 1:i + 1], poses[i - 1:i + 1], time_ns)
 
 
 def split_selector(path: str | Path) -> tuple[Path, str | None]:

@@ -17,6 +17,7 @@ from tracker.geometry import Box, State
 from ..errors import InputError
 from ..schemas import load_json_validated, validate
 from .atomic import write_json
+from .jsonable import json_safe
 from .ply import read_ply_points, write_ply_points
 
 if TYPE_CHECKING:
@@ -131,7 +132,7 @@ class TrackFile:
             "start_frame": int(self.start_frame), "end_frame": int(self.end_frame),
             "init_box": {"x": b.x, "y": b.y, "z": b.z, "heading": b.heading, "length": b.length, "width": b.width,
                          "height": b.height},
-            "config": _plain(self.config), "shape": self.shape,
+            "config": json_safe(self.config), "shape": self.shape,
             "frames": [r.to_json() for r in self.frames],
         })
         return out
@@ -145,21 +146,6 @@ class TrackFile:
                    init_box=Box(*(float(b[k]) for k in ("x", "y", "z", "heading", "length", "width", "height"))),
                    config=dict(data["config"]), frames=[FrameRecord.from_json(f) for f in data["frames"]],
                    label=data.get("label"), shape=data.get("shape", "shape.ply"))
-
-
-def _plain(value: Any) -> Any:
-    """Config values as plain JSON types (numpy scalars/arrays, tuples, paths converted)."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    return value
 
 
 def _check_frames(doc: dict[str, Any], path: Path) -> None:

@@ -8,10 +8,11 @@ in KITTI's rectified CAMERA frame (x right, y down, z forward) with the camera a
 rectification: ``x_cam = -y_lidar``, ``y_cam = -z_lidar``, ``z_cam = x_lidar``. ``(x, y, z)`` is the centre
 of the box's BOTTOM face (``y_cam = -(z_centre - h/2)``), ``rotation_y = -heading - pi/2`` (wrapped; the
 rotation about the camera's y axis, 0 = facing camera x), ``alpha = rotation_y - atan2(x, z)``. No image
-exists, so the 2D box is written as ``-1 -1 -1 -1``. ``truncated`` and ``occluded`` say what the LiDAR saw
-(``sot_apps.lidar_sim.visibility``: share of the box outside the field of view; KITTI occlusion level from the
-share of its unoccluded returns it got); a vehicle with no return is left out of the labels (``boxes.json``
-keeps it with ``"visible": false``). ``.bin`` is KITTI's Velodyne layout: float32 x, y, z, intensity (intensity in [0, 1]).
+exists, so the 2D box is written as ``-1 -1 -1 -1``. KITTI labels have no roll or pitch: a tilted vehicle's
+label is its level box (``boxes.json`` keeps ``roll`` and ``pitch``). ``truncated`` and ``occluded`` say what
+the LiDAR saw (``sot_apps.lidar_sim.visibility``: share of the box outside the field of view; KITTI occlusion
+level from the share of its unoccluded returns it got); a vehicle with no return is left out of the labels
+(``boxes.json`` keeps it with ``"visible": false``). ``.bin`` is KITTI's Velodyne layout: float32 x, y, z, intensity (intensity in [0, 1]).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from tracker import Box, wrap_angle
 
 from ..io.atomic import write_bytes, write_json, write_npz, write_text
 from ..io.ply import write_ply_points
-from ..sensor.scan import Scan, range_image
+from ..sensor.scan import Scan
 from .visibility import Visibility
 
 __all__ = ["write_scan_npz", "write_bin", "write_pcd", "write_ply", "kitti_label_lines", "write_boxes",
@@ -98,12 +99,8 @@ def write_boxes(out_dir: Path, boxes: list[Box], labels: list[str], bank_ids: li
     (the vehicles that got returns)."""
     doc = {"version": 1, "frame": "sensor", "boxes": [
         {"index": i, "bank_id": b_id, "label": lab, "x": b.x, "y": b.y, "z": b.z, "heading": b.heading,
-         "length": b.length, "width": b.width, "height": b.height, **v.to_json()}
+         "length": b.length, "width": b.width, "height": b.height, "roll": b.roll, "pitch": b.pitch, **v.to_json()}
         for i, (b, lab, b_id, v) in enumerate(zip(boxes, labels, bank_ids, visibility, strict=True))]}
     write_json(out_dir / "boxes.json", doc)
     lines = kitti_label_lines(boxes, labels, visibility)
     write_text(out_dir / "labels_kitti.txt", "\n".join(lines) + ("\n" if lines else ""))
-
-
-def range_image_of(scan: Scan) -> np.ndarray:
-    return range_image(scan)

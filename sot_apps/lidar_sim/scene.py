@@ -32,7 +32,7 @@ from ..sensor.model import Sensor, load_sensor
 from ..sensor.noise import Realism
 from ..sensor.occlusion import OCCLUDER_MARGIN_M, angular_tolerance, blocked_by_real
 from ..sensor.scan import Scan, SimObject, Trajectory, simulate_scan
-from .visibility import Visibility, vehicle_visibility
+from .visibility import Visibility, placed_vertices, vehicle_visibility
 
 __all__ = ["SceneObject", "SceneSpec", "SimResult", "load_scene", "overlapping_objects", "random_scene", "simulate_scene",
            "insert_into_background", "OCCLUDER_MARGIN_M"]
@@ -47,6 +47,8 @@ class SceneObject:
     heading: float
     label: str | None = None
     reflectivity: float = 0.5
+    roll: float = 0.0
+    pitch: float = 0.0
 
 
 @dataclass
@@ -58,7 +60,8 @@ class SceneSpec:
 
     def to_json(self) -> dict:
         return {"version": 1, "sensor": self.sensor.name, "ground_z": self.ground_z,
-                "objects": [{"bank_id": o.bank_id, "x": o.x, "y": o.y, "z": o.z, "heading": o.heading}
+                "objects": [{"bank_id": o.bank_id, "x": o.x, "y": o.y, "z": o.z, "heading": o.heading,
+                             **({"roll": o.roll, "pitch": o.pitch} if o.roll or o.pitch else {})}
                             for o in self.objects]}
 
 
@@ -88,11 +91,13 @@ def load_scene(path: str | Path) -> SceneSpec:
     realism_doc = doc.get("realism", {})
     realism = Realism(motion_distortion=False, **realism_doc)
     objects = [SceneObject(o["bank_id"], float(o["x"]), float(o["y"]), None if o.get("z") is None else float(o["z"]),
-                           float(o["heading"]), o.get("label"), float(o.get("reflectivity", 0.5)))
+                           float(o["heading"]), o.get("label"), float(o.get("reflectivity", 0.5)),
+                           float(o.get("roll", 0.0)), float(o.get("pitch", 0.0)))
                for o in doc["objects"]]
     from ..io.bounds import check_coordinates
 
-    check_coordinates([[o.x, o.y, 0.0 if o.z is None else o.z, o.heading] for o in objects], path, "object")
+    check_coordinates([[o.x, o.y, 0.0 if o.z is None else o.z, o.heading, o.roll, o.pitch] for o in objects], path,
+                      "object")
     if doc.get("ground_z") is not None:
         check_coordinates([doc["ground_z"]], path, "ground_z")
     return SceneSpec(sensor, doc.get("ground_z"), objects, realism)
@@ -176,9 +181,9 @@ def _placed_objects(spec: SceneSpec, bank: Bank, background_xyz: np.ndarray | No
         z = o.z
         if z is None:
             z = _local_ground(background_xyz, o.x, o.y, max(length, width) / 2 + 1.5, spec.ground_z) + height / 2
-        sims.append(SimObject(vertices, faces, Trajectory.static(o.x, o.y, z, o.heading), instance=i,
+        sims.append(SimObject(vertices, faces, Trajectory.static(o.x, o.y, z, o.heading, o.roll, o.pitch), instance=i,
                               reflectivity=o.reflectivity, name=o.bank_id))
-        boxes.append(Box(o.x, o.y, z, o.heading, length, width, height))
+        boxes.append(Box(o.x, o.y, z, o.heading, length, width, height, o.roll, o.pitch))
         labels.append(o.label or entry.label or "Car")
     return sims, boxes, labels
 
@@ -205,9 +210,7 @@ def insert_into_background(spec: SceneSpec, bank: Bank, background_xyz: np.ndarr
     vehicles, boxes, labels = _placed_objects(spec, bank, bg)
     scene = RaycastScene()
     for v in vehicles:
-        x, y, z, h = v.trajectory.states[0]
-        c, s = math.cos(h), math.sin(h)
-        scene.add_mesh(v.vertices @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + [x, y, z], v.faces)
+        scene.add_mesh(placed_vertices(v), v.faces)
     rng_bg = np.linalg.norm(bg, axis=1)
     valid = rng_bg > 1e-6
     dirs = np.zeros_like(bg)

@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,15 +53,15 @@ def occlusion_level(visible_share: float) -> int:
     return 1 if visible_share >= PARTLY_VISIBLE_SHARE else 2
 
 
-def _placed_vertices(obj: SimObject) -> np.ndarray:
-    x, y, z, h = obj.trajectory.states[0]
-    c, s = math.cos(h), math.sin(h)
-    return obj.vertices @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T + [x, y, z]
+def placed_vertices(obj: SimObject) -> np.ndarray:
+    """The vertices of a static object at its pose (heading, roll and pitch)."""
+    world_from_object = obj.trajectory.poses_at(int(obj.trajectory.times_ns[0]))
+    return np.asarray(obj.vertices, dtype=np.float64) @ world_from_object[:3, :3].T + world_from_object[:3, 3]
 
 
 def _expected_points(sensor: Sensor, obj: SimObject) -> int:
     dirs, _, _ = sensor.ray_grid()
-    vertices = _placed_vertices(obj)
+    vertices = placed_vertices(obj)
     centre = vertices.mean(axis=0)
     radius = float(np.linalg.norm(vertices - centre, axis=1).max())
     t = dirs @ centre
@@ -78,8 +77,7 @@ def _expected_points(sensor: Sensor, obj: SimObject) -> int:
 def _truncated(sensor: Sensor, box: Box) -> float:
     g = (np.arange(6) + 0.5) / 6 - 0.5
     local = np.stack(np.meshgrid(g * box.length, g * box.width, g * box.height, indexing="ij"), -1).reshape(-1, 3)
-    c, s = math.cos(box.heading), math.sin(box.heading)
-    pts = local @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T + [box.x, box.y, box.z]
+    pts = local @ box.rotation().T + box.center
     rng = np.linalg.norm(pts, axis=1)
     elevation = np.degrees(np.arcsin(np.clip(pts[:, 2] / np.maximum(rng, 1e-9), -1.0, 1.0)))
     el = np.asarray(sensor.elevations_deg, dtype=np.float64)

@@ -33,6 +33,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from tracker import rotation_z, rotation_zyx
+
 from ..io.atomic import atomic_path
 from ..io.sequence import Sequence
 from ..objects.smoother import Kinematics
@@ -148,14 +150,19 @@ class _Writer:
             if not k.valid[i]:
                 continue
             position = m.Vector3(x=float(k.x[i]), y=float(k.y[i]), z=float(k.z[i]))
-            orientation = _quat_z(m, float(k.heading[i]))
+            if k.tilts is None:
+                orientation = _quat_z(m, float(k.heading[i]))
+                rotation = rotation_z(float(k.heading[i]))
+            else:   # a box that is not level in the world keeps its roll and pitch
+                rotation = rotation_zyx(float(k.heading[i]), float(k.tilts[i, 1]), float(k.tilts[i, 0]))
+                orientation = _quat_matrix(m, rotation)
             pose = m.Pose(position=position, orientation=orientation)
             transforms.append(m.FrameTransform(timestamp=ts, parent_frame_id=WORLD_FRAME,
                                                child_frame_id=object_frame(oid), translation=position,
                                                rotation=orientation))
-            c, s = np.cos(k.heading[i]), np.sin(k.heading[i])
-            body_vx = float(c * k.velocity_x[i] + s * k.velocity_y[i])   # velocity in the object frame
-            body_vy = float(-s * k.velocity_x[i] + c * k.velocity_y[i])
+            # velocity (world x, y; no vertical component) and yaw rate (about world z) in the object frame
+            body_v = rotation.T @ [float(k.velocity_x[i]), float(k.velocity_y[i]), 0.0]
+            body_w = rotation.T @ [0.0, 0.0, float(k.yaw_rate[i])]
             pos_var = float(k.position_std[i]) ** 2 / 2.0
             pose_cov = [0.0] * 36
             pose_cov[0] = pose_cov[7] = pos_var
@@ -164,8 +171,8 @@ class _Writer:
             vel_cov[0] = float(k.speed_std[i]) ** 2
             vel_cov[35] = float(k.yaw_rate_std[i]) ** 2
             odom = m.Odometry(timestamp=ts, frame_id=WORLD_FRAME, body_frame_id=object_frame(oid), pose=pose,
-                              linear_velocity=m.Vector3(x=body_vx, y=body_vy, z=0.0),
-                              angular_velocity=m.Vector3(x=0.0, y=0.0, z=float(k.yaw_rate[i])),
+                              linear_velocity=m.Vector3(x=float(body_v[0]), y=float(body_v[1]), z=float(body_v[2])),
+                              angular_velocity=m.Vector3(x=float(body_w[0]), y=float(body_w[1]), z=float(body_w[2])),
                               pose_covariance=pose_cov, velocity_covariance=vel_cov)
             self._log(self.pose[oid], f"/objects/{oid}/pose", odom, t_ns)
             entities.append(self._entity(k, i, ts, pose))

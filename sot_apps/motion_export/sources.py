@@ -68,7 +68,8 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
     """Ground-truth tracks of ``sequence`` (all, or those whose ids start with ``track_ids``).
 
     Frames inside an annotated span where the box is missing are kept as invalid frames (flag
-    "not_annotated"). The size is the per-dimension median over the annotated boxes.
+    "not_annotated"). The size is the per-dimension median over the annotated boxes. Boxes that are not level
+    in the world (AV2, Waymo, nuScenes) keep their roll and pitch (``ObjectTrack.tilts``).
     """
     annotated = sequence.tracks()
     if not annotated:
@@ -81,6 +82,7 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
         frames = np.arange(first, last + 1)
         by_frame = dict(zip(ann.frames, ann.boxes, strict=True))
         states = np.full((len(frames), 4), np.nan)
+        tilts = np.zeros((len(frames), 2))
         valid = np.zeros(len(frames), dtype=bool)
         flags: list[list[str]] = []
         for i, k in enumerate(frames):
@@ -89,6 +91,7 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
                 flags.append(["not_annotated"])
                 continue
             states[i] = [box.x, box.y, box.z, box.heading]
+            tilts[i] = [box.roll, box.pitch]
             valid[i] = True
             flags.append([])
         sizes = np.array([[b.length, b.width, b.height] for b in ann.boxes])
@@ -96,7 +99,7 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
         out.append(ObjectTrack(object_id=tid, label=ann.label, size=size, frames=frames,
                                timestamps_ns=sequence.timestamps_ns[frames], states=states, valid=valid,
                                flags=flags, source=f"annotations of {sequence.id}",
-                               config={"source": "annotations"}))
+                               config={"source": "annotations"}, tilts=tilts if tilts.any() else None))
     return out
 
 

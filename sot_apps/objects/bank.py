@@ -30,7 +30,6 @@ sequence + track, so the mirrored or re-built copies of one vehicle stay togethe
 from __future__ import annotations
 
 import hashlib
-import json
 import re
 import time
 from dataclasses import asdict, dataclass, field
@@ -44,7 +43,7 @@ from tracker import Box
 from ..errors import InputError
 from ..interrupts import import_trimesh
 from ..io.atomic import write_json
-from ..io.ply import read_ply_mesh, read_ply_points, write_ply_mesh, write_ply_points
+from ..io.ply import read_ply_mesh, write_ply_mesh, write_ply_points
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
 from .meshes import SurfelParams, surfel_mesh
@@ -282,10 +281,6 @@ def is_track_dir(path: Path) -> bool:
     return (path / "track.json").is_file()
 
 
-def load_points_file(path: Path) -> np.ndarray:
-    return read_ply_points(path)
-
-
 def bank_summary_rows(bank: Bank) -> list[list[str]]:
     rows = []
     for e in bank.entries:
@@ -294,7 +289,3 @@ def bank_summary_rows(bank: Bank) -> list[list[str]]:
                      str(e.point_count), f"{e.quality:.2f}", str(e.source.get("kind", "")) + (f" ({e.source['tracker_mode']})" if e.source.get("tracker_mode") else ""),
                      str(e.source.get("sequence", e.source.get("path", ""))), str(e.source.get("track", "-"))])
     return rows
-
-
-def entry_json_text(entry: BankEntry) -> str:
-    return json.dumps(entry.to_json())

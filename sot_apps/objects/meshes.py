@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-__all__ = ["Mesh", "mesh_from_points", "box_mesh", "voxel_downsample", "SurfelParams", "mirror_complete",
+__all__ = ["Mesh", "mesh_from_points", "box_mesh", "voxel_downsample_means", "SurfelParams", "mirror_complete",
            "estimate_normals", "surfel_mesh"]
 
 
@@ -36,7 +36,7 @@ class Mesh:
         return Mesh(v, self.faces)
 
 
-def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
+def voxel_downsample_means(points: np.ndarray, voxel: float) -> np.ndarray:
     """One point per occupied voxel of size ``voxel`` (the mean of the points in it), in a deterministic order."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(points) == 0 or voxel <= 0:
@@ -150,7 +150,7 @@ def surfel_mesh(points: np.ndarray, params: SurfelParams = SurfelParams(), mirro
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if mirror:
         pts = mirror_complete(pts)
-    pts = voxel_downsample(pts, params.voxel)
+    pts = voxel_downsample_means(pts, params.voxel)
     if len(pts) < 3:
         raise ValueError(f"need at least 3 points to mesh, got {len(pts)}")
     normals, spacing = estimate_normals(pts, params.k)

@@ -18,7 +18,7 @@ from typing import Iterable
 
 import numpy as np
 
-from tracker import Box
+from tracker import Box, points_in_box
 
 from .trajectory import EndMode, Trajectory
 
@@ -37,8 +37,9 @@ class BoxMargin:
 
 
 def in_box(local: np.ndarray, size: np.ndarray, margin: BoxMargin = BoxMargin()) -> np.ndarray:
-    """Mask of object-frame points inside the box of ``size`` grown by ``margin``."""
-    return (np.abs(local) <= margin.half(size)).all(axis=1)
+    """Mask of object-frame points inside the box of ``size`` grown by ``margin`` (:func:`tracker.points_in_box`
+    on that box at the object frame's origin)."""
+    return points_in_box(local, Box(0.0, 0.0, 0.0, 0.0, *(2.0 * margin.half(size))))
 
 
 def box_capture_time(frame_time_ns: int, offsets_inside_ns: np.ndarray, min_points: int = 1) -> int:

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker import wrap_angle
+from tracker import ctrv_arc, wrap_angle
 
 __all__ = ["SmootherConfig", "ObjectTrack", "Kinematics", "smooth_track", "ctrv_transition",
            "central_difference_kinematics"]
@@ -85,7 +85,8 @@ class ObjectTrack:
     """Per-frame box states of one object (the smoother's input).
 
     ``states`` (N, 4) WORLD [x, y, z, heading]; ``valid`` (N,) False where the measurement must not
-    be used (``flags[i]`` says why). ``size`` is (length, width, height).
+    be used (``flags[i]`` says why). ``size`` is (length, width, height). ``tilts`` (N, 2) ``[roll, pitch]``
+    of boxes that are not level in the world (None: level); they are carried through, not smoothed.
     """
 
     object_id: str
@@ -99,6 +100,7 @@ class ObjectTrack:
     source: str = ""
     shape_points: np.ndarray | None = None  # (M, 3) object-frame points, optional
     config: dict = field(default_factory=dict)
+    tilts: np.ndarray | None = None         # (N, 2) [roll, pitch]; None: level
 
     def __post_init__(self) -> None:
         self.frames = np.asarray(self.frames, dtype=np.int64).reshape(-1)
@@ -115,6 +117,11 @@ class ObjectTrack:
         if n > 1 and (np.any(np.diff(self.frames) <= 0) or np.any(np.diff(self.timestamps_ns) <= 0)):
             raise ValueError(f"{self.object_id}: frames and timestamps must be strictly increasing")
         self.valid = self.valid & np.isfinite(self.states).all(axis=1)
+        if self.tilts is not None:
+            self.tilts = np.asarray(self.tilts, dtype=np.float64).reshape(-1, 2)
+            if len(self.tilts) != n:
+                raise ValueError(f"{self.object_id}: tilts has {len(self.tilts)} rows for {n} frames")
+            self.valid = self.valid & np.isfinite(self.tilts).all(axis=1)
 
 
 @dataclass
@@ -144,15 +151,10 @@ class Kinematics:
     source: str = ""
     shape_points: np.ndarray | None = None
     config: dict = field(default_factory=dict)
+    tilts: np.ndarray | None = None   # (N, 2) [roll, pitch] of the input boxes (NaN where invalid); None: level
 
     def __len__(self) -> int:
         return len(self.frames)
-
-    @property
-    def signed_speed(self) -> np.ndarray:
-        """Velocity component along the heading (negative when reversing)."""
-        c, s = np.cos(self.heading), np.sin(self.heading)
-        return self.velocity_x * c + self.velocity_y * s
 
     def sample(self, i: int) -> dict:
         """Sample i as plain Python values (None for NaN), for JSON messages."""
@@ -173,30 +175,17 @@ class Kinematics:
         }
 
 
-def _f1_f2(a: float) -> tuple[float, float, float, float]:
-    """f1 = sin(a)/a, f2 = (1 - cos a)/a and their derivatives (series near 0)."""
-    if abs(a) < 1e-3:
-        a2 = a * a
-        return 1.0 - a2 / 6.0, a / 2.0 - a * a2 / 24.0, -a / 3.0 + a * a2 / 30.0, 0.5 - a2 / 8.0
-    s, c = np.sin(a), np.cos(a)
-    return s / a, (1.0 - c) / a, (a * c - s) / (a * a), (a * s - (1.0 - c)) / (a * a)
-
-
 def ctrv_transition(state: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """CTRV prediction of a state over ``dt`` seconds: (next state, Jacobian d next / d state)."""
+    """CTRV prediction of a state over ``dt`` seconds (:func:`tracker.ctrv_arc` along heading + slip, z at
+    constant vertical speed): (next state, Jacobian d next / d state)."""
     x, y, th, v, w, z, vz, beta = state
-    f1, f2, d1, d2 = _f1_f2(w * dt)
-    c, s = np.cos(th + beta), np.sin(th + beta)
-    dx = v * dt * (c * f1 - s * f2)
-    dy = v * dt * (s * f1 + c * f2)
+    (dx, dy), arc = ctrv_arc(th + beta, v, w, dt)
     out = np.array([x + dx, y + dy, th + w * dt, v, w, z + vz * dt, vz, beta])
     F = np.eye(_NX)
-    F[_IX, _ITH] = F[_IX, _IB] = -dy
-    F[_IY, _ITH] = F[_IY, _IB] = dx
-    F[_IX, _IV] = dt * (c * f1 - s * f2)
-    F[_IY, _IV] = dt * (s * f1 + c * f2)
-    F[_IX, _IW] = v * dt * dt * (c * d1 - s * d2)
-    F[_IY, _IW] = v * dt * dt * (s * d1 + c * d2)
+    F[_IX, _ITH] = F[_IX, _IB] = arc[0, 0]
+    F[_IY, _ITH] = F[_IY, _IB] = arc[1, 0]
+    F[_IX, _IV], F[_IY, _IV] = arc[0, 1], arc[1, 1]
+    F[_IX, _IW], F[_IY, _IW] = arc[0, 2], arc[1, 2]
     F[_ITH, _IW] = dt
     F[_IZ, _IVZ] = dt
     return out, F
@@ -267,6 +256,11 @@ def _ekf_rts(t: np.ndarray, meas: np.ndarray, valid: np.ndarray, r_scale: np.nda
     return xs_s, ps_s
 
 
+def _valid_tilts(track: ObjectTrack) -> np.ndarray | None:
+    """The track's [roll, pitch] at its valid frames (NaN elsewhere), or None for a level track."""
+    return None if track.tilts is None else np.where(track.valid[:, None], track.tilts, np.nan)
+
+
 def smooth_track(track: ObjectTrack, config: SmootherConfig = TRACKER_SMOOTHER,
                  measurement_sigma_scale: np.ndarray | None = None) -> Kinematics:
     """Smoothed kinematics of ``track`` at its frame times (see the module docstring)."""
@@ -312,7 +306,8 @@ def smooth_track(track: ObjectTrack, config: SmootherConfig = TRACKER_SMOOTHER,
     return Kinematics(object_id=track.object_id, label=track.label, size=tuple(float(s) for s in track.size),
                       frames=track.frames.copy(), timestamps_ns=track.timestamps_ns.copy(), valid=valid,
                       flags=[list(f) for f in track.flags], source=track.source, shape_points=track.shape_points,
-                      config={**track.config, "smoother": {"model": "CTRV EKF + RTS", **config.to_dict()}}, **out)
+                      config={**track.config, "smoother": {"model": "CTRV EKF + RTS", **config.to_dict()}},
+                      tilts=_valid_tilts(track), **out)
 
 
 def central_difference_kinematics(track: ObjectTrack) -> Kinematics:
@@ -351,4 +346,5 @@ def central_difference_kinematics(track: ObjectTrack) -> Kinematics:
                       x=mask(st[:, 0]), y=mask(st[:, 1]), z=mask(st[:, 2]), heading=mask(wrap_angle(st[:, 3])),
                       velocity_x=vx, velocity_y=vy, speed=speed, acceleration=acc, yaw_rate=w,
                       position_std=nan.copy(), heading_std=nan.copy(), speed_std=nan.copy(), yaw_rate_std=nan.copy(),
-                      source=track.source, config={"smoother": {"model": "central differences"}})
+                      source=track.source, config={"smoother": {"model": "central differences"}},
+                      tilts=_valid_tilts(track))

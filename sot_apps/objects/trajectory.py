@@ -13,7 +13,7 @@ turn the object frame to Rz(heading) Ry(pitch) Rx(roll), as :class:`tracker.Box`
 level in the world (AV2, Waymo, nuScenes on a tilted ego) is placed as the source gave it.
 
 ``max_extrapolation_ns`` (None: unlimited) bounds :meth:`Trajectory.covers` / :meth:`Trajectory.state_at`.
-Camera poses, when a camera only has ego poses, are interpolated on SE(3) (linear translation, slerp rotation).
+Camera poses, when a camera only has ego poses, are interpolated on SE(3) by :func:`tracker.interpolate_pose`.
 """
 
 from __future__ import annotations
@@ -22,11 +22,10 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
-from tracker import make_transform, rotation_zyx
+from tracker import rotation_zyx
 
-__all__ = ["Trajectory", "EndMode", "CAMERA_EXTRAPOLATION_NS", "interpolate_pose", "world_from_object", "wrap_heading"]
+__all__ = ["Trajectory", "EndMode", "CAMERA_EXTRAPOLATION_NS", "world_from_object", "wrap_heading"]
 
 EndMode = Literal["hold", "extrapolate"]
 
@@ -93,9 +92,11 @@ class Trajectory:
         return cls(times_ns, states, end, None if max_extrapolation_ns is None else int(max_extrapolation_ns), tilts)
 
     @classmethod
-    def static(cls, x: float, y: float, z: float, heading: float) -> "Trajectory":
+    def static(cls, x: float, y: float, z: float, heading: float, roll: float = 0.0, pitch: float = 0.0
+               ) -> "Trajectory":
         """A fixed pose (one sample, held at every time)."""
-        return cls(np.zeros(1, dtype=np.int64), np.array([[x, y, z, heading]], dtype=np.float64))
+        return cls(np.zeros(1, dtype=np.int64), np.array([[x, y, z, heading]], dtype=np.float64),
+                   tilts=np.array([[roll, pitch]], dtype=np.float64))
 
     @property
     def is_static(self) -> bool:
@@ -133,6 +134,16 @@ class Trajectory:
         """[x, y, z, heading] at ``time_ns`` (heading unwrapped), or None outside the covered span."""
         return self.states_at(int(time_ns)) if self.covers(time_ns) else None
 
+    def poses_at(self, times_ns: np.ndarray | int) -> np.ndarray:
+        """(..., 4, 4) ``world_from_object`` at the given times, with the tilts (the ``end`` mode outside the
+        samples, no coverage check)."""
+        states = self.states_at(times_ns)
+        out = world_from_object(states)
+        if self.tilts is not None:
+            tilts = self.tilts_at(times_ns)
+            out[..., :3, :3] = rotation_zyx(states[..., 3], tilts[..., 1], tilts[..., 0])
+        return out
+
     def world_from_object_at(self, time_ns: int) -> np.ndarray | None:
         state = self.state_at(time_ns)
         if state is None:
@@ -157,26 +168,3 @@ class Trajectory:
         x = cp * local[:, 0] - sp * local[:, 2]
         z = sp * local[:, 0] + cp * local[:, 2]
         return np.stack([x, cr * local[:, 1] + sr * z, -sr * local[:, 1] + cr * z], axis=1)
-
-    def velocity_at(self, time_ns: int) -> np.ndarray:
-        """d[x, y, z, heading]/dt in units per second, of the segment used at ``time_ns`` (zero when held)."""
-        t = self.times_ns
-        if len(t) == 1 or (self.end == "hold" and not t[0] <= time_ns <= t[-1]):
-            return np.zeros(4)
-        i = int(np.clip(np.searchsorted(t, time_ns) - 1, 0, len(t) - 2))
-        return (self.states[i + 1] - self.states[i]) / ((int(t[i + 1]) - int(t[i])) * 1e-9)
-
-
-def interpolate_pose(times_ns: np.ndarray, target_from_source: np.ndarray, time_ns: int) -> np.ndarray:
-    """SE(3) pose at ``time_ns`` from (N, 4, 4) poses at increasing ``times_ns`` (clamped at the ends)."""
-    times = np.asarray(times_ns, dtype=np.int64)
-    poses = np.asarray(target_from_source, dtype=np.float64)
-    if len(times) == 1:
-        return poses[0].copy()
-    i = int(np.clip(np.searchsorted(times, time_ns) - 1, 0, len(times) - 2))
-    t0, t1 = int(times[i]), int(times[i + 1])
-    alpha = float(np.clip((time_ns - t0) / float(t1 - t0), 0.0, 1.0))
-    slerp = Slerp([0.0, 1.0], Rotation.from_matrix(poses[i:i + 2, :3, :3]))
-    rotation = slerp([alpha]).as_matrix()[0]
-    translation = (1.0 - alpha) * poses[i, :3, 3] + alpha * poses[i + 1, :3, 3]
-    return make_transform(rotation, translation)

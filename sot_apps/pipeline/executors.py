@@ -16,7 +16,7 @@ import traceback
 import uuid
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
@@ -162,6 +162,32 @@ def _worker_init(stop_event=None) -> None:
     _single_threaded_env()
     _stop_event = stop_event
     signal.signal(signal.SIGINT, _worker_sigint)
+
+
+@contextlib.contextmanager
+def _forkserver_method() -> Iterator[None]:
+    """Dask's workers forked from multiprocessing's fork server, started with SIGINT ignored.
+
+    Spawned workers (Dask's default) start a fresh interpreter that installs Python's KeyboardInterrupt handler:
+    a Ctrl-C in their first ~0.1-1 s (start-up, before they import sot_apps.cli.main, which ignores it) printed a
+    traceback, or "Fatal Python error: init_import_site". An ignored signal stays ignored across fork and exec:
+    the fork server is started here (this process ignores Ctrl-C only during that fork and exec) and forks every
+    worker with SIGINT ignored from its first instruction. Without fork servers (Windows), Dask spawns as before;
+    if this process already runs a fork server started otherwise, its workers keep its handler."""
+    import multiprocessing
+    import multiprocessing.forkserver
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        yield
+        return
+    import dask
+    from distributed.utils import get_mp_context
+
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        get_mp_context()   # Dask's preload list for the server (distributed, numpy, ...): workers start faster
+        with sigint_ignored_in_children():
+            multiprocessing.forkserver.ensure_running()
+        yield
 
 
 def _progress(total: int, desc: str, enabled: bool) -> tqdm:
@@ -322,10 +348,10 @@ class ExecutorSession:
                 self._client = Client(self.spec.address)
             else:
                 # a Ctrl-C while the cluster starts is held and delivered once it stands (the session's close
-                # then stops it; ignoring it lost the Ctrl-C for seconds); the spawned workers ignore SIGINT from
-                # their first import of sot_apps.cli.main on (and keep it so: asyncio installs no handler over
-                # an ignored signal), so they print nothing of their own
-                with deferred_interrupt():
+                # then stops it; ignoring it lost the Ctrl-C for seconds); the workers ignore SIGINT from their
+                # first instruction on (_forkserver_method) and keep it so (asyncio installs no handler over an
+                # ignored signal), so they print nothing of their own
+                with deferred_interrupt(), _forkserver_method():
                     self._cluster = LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1,
                                                  processes=True, dashboard_address=None,
                                                  worker_dashboard_address=None,

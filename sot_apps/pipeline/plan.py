@@ -18,7 +18,6 @@ its first annotated frame with enough points and caps the length (``stages.track
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import re
@@ -195,10 +194,6 @@ def make_plan(config: PipelineConfig) -> Plan:
     if dup:
         raise InputError(None, f"two sequences are both named {dup[0]!r}; give each a unique 'name'")
     return Plan(tuple(plans))
-
-
-def plan_json(plan: Plan) -> str:
-    return json.dumps([o.to_json() for o in plan.objects], sort_keys=True)
 
 
 # a tracking task holds at most this many live objects (each keeps its track and, offline, its region points)

@@ -29,7 +29,7 @@ from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
 from .health import health_lines, run_track_health
 from .lock import RunLock
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
-from .plan import Plan, make_plan, open_sequences, safe_name, track_chunks
+from .plan import Plan, make_plan, open_sequences, track_chunks
 
 __all__ = ["UnitRecord", "PipelineResult", "run_pipeline"]
 
@@ -358,7 +358,3 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
                               {"track_health": health, "track_times": track_times})
     return PipelineResult(out, plan, records, time.perf_counter() - t0, manifest, failures_path, stage_seconds,
                           health, track_times)
-
-
-def default_name(path: str) -> str:
-    return safe_name(Path(path).name)

@@ -328,10 +328,3 @@ class BevCanvas:
             text(self.image, s, (x0, y0), 0.4, (110, 110, 110))
             rects.append((x0 - 1, y0 - th - 1, x0 + tw + 1, y0 + 3))
         return rects
-
-    def scale_bar(self, metres: float = 10.0) -> None:
-        h = self.image.shape[0]
-        x = 12
-        length = int(metres * self.scale)
-        cv2.line(self.image, (x, h - 14), (x + length, h - 14), BLACK, 2)
-        text(self.image, f"{metres:g} m", (x, h - 20), 0.45)

@@ -21,7 +21,7 @@ import numpy as np
 
 from tracker import invert_transform
 
-from ..objects.trajectory import Trajectory, world_from_object
+from ..objects.trajectory import Trajectory
 from ..raycast import RaycastScene, RayHits
 from ..raycast.compiled import SweepReturns, compiled_sweep_returns
 from .model import Sensor
@@ -114,8 +114,8 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
     abs_times = frame_time_ns + times  # per column
 
     if isinstance(world_from_sensor, Trajectory):
-        sensor_T_col = world_from_object(world_from_sensor.states_at(abs_times))          # (C, 4, 4)
-        world_from_sensor_frame = world_from_object(world_from_sensor.states_at(frame_time_ns))
+        sensor_T_col = world_from_sensor.poses_at(abs_times)                              # (C, 4, 4)
+        world_from_sensor_frame = world_from_sensor.poses_at(int(frame_time_ns))
     else:
         sensor_T_col = np.broadcast_to(np.asarray(world_from_sensor, dtype=np.float64), (sensor.columns, 4, 4))
         world_from_sensor_frame = np.asarray(world_from_sensor, dtype=np.float64)
@@ -144,7 +144,7 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
         cand = np.flatnonzero(_near_sphere(origins, dirs, centres, o.radius(), sensor.max_range))
         if cand.size == 0:
             continue
-        object_from_world = invert_transform_batch(world_from_object(states_col))[column[cand]]
+        object_from_world = invert_transform_batch(o.trajectory.poses_at(abs_times))[column[cand]]
         o_obj = np.einsum("nij,nj->ni", object_from_world[:, :3, :3], origins[cand]) + object_from_world[:, :3, 3]
         d_obj = np.einsum("nij,nj->ni", object_from_world[:, :3, :3], dirs[cand])
         scene = RaycastScene()
@@ -225,7 +225,7 @@ def build_static_scene(objects: list[SimObject]) -> RaycastScene:
     scene = RaycastScene()
     for o in objects:
         if o.trajectory.is_static:
-            T = world_from_object(o.trajectory.states[0])
+            T = o.trajectory.poses_at(int(o.trajectory.times_ns[0]))
             scene.add_mesh(rotate(T[:3, :3], np.asarray(o.vertices, dtype=np.float64)) + T[:3, 3], o.faces)
     return scene
 

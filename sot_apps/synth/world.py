@@ -38,8 +38,6 @@ run: a few single edge pixels may differ; see ``sot-apps synth --help``).
 from __future__ import annotations
 
 import math
-import os
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -430,13 +428,3 @@ def _write_preview(path: Path, world: World, scan: Scan, info: FrameInfo) -> Non
     ego_from_world = invert_transform(info.world_from_ego)
     boxes = [o.box_at(info.timestamp_ns).transformed(ego_from_world) for o in world.objects]
     write_bev_png(path, scan.xyz, scan.instance, boxes, extent=40.0)
-
-
-def clean_output(out: Path) -> None:
-    """Remove a previous synth output's generated parts (used by the CLI's --overwrite)."""
-    for name in ("points", "gt", "cameras", "sequence.json"):
-        path = out / name
-        if path.is_dir():
-            shutil.rmtree(path)
-        elif path.exists():
-            os.remove(path)

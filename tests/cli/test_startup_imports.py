@@ -41,6 +41,13 @@ def test_help_imports_no_heavy_library(argv):
     assert "usage: sot-apps" in probe["help"]
 
 
+@pytest.mark.parametrize("argv", [["--help"], ["track", "--help"]])
+def test_the_most_used_helps_do_not_load_numpy(argv):
+    """``sot-apps --help`` and ``sot-apps track --help`` build their parsers without numpy (the preset names come
+    from tracker/config.py, whose ground parameters live apart from the ground remover's numpy code)."""
+    assert "numpy" not in _probe(*argv)["modules"]
+
+
 def test_help_texts_are_complete():
     """The fast path (only the named command's module) gives the same help as the full parser."""
     from sot_apps.cli.main import _build_parser, _subcommand_choices, _subcommand_modules

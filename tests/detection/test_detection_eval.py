@@ -40,3 +40,17 @@ def test_identity_coverage_counts_one_track_per_object():
     split = {"t1a": {k: gt[k].boxes[0] for k in (0, 1)}, "t1b": {k: gt[k].boxes[0] for k in (2, 3)},
              "t2": whole["t2"]}
     assert identity_coverage(split, gt)["coverage"] == (2 + 4) / 8
+
+
+def test_operating_point_counts_confident_detections_within_range():
+    from sot_apps.evaluation.detection import operating_point
+
+    gt = {0: GroundTruthFrame(CARS, np.array([60, 10]), np.zeros(2), ("a", "b"))}   # b has too few points
+    fp = [[20.0, -8.0, 1.0, 0.0, 4.5, 1.9, 1.6]]
+    far = [[50.0, 0.0, 1.0, 0.0, 4.5, 1.9, 1.6]]
+    dets = {0: FrameDetections(np.vstack([CARS, fp, far, CARS[:1]]), np.array([0.9, 0.8, 0.7, 0.9, 0.3]))}
+    point = operating_point(dets, gt)
+    # recall: only car a counts (>= 50 points); precision: a and b matched, the fp not; far (50 m) and the
+    # low-scored duplicate are not counted
+    assert point["n_gt"] == 1 and point["recall"] == 1.0
+    assert point["n_det"] == 3 and abs(point["precision"] - 2 / 3) < 1e-9

@@ -60,3 +60,17 @@ def test_detect_simulated_and_evaluate(tiny_dir, tmp_path, capsys):
     # clean simulated detections are the ground truth: AP 100 wherever there is ground truth
     row = next(line for line in out.splitlines() if line.startswith("| BEV @ 0.7"))
     assert all(cell.strip().startswith(("100.0", "—")) for cell in row.split("|")[2:-1])
+
+
+def test_detect_frames_and_operating_point(tiny_dir, tmp_path, capsys):
+    n = len(open_sequence(tiny_dir))
+    assert main(["detect", str(tiny_dir), "--simulate", "clean", "--frames", f"0:{n}:2", "--out",
+                 str(tmp_path / "sim.json"), "--evaluate"]) == 0
+    out = capsys.readouterr().out
+    assert "precision 1.00" in out                       # clean detections are the ground truth
+    frames = [f["frame"] for f in json.loads((tmp_path / "sim.json").read_text())["frames"]]
+    assert frames and all(k % 2 == 0 for k in frames)
+    assert main(["detect", str(tiny_dir), "--simulate", "clean", "--frames", f"{n + 5}", "--evaluate"]) == 2
+    with pytest.raises(SystemExit) as bad:          # argparse: one line, exit 2
+        main(["detect", str(tiny_dir), "--simulate", "clean", "--frames", "a:b", "--evaluate"])
+    assert bad.value.code == 2

@@ -126,3 +126,34 @@ def test_spawned_workers_of_the_console_script_are_not_the_program(tmp_path):
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, env=ENV)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "True (False, False)"
+
+
+DASK_WORKERS = textwrap.dedent("""
+    import os, signal, sys
+    from sot_apps.pipeline.executors import ExecutorSession, ExecutorSpec
+
+    def ignored(pid):   # SIGINT in the process's ignored-signal mask (/proc/PID/status SigIgn)
+        line = next(l for l in open(f"/proc/{pid}/status") if l.startswith("SigIgn:"))
+        return bool(int(line.split()[1], 16) & (1 << (signal.SIGINT - 1)))
+
+    def probe():
+        parent = open(f"/proc/{os.getppid()}/cmdline", "rb").read()
+        return ignored(os.getpid()), b"forkserver" in parent, ignored(os.getppid())
+
+    if __name__ == "__main__":
+        with ExecutorSession(ExecutorSpec("dask", workers=2)) as session:
+            print(sorted(session.on_every_worker(probe)), ignored(os.getpid()))
+""")
+
+
+def test_dask_workers_ignore_sigint_from_their_first_instruction(tmp_path):
+    """Issue 26 gap: a Ctrl-C in a Dask worker's first ~0.1-1 s (interpreter start-up, before it imported
+    sot_apps.cli.main) printed a KeyboardInterrupt traceback or "Fatal Python error: init_import_site". The
+    workers are now forked by a fork server that was started with SIGINT ignored, so they ignore it from the
+    start; the command itself still handles Ctrl-C."""
+    script = tmp_path / "dask_workers.py"
+    script.write_text(DASK_WORKERS)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, env=ENV,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[(True, True, True), (True, True, True)] False", done.stdout

@@ -22,10 +22,12 @@ from sot_apps.objects.bank import (
     read_bank,
     write_bank_index,
 )
+from sot_apps.objects.trajectory import Trajectory
 from sot_apps.sensor.model import PRESETS
 from sot_apps.sensor.noise import Realism
+from sot_apps.sensor.scan import SimObject, simulate_scan
 from sot_apps.synth import make_world, write_world
-from tracker.geometry import Box
+from tracker.geometry import Box, transform_points
 
 BOX_SIZE = (4.0, 2.0, 1.6)
 
@@ -223,3 +225,41 @@ def test_labels_say_what_the_sensor_saw(box_bank, tmp_path):
     assert len(lines) == 3
     assert [int(line.split()[2]) for line in lines] == [boxes[i]["occluded"] for i in (0, 2, 3)]
     assert all(float(line.split()[1]) == boxes[i]["truncated"] for line, i in zip(lines, (0, 2, 3), strict=True))
+
+
+def _on_box_surface(points: np.ndarray, box: Box, tol: float = 2e-3) -> tuple[np.ndarray, np.ndarray]:
+    """(inside the box within tol, on one of its faces within tol) per point, in the box's object frame."""
+    local = np.abs(transform_points(box.object_from_world(), points.astype(np.float64)))
+    half = box.size / 2.0
+    return (local <= half + tol).all(axis=1), (np.abs(local - half) < tol).any(axis=1)
+
+
+def test_tilted_scene_vehicle_returns_lie_on_the_tilted_box(box_bank, tmp_path):
+    """A scene vehicle with roll and pitch is ray cast tilted: every return lies on the faces of its tilted box
+    (boxes.json keeps the tilt), and not all of them inside the level box of the same centre and heading."""
+    scene = {"sensor": "pandar64", "ground_z": None, "realism": {"range_noise": False, "drop_random": 0.0},
+             "objects": [{"bank_id": box_bank.entries[0].id, "x": 9.0, "y": 2.0, "z": -0.6, "heading": 0.4,
+                          "roll": 0.25, "pitch": -0.3}]}
+    (tmp_path / "scene.json").write_text(json.dumps(scene))
+    out = tmp_path / "sim"
+    assert main(["simulate-lidar", "--bank", str(box_bank.root), "--scene", str(tmp_path / "scene.json"),
+                 "--out", str(out), "--format", "bin"]) == 0
+    xyz = np.load(out / "scan.npz")["xyz"]
+    written = json.loads((out / "boxes.json").read_text())["boxes"][0]
+    assert (written["roll"], written["pitch"]) == (0.25, -0.3)
+    tilted = Box(9.0, 2.0, -0.6, 0.4, *BOX_SIZE, roll=0.25, pitch=-0.3)
+    inside, on_face = _on_box_surface(xyz, tilted)
+    assert len(xyz) > 200 and inside.all() and on_face.all()
+    assert not _on_box_surface(xyz, Box(9.0, 2.0, -0.6, 0.4, *BOX_SIZE))[0].all()
+
+
+def test_moving_tilted_object_is_cast_tilted(box_bank):
+    """The moving-object path (a trajectory of several samples) places the mesh with its roll and pitch too."""
+    vertices, faces = box_bank.mesh(box_bank.entries[0].id)
+    pose = [8.0, -3.0, -0.5, -0.6]
+    trajectory = Trajectory.from_samples([0, 100_000_000], [pose, pose], tilts=[[-0.2, 0.35], [-0.2, 0.35]])
+    assert not trajectory.is_static
+    scan = simulate_scan(PRESETS["pandar64"], [SimObject(vertices, faces, trajectory, instance=0)], np.eye(4),
+                         realism=Realism.ideal())
+    inside, on_face = _on_box_surface(scan.xyz, Box(*pose, *BOX_SIZE, roll=-0.2, pitch=0.35))
+    assert len(scan.xyz) > 200 and inside.all() and on_face.all()

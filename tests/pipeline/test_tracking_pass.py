@@ -130,9 +130,10 @@ def test_ground_masks_stored_in_the_sweep_cache_give_the_same_tracks(tiny_worlds
 
 
 def test_eval_tracks_every_object_in_one_pass_as_each_alone(tiny_worlds, monkeypatch):
-    """``sot-apps eval`` (evaluation.tracker.evaluate) scores, per preset and seed, the tracks of one pass over the
+    """``sot-apps eval`` (bench.sequence_eval.evaluate) scores, per preset and seed, the tracks of one pass over the
     sweeps; each is the track ``tracker.track`` gives from the object's first annotated box."""
     import sot_apps.evaluation.tracker as evaluation
+    from sot_apps.bench.sequence_eval import evaluate
     from sot_apps.io.cached_source import CachedSource
 
     seq = open_sequence(tiny_worlds[1])
@@ -144,7 +145,7 @@ def test_eval_tracks_every_object_in_one_pass_as_each_alone(tiny_worlds, monkeyp
     reads: list[int] = []
     loader = seq.lidar_frame
     seq.lidar_frame = lambda k: reads.append(k) or loader(k)
-    report = evaluation.evaluate(seq, ids, presets=("full",), seeds=(0, 1), end_frame=5, with_shape=False)
+    report = evaluate(seq, ids, presets=("full",), seeds=(0, 1), end_frame=5, with_shape=False)
     seq.lidar_frame = loader
     assert len(reads) == len(set(reads))                 # every sweep read once (two seeds: the source keeps them)
     assert [spec.track_id for spec, _ in scored] == ids * 2 and len(report.rows) == 1

@@ -138,3 +138,51 @@ def test_trajectories_place_tilted_boxes_as_given(readers_root):
     assert level.tilts is None
     np.testing.assert_array_equal(level.world_from_object_at(5), Trajectory.from_samples(
         [0, 10], [[0, 0, 0, 0.1], [1, 0, 0, 0.2]]).world_from_object_at(5))
+
+
+def test_motion_export_from_av2_annotations_keeps_the_tilt(readers_root, tmp_path):
+    """``motion-export --from-annotations`` on an AV2 log, read back with the mcap reader: every object transform
+    and box marker has the roll and pitch of the sequence's box at that frame, and the smoothed heading of the
+    object's kinematics message (the MCAP wrote level boxes before)."""
+    import json
+
+    from mcap.decoder import DecoderFactory as McapDecoderFactory
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+    from scipy.spatial.transform import Rotation as R
+
+    from sot_apps.cli.main import main
+
+    class JsonDecoderFactory(McapDecoderFactory):
+        def decoder_for(self, message_encoding, schema):
+            return (lambda data: json.loads(data)) if message_encoding == "json" else None
+
+    seq = open_sequence(AV2_LOG_A)
+    tracks = seq.tracks()
+    ids = sorted((t for t in tracks if tracks[t].label in ("REGULAR_VEHICLE", "BOX_TRUCK", "BUS")),
+                 key=lambda t: (-len(tracks[t].frames), t))[:3]
+    assert main(["motion-export", str(AV2_LOG_A), "--from-annotations", "--track-id", *ids,
+                 "--out", str(tmp_path / "gt.mcap"), "--quiet"]) == 0
+    frame_of = {int(f.timestamp_ns): f.index for f in seq.frames}
+    boxes = {(k, tid): box for tid in ids for k, box in zip(tracks[tid].frames, tracks[tid].boxes, strict=True)}
+    orientations, headings = [], {}
+    with open(tmp_path / "gt.mcap", "rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
+        for _, channel, message, decoded in reader.iter_decoded_messages():
+            k = frame_of[message.log_time]
+            if channel.topic == "/tf":
+                orientations += [(k, t.child_frame_id.removeprefix("object/"), t.rotation) for t in decoded.transforms
+                                 if t.child_frame_id.startswith("object/")]
+            elif channel.topic == "/markers/objects":
+                orientations += [(k, e.id, e.cubes[0].pose.orientation) for e in decoded.entities]
+            elif channel.topic.endswith("/kinematics"):
+                headings[(k, decoded["object_id"])] = decoded["heading"]
+    assert len(orientations) == 2 * len(boxes) and len(headings) == len(boxes)
+    tilt = 0.0
+    for k, tid, q in orientations:
+        box = boxes[(k, tid)]
+        heading, pitch, roll = zyx_angles(R.from_quat([q.x, q.y, q.z, q.w]).as_matrix())
+        assert (roll, pitch) == pytest.approx((box.roll, box.pitch), abs=1e-9)
+        assert math.remainder(heading - headings[(k, tid)], 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+        tilt = max(tilt, abs(box.roll) + abs(box.pitch))
+    assert tilt > 0.01

@@ -4,8 +4,9 @@
 
 ``python tests/tracker/golden_boxes.py`` writes tests/tracker/golden/dev_tracks_boxes.npz (made with the code
 before the configuration was nested; tests/tracker/test_golden_boxes.py checks that today's code gives the same
-boxes). The file holds, per (preset, seed, track): the (K, 7) float64 boxes x, y, z, heading, l, w, h, and the
-flags of each frame joined by ',' (a fixed-width unicode array).
+boxes); ``python tests/tracker/golden_boxes.py full`` remakes only the named presets' entries (a preset that was
+changed on purpose) and keeps the others' as they are. The file holds, per (preset, seed, track): the (K, 7)
+float64 boxes x, y, z, heading, l, w, h, and the flags of each frame joined by ',' (a fixed-width unicode array).
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ def track_boxes(source, tracks, preset: str, seed: int, track_ids=None) -> dict[
     return out
 
 
-def main() -> int:
+def main(presets: list[str]) -> int:
     from sot_apps.evaluation.tracker import CachedSource
     from sot_apps.io import open_sequence
 
@@ -62,7 +63,10 @@ def main() -> int:
     source = CachedSource(sequence)
     tracks = dev_tracks(sequence)
     arrays: dict[str, np.ndarray] = {"track_ids": np.array([t[0] for t in tracks])}
-    for preset in PRESETS:
+    if presets:  # keep the other presets' entries
+        with np.load(GOLDEN) as old:
+            arrays.update({k: old[k] for k in old.files if k.split("/")[0] not in presets and k != "track_ids"})
+    for preset in presets or PRESETS:
         for seed in SEEDS:
             for k, (boxes, flags) in track_boxes(source, tracks, preset, seed).items():
                 arrays[k + "/boxes"] = boxes
@@ -75,4 +79,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main([p for p in sys.argv[1:] if p in PRESETS]))

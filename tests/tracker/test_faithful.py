@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from tracker_synthetic import car_points, ground_points
 
+from sot_apps.bench.reference import compare_with_reference
 from sot_apps.errors import InputError
-from sot_apps.evaluation.reference import compare_with_reference, load_reference
+from sot_apps.evaluation.reference import load_reference
 from tracker.config import TrackerConfig, get_preset
 from tracker.finder import finder_icp, resample
 from tracker.geometry import Box

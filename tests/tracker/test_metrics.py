@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, HalfspaceIntersection
 
-from tracker.geometry import Box
+from tracker.geometry import Box, make_transform, points_in_box, rotation_zyx, transform_points
 from tracker.metrics import (
     PooledMetrics,
     accuracy,
@@ -143,6 +143,102 @@ def test_iou_batch_matches_single_and_is_symmetric():
     np.testing.assert_allclose(batch, single, atol=1e-12)
     np.testing.assert_allclose(batch, iou_3d_batch(b, a), atol=1e-12)
     assert np.all((batch >= 0) & (batch <= 1))
+
+
+# --------------------------------------------------------------------------- IoU of tilted boxes (roll, pitch)
+
+def _halfspace_volume(a: Box, b: Box) -> float:
+    """Intersection volume of two boxes via scipy's half-space intersection (an independent method)."""
+    halfspaces = []
+    for box in (a, b):
+        r = box.rotation()
+        for axis in range(3):
+            for sign in (1.0, -1.0):
+                normal = sign * r[:, axis]
+                halfspaces.append([*normal, -(normal @ box.center) - box.size[axis] / 2.0])
+    hs = np.array(halfspaces)
+    norms = np.linalg.norm(hs[:, :3], axis=1)
+    lp = linprog([0, 0, 0, -1], A_ub=np.c_[hs[:, :3], norms], b_ub=-hs[:, 3],
+                 bounds=[(None, None)] * 3 + [(0, None)])
+    if lp.x is None or lp.x[3] < 1e-9:
+        return 0.0
+    return float(ConvexHull(HalfspaceIntersection(hs, lp.x[:3]).intersections).volume)
+
+
+def _random_tilted(rng: np.random.Generator, n: int, tilt: float) -> list[Box]:
+    return [Box(*rng.normal(0, 0.6, 3), rng.uniform(-np.pi, np.pi), *rng.uniform(1, 4, 3), *rng.uniform(-tilt, tilt, 2))
+            for _ in range(n)]
+
+
+def test_tilted_box_against_itself_is_one():
+    box = Box(3.0, -2.0, 0.8, 0.7, 4.5, 1.9, 1.6, roll=0.2, pitch=-0.3)
+    assert iou_3d(box, box) == pytest.approx(1.0, abs=1e-12)
+    # the same solid described with heading + pi, roll and pitch negated
+    same = Box(3.0, -2.0, 0.8, 0.7 + math.pi, 4.5, 1.9, 1.6, roll=-0.2, pitch=0.3)
+    np.testing.assert_allclose(same.corners()[np.lexsort(same.corners().T)],
+                               box.corners()[np.lexsort(box.corners().T)], atol=1e-12)
+    assert iou_3d(box, same) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_cube_pitched_or_rolled_by_45_degrees():
+    """A 2 m cube against itself pitched (or rolled) by 45 deg about its centre: the section across the
+    rotation axis is the square-and-rotated-square octagon of the level case, so IoU = 1/sqrt(2)."""
+    level = Box(5.0, 7.0, 1.0, 0.3, 2.0, 2.0, 2.0)
+    for tilt in ({"pitch": math.pi / 4}, {"roll": math.pi / 4}):
+        tilted = Box(5.0, 7.0, 1.0, 0.3, 2.0, 2.0, 2.0, **tilt)
+        assert iou_3d(level, tilted) == pytest.approx(1 / math.sqrt(2), abs=1e-12)
+
+
+def test_iou_is_invariant_under_a_tilting_rigid_motion():
+    """Level pairs of known IoU moved by one rigid transform with roll and pitch keep their IoU."""
+    world_from_box = make_transform(rotation_zyx(0.9, 0.35, -0.25), [12.0, -4.0, 2.5])
+    pairs = [(Box(0.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5), Box(1.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5), 9.0 / 15.0),
+             (Box(0.0, 0.0, 1.0, 0.0, 4.0, 2.0, 2.0), Box(0.0, 0.0, 0.25, 0.0, 4.0, 2.0, 1.0), 1.0 / 3.0),
+             (Box(0.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.0), Box(0.0, 0.0, 0.0, math.pi / 2, 4.0, 2.0, 1.0), 1.0 / 3.0),
+             (Box(0, 0, 0, 0, 4, 2, 1), Box(4, 0, 0, 0, 4, 2, 1), 0.0)]
+    for a, b, expected in pairs:
+        ta, tb = a.transformed(world_from_box, keep_tilt=True), b.transformed(world_from_box, keep_tilt=True)
+        assert not ta.is_level
+        assert iou_3d(ta, tb) == pytest.approx(expected, abs=1e-12)
+        assert iou_3d_batch(np.array([[*ta.to_array(), ta.roll, ta.pitch]]),
+                            np.array([[*tb.to_array(), tb.roll, tb.pitch]]))[0] == pytest.approx(expected, abs=1e-12)
+
+
+def test_tilted_iou_matches_halfspace_intersection_and_sampling():
+    """Random tilted pairs: the volume behind the IoU equals scipy's half-space intersection; and, for a few,
+    the share of points sampled uniformly in box a that lie in box b (points_in_box) times V_a."""
+    rng = np.random.default_rng(11)
+    a, b = _random_tilted(rng, 60, 0.7), _random_tilted(rng, 60, 0.7)
+    got = iou_3d_batch(a, b)
+    inter = np.array([_halfspace_volume(x, y) for x, y in zip(a, b, strict=True)])
+    va, vb = np.array([np.prod(x.size) for x in a]), np.array([np.prod(y.size) for y in b])
+    assert np.count_nonzero(inter > 0) > 40
+    np.testing.assert_allclose(got, inter / (va + vb - inter), atol=1e-9)
+    np.testing.assert_allclose(got, iou_3d_batch(b, a), atol=1e-12)
+    for i in range(3):
+        local = rng.uniform(-0.5, 0.5, (200_000, 3)) * a[i].size
+        inside = points_in_box(transform_points(a[i].world_from_object(), local), b[i]).mean() * va[i]
+        assert inside == pytest.approx(inter[i], abs=0.02 * va[i])
+
+
+def test_level_and_polytope_paths_agree_on_level_boxes():
+    """A vanishing tilt sends a level pair through the polytope path: the same IoU as the level formula."""
+    rng = np.random.default_rng(5)
+    n = 80
+    a = np.c_[rng.normal(0, 1, (n, 3)), rng.uniform(-4, 4, n), rng.uniform(1, 5, (n, 3)), np.zeros((n, 2))]
+    b = np.c_[rng.normal(0, 1, (n, 3)), rng.uniform(-4, 4, n), rng.uniform(1, 5, (n, 3)), np.zeros((n, 2))]
+    nearly = b.copy()
+    nearly[:, 8] = 1e-13
+    np.testing.assert_allclose(iou_3d_batch(a, nearly), iou_3d_batch(a[:, :7], b[:, :7]), atol=1e-9)
+
+
+def test_boxes_keep_their_tilt_and_seven_value_arrays_are_level():
+    """Boxes keep their roll and pitch through iou_3d and Box sequences; 7-value arrays are level boxes."""
+    tilted = Box(0.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5, pitch=0.1)
+    level = Box(0.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5)
+    assert iou_3d(tilted, level) < 0.95
+    assert iou_3d_batch([tilted], [level])[0] == pytest.approx(iou_3d(tilted, level), abs=1e-12)
+    assert iou_3d_batch(tilted.to_array()[None], level.to_array()[None])[0] == pytest.approx(1.0, abs=1e-12)
 
 
 def test_centre_errors():

@@ -12,8 +12,9 @@ from tracker.association import fit_rigid_2d, ransac_rigid_2d
 from tracker.config import PRESETS, TrackerConfig, get_preset
 from tracker.geometry import make_transform, rotation_z, transform_points
 from tracker.ground import GroundParams, ground_mask
+from tracker.metrics import voxel_downsample_centres
 from tracker.motion import MotionPrior
-from tracker.shape import ShapeModel, voxel_downsample
+from tracker.shape import ShapeModel
 from tracker.sotracker import deskew_points
 from tracker.terms import apply_motion, motion_consistency_block, motion_prior_block, point_pair_block
 
@@ -173,7 +174,7 @@ def test_deskew_recovers_static_points_seen_during_ego_motion():
 
 def test_voxel_downsampling_and_shape_growth():
     pts = np.array([[0.01, 0.01, 0.01], [0.02, 0.04, 0.0], [0.26, 0.0, 0.0]])
-    np.testing.assert_allclose(voxel_downsample(pts, 0.05), [[0.025, 0.025, 0.025], [0.275, 0.025, 0.025]])
+    np.testing.assert_allclose(voxel_downsample_centres(pts, 0.05), [[0.025, 0.025, 0.025], [0.275, 0.025, 0.025]])
     shape = ShapeModel(0.05)
     shape.add(pts)
     shape.add(pts + 0.001)

@@ -13,9 +13,12 @@ track holds) or moves it, or ``recover_frames`` frames in a row had support. A s
 the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
 ``reacquired``) only on a candidate matched to
 one of the previous frame's candidates in position, size and motion: for a lost track a velocity within
-``velocity_gate`` of the predicted one; for a lost start a velocity along the start box's heading line (within
-``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance travelled from the start box
-since the start.
+``velocity_gate`` of the predicted one and a place on the object's path (not more than ``reach`` behind the box
+of the last supported frame along its heading, the way it moves: a hidden vehicle does not end up behind where
+it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
+the predicted path: a vehicle a lane over is another one); for a lost start a velocity along the start box's
+heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance
+travelled from the start box since the start.
 """
 
 from __future__ import annotations
@@ -41,15 +44,16 @@ class Relock:
 class Reacquire:
     """The interface (and the "none" behaviour)."""
 
-    def reset(self, time_s: float) -> None:
-        """A track (re)starts at ``time_s``."""
+    def reset(self, time_s: float, centre: np.ndarray) -> None:
+        """A track (re)starts at ``time_s`` with its box at ``centre`` (xy, world)."""
 
     def lost_start(self, points: int) -> bool:
         """Whether a start box holding ``points`` object points is a lost start."""
         return False
 
-    def holds(self, points: int, coasted: bool, time_s: float) -> bool:
-        """Whether the frame's support holds the track (``coasted``: the frame continued on the prior)."""
+    def holds(self, points: int, coasted: bool, time_s: float, centre: np.ndarray) -> bool:
+        """Whether the frame's support holds the track (``coasted``: the frame continued on the prior; ``centre``:
+        the frame's box centre, xy)."""
         return True
 
     def region(self, box: Box, time_s: float, start: Box | None) -> Box:
@@ -69,10 +73,10 @@ class NoReacquire(Reacquire):
 class ClusterReacquire(Reacquire):
     def __init__(self, config: ReacquireConfig) -> None:
         self.c = config
-        self.reset(0.0)
+        self.reset(0.0, np.zeros(2))
 
-    def reset(self, time_s: float) -> None:
-        self._held_s = time_s
+    def reset(self, time_s: float, centre: np.ndarray) -> None:
+        self._held_s, self._held_at = time_s, np.asarray(centre, dtype=np.float64)[:2].copy()
         self._misses = 0
         self._lost = False
         self._supported = 0
@@ -81,11 +85,12 @@ class ClusterReacquire(Reacquire):
     def lost_start(self, points: int) -> bool:
         return points < self.c.start_points
 
-    def holds(self, points: int, coasted: bool, time_s: float) -> bool:
+    def holds(self, points: int, coasted: bool, time_s: float, centre: np.ndarray) -> bool:
         supported = points >= self.c.min_points and not coasted
         if not self._lost:
             if supported:
                 self._held_s, self._misses = time_s, 0
+                self._held_at = np.asarray(centre, dtype=np.float64)[:2].copy()
                 return True
             self._misses += 1
             self._lost = self._misses >= self.c.lost_frames
@@ -94,7 +99,7 @@ class ClusterReacquire(Reacquire):
         # until a candidate confirms the track or ``recover_frames`` supported frames in a row
         self._supported = self._supported + 1 if supported else 0
         if self._supported >= self.c.recover_frames:
-            self.reset(time_s)
+            self.reset(time_s, centre)
             return True
         return False
 
@@ -119,7 +124,7 @@ class ClusterReacquire(Reacquire):
                     continue
                 v = (now.centre - before.centre) / dt
                 relock = (self._from_start(now, v, start) if start is not None else
-                          self._from_track(now, v, velocity))
+                          self._from_track(now, v, box, velocity))
                 if relock is None:
                     continue
                 # a lost track: the candidate nearest the prediction; a lost start: the steadiest motion
@@ -129,9 +134,21 @@ class ClusterReacquire(Reacquire):
                     best = (score, relock)
         return None if best is None else best[1]
 
-    def _from_track(self, now: Candidate, v: np.ndarray, velocity: np.ndarray | None) -> Relock | None:
+    def _from_track(self, now: Candidate, v: np.ndarray, box: Box, velocity: np.ndarray | None) -> Relock | None:
         predicted = np.zeros(2) if velocity is None else velocity
         if np.linalg.norm(v - predicted) > self.c.velocity_gate:
+            return None
+        # the object's path since the loss: a hidden vehicle that keeps going does not end up behind where its
+        # support was lost (along its heading, the way it moves; more than ``reach``): a candidate there is
+        # something it passed (a parked car, the occluder that hid it)
+        axis = np.array([np.cos(box.heading), np.sin(box.heading)])
+        way = float(np.sign(predicted @ axis))
+        if way != 0 and way * float((now.centre - self._held_at) @ axis) < -self.c.reach:
+            return None
+        # nor far across its predicted path: lanes change at a metre or two per second (a candidate a lane over is
+        # a vehicle beside it, e.g. the one that hid it, driving alongside)
+        across = abs(float((now.centre - box.center[:2]) @ np.array([-axis[1], axis[0]])))
+        if across > self.c.reach + self.c.lateral_growth * max(now.time_s - self._held_s, 0.0):
             return None
         return Relock(now.centre, predicted.copy())
 

@@ -2,11 +2,13 @@
 heading, so the direction of travel of the track's own recent box centres is a target for the per-frame
 heading.
 
-:class:`TravelHeading` keeps the last ``motion.travel_frames`` + 1 centres with their times (at least 3). The direction of
-travel is the chord from the first to the last. In a turn the chord lags the heading, so the term fades out as
-the window turns: the direction of its second half-chord less its first's, the weight x (1 - that /
-``travel_max_turn``), none beyond (a turn measured from the positions only: the motion model's turn rate, which a
-rotating box feeds, would feed the rotation back). Its
+:class:`TravelHeading` keeps the last ``motion.travel_frames`` + 1 centres with their times (at least 3). The
+direction of travel is the chord from the first to the last: in a steady turn, the heading at the window's middle
+time. The half-chords' directions (headings half a span apart) give the window's turn rate, which carries the
+chord's direction to the next frame's time (a turn measured from the positions only: the motion model's turn
+rate, which a rotating box feeds, would feed the rotation back); the term still fades out as the window turns
+(x (1 - the half-chords' turn / ``travel_max_turn``), none beyond): entering or leaving a turn the rate changes
+within the window. Its
 weight is ``travel_weight`` x a speed factor (0 below ``travel_min_speed``, rising to 1 at twice that speed) x a
 sparseness factor ``travel_points`` / (``travel_points`` + the previous frame's object points): few points (a far
 or partial view) pin the heading weakly. In
@@ -68,14 +70,16 @@ class TravelHeading(NoTravel):
         factor = min(1.0, max(0.0, speed / self.min_speed - 1.0))
         if factor <= 0:
             return None
-        # a turn: the chord lags the heading; the term fades out as the half-chords turn (up to max_turn)
+        # a turn: the chord is the heading at the window's middle time; the half-chords (headings a half span
+        # apart) give the turn rate, which carries it to the next frame's time; the term fades out as they turn
         mid = track[len(track) // 2, 1:]
         first, second = mid - track[0, 1:], track[-1, 1:] - mid
-        turn = abs(float(wrap_angle(np.arctan2(second[1], second[0]) - np.arctan2(first[1], first[0]))))
-        factor *= max(0.0, 1.0 - turn / self.max_turn)
+        turn = float(wrap_angle(np.arctan2(second[1], second[0]) - np.arctan2(first[1], first[0])))
+        factor *= max(0.0, 1.0 - abs(turn) / self.max_turn)
         if factor <= 0:
             return None
-        direction = float(np.arctan2(chord[1], chord[0]))
+        ahead = 0.5 * span + span / (len(track) - 1)      # the window's middle to the next frame (mean interval)
+        direction = float(np.arctan2(chord[1], chord[0])) + turn * ahead / (0.5 * span)
         offset = float(wrap_angle(direction - heading))
         if abs(offset) > 0.5 * np.pi:                  # driving backwards: the heading is the other way
             offset = float(wrap_angle(offset + np.pi))
