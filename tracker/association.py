@@ -56,7 +56,7 @@ def fit_rigid_2d(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = 
 
 
 def smallest_per_row(values: np.ndarray, k: int) -> np.ndarray:
-    """Column indices of the ``k`` smallest entries of each row of ``values`` (r, m), in ascending order of value:
+    """Column indices of the ``k`` smallest entries of each row of finite ``values`` (r, m), in ascending order:
     what ``np.argpartition(values, k - 1, axis=1)[:, :k]`` returns for k <= 3 (numpy's selection for so small a k,
     and its SIMD selection, both leave the k smallest sorted), found by k row-wise argmins (several times faster).
     Rows with a tie among or next to the k smallest are left to argpartition itself, so the result never differs."""
