@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["NearestNeighbors", "RansacResult", "fit_rigid_2d", "ransac_rigid_2d", "random_subset"]
+__all__ = ["NearestNeighbors", "RansacDraws", "RansacResult", "fit_rigid_2d", "ransac_rigid_2d", "random_subset",
+           "smallest_per_row"]
 
 
 class NearestNeighbors:
@@ -54,6 +55,51 @@ def fit_rigid_2d(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = 
     return angle, t
 
 
+def smallest_per_row(values: np.ndarray, k: int) -> np.ndarray:
+    """Column indices of the ``k`` smallest entries of each row of finite ``values`` (r, m), in ascending order:
+    what ``np.argpartition(values, k - 1, axis=1)[:, :k]`` returns for k <= 3 (numpy's selection for so small a k,
+    and its SIMD selection, both leave the k smallest sorted), found by k row-wise argmins (several times faster).
+    Rows with a tie among or next to the k smallest are left to argpartition itself, so the result never differs."""
+    rows = np.arange(len(values))
+    if k > 3 or k >= values.shape[1]:
+        return np.argpartition(values, k - 1, axis=1)[:, :k]
+    work = values.copy()
+    out = np.empty((len(values), k), dtype=np.intp)
+    picked = np.empty((len(values), k))
+    for j in range(k):
+        i = work.argmin(axis=1)
+        out[:, j] = i
+        picked[:, j] = work[rows, i]
+        work[rows, i] = np.inf
+    # distinct: strictly increasing, and no other entry of the row as small as the k-th
+    tie = np.any(picked[:, 1:] <= picked[:, :-1], axis=1) | np.any(work <= picked[:, -1:], axis=1)
+    if tie.any():
+        out[tie] = np.argpartition(values[tie], k - 1, axis=1)[:, :k]
+    return out
+
+
+class RansacDraws:
+    """The random draws of :func:`ransac_rigid_2d` for ``n`` pairs: the scored subset (``pick``, None: all pairs)
+    and each batch's sample indices, drawn from ``rng`` in the order the search asks for them and kept, so a search
+    repeated from the same generator state on the same number of pairs (:class:`~tracker.strategies.inliers.
+    FixedRansac`: every outer iteration of a frame) replays them instead of drawing again. They depend only on the
+    generator's state and the sizes, never on the points."""
+
+    def __init__(self, rng: np.random.Generator, n: int, max_score_pairs: int, sample_size: int) -> None:
+        self.rng, self.sample_size = rng, sample_size
+        self.pick = rng.choice(n, size=max_score_pairs, replace=False) if n > max_score_pairs else None
+        self.m = n if self.pick is None else max_score_pairs
+        self._batches: list[np.ndarray] = []
+
+    def samples(self, batch: int, size: int) -> np.ndarray:
+        """(size, sample_size) indices into the scored pairs for batch number ``batch`` (0, 1, ...)."""
+        while len(self._batches) <= batch:
+            self._batches.append(smallest_per_row(self.rng.random((size, self.m)), self.sample_size))
+        drawn = self._batches[batch]
+        assert len(drawn) == size, "a replayed batch has the size it was drawn with"
+        return drawn
+
+
 @dataclass(frozen=True)
 class RansacResult:
     inliers: np.ndarray     # (N,) bool
@@ -63,7 +109,8 @@ class RansacResult:
 
 def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, *, max_iterations: int = 200,
                     confidence: float = 0.99, sample_size: int = 3, threshold: float = 0.2,
-                    batch_size: int = 50, max_score_pairs: int = 150, identity_first: bool = False) -> RansacResult:
+                    batch_size: int = 50, max_score_pairs: int = 150, identity_first: bool = False,
+                    draws: RansacDraws | None = None) -> RansacResult:
     """RANSAC for a 2D rigid transform between paired (N, 2) points ``src`` -> ``dst``.
 
     Inlier: BEV residual <= ``threshold``. Hypotheses are scored on at most ``max_score_pairs`` random
@@ -72,6 +119,8 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
     A batch's squared residuals come from one product: with p, q the scored pairs (centred on the mean of
     ``src``) and hypothesis (R, t), |R p + t - q|^2 = |p|^2 + |q|^2 + |t|^2 + 2 [t.R p - q.R p - t.q], and the
     bracket is linear in the per-pair features (p_x, p_y, p.q, p x q, q_x, q_y).
+    ``draws``: the random draws for these ``n`` pairs made before (:class:`RansacDraws`, from a generator in the
+    state ``rng`` would be in); None: drawn from ``rng``.
     """
     src = np.asarray(src, dtype=np.float64)[:, :2]
     dst = np.asarray(dst, dtype=np.float64)[:, :2]
@@ -80,10 +129,11 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
         return RansacResult(np.zeros(n, dtype=bool), 0.0, np.zeros(2), 0)
     centre = src.mean(axis=0)   # a rigid fit commutes with a common shift: centred coordinates, small squares
     src_c, dst_c = src - centre, dst - centre
+    if draws is None:
+        draws = RansacDraws(rng, n, max_score_pairs, sample_size)
     score_src, score_dst = src_c, dst_c
-    if n > max_score_pairs:
-        pick = rng.choice(n, size=max_score_pairs, replace=False)
-        score_src, score_dst = src_c[pick], dst_c[pick]
+    if draws.pick is not None:
+        score_src, score_dst = src_c[draws.pick], dst_c[draws.pick]
     m = len(score_src)
     px, py, qx, qy = score_src[:, 0], score_src[:, 1], score_dst[:, 0], score_dst[:, 1]
     features = np.stack([px, py, px * qx + py * qy, px * qy - py * qx, qx, qy])       # (6, m)
@@ -91,11 +141,12 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
     best_count, best_angle, best_t = -1, 0.0, np.zeros(2)
     if identity_first:
         best_count = int((((score_src - score_dst) ** 2).sum(axis=1) <= threshold * threshold).sum())
-    done, needed = 0, max_iterations
+    done, needed, batch = 0, max_iterations, 0
     thr2 = threshold * threshold
     while done < min(needed, max_iterations):
         b = min(batch_size, max_iterations - done)
-        samples = np.argpartition(rng.random((b, m)), sample_size - 1, axis=1)[:, :sample_size]
+        samples = draws.samples(batch, b)
+        batch += 1
         ps, pd = score_src[samples], score_dst[samples]                     # (b, s, 2)
         cs, cd = ps.mean(axis=1), pd.mean(axis=1)
         a, c_ = ps - cs[:, None], pd - cd[:, None]

@@ -300,9 +300,12 @@ class Tracker:
                      t0: float) -> FrameEstimate:
         c = self.config
         box = box_moved(self.box, x)
-        quality = self._quality(local, box)
+        inside = local[points_in_box(local, box, 1.0)]   # the points the quality and (crop 1.0) the shape take
+        obj = to_object_frame(inside, box)
+        quality = self._quality_of(obj)
         keyframe = c.shape.aggregate and self.steps % c.shape.keyframe_interval == 0
-        obj_world = self._finish_frame(frame, box, local, keyframe)
+        shared = (inside, obj) if c.shape.crop_scale == 1.0 else None
+        obj_world = self._finish_frame(frame, box, local, keyframe, shared)
         if 0 < len(obj_world) < c.registration.min_points:
             flags.append("low_points")
         self.box = box
@@ -310,11 +313,17 @@ class Tracker:
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
                              (time.perf_counter() - t0) * 1e3, obj_world)
 
-    def _finish_frame(self, frame: LidarFrame, box: Box, local: np.ndarray, keyframe: bool) -> np.ndarray:
+    def _finish_frame(self, frame: LidarFrame, box: Box, local: np.ndarray, keyframe: bool,
+                      object_points: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """``object_points``: (world, object frame) of the points in ``box`` scaled ``shape.crop_scale`` when the
+        caller has them."""
         c = self.config
         self.prev_points = local[points_in_box(local, box, c.search.crop_scale)]
-        obj_world = local[points_in_box(local, box, c.shape.crop_scale)]
-        obj = to_object_frame(obj_world, box)
+        if object_points is None:
+            obj_world = local[points_in_box(local, box, c.shape.crop_scale)]
+            obj = to_object_frame(obj_world, box)
+        else:
+            obj_world, obj = object_points
         self.subshape.add(obj)
         if keyframe:
             self.shape.add(obj)
@@ -441,7 +450,10 @@ class Tracker:
 
     def _explained(self, local: np.ndarray, box: Box) -> tuple[float, int]:
         """Share of the object points in ``box`` within 0.2 m of the shape placed there, and their number."""
-        obj = to_object_frame(local[points_in_box(local, box, 1.0)], box)
+        return self._explained_of(to_object_frame(local[points_in_box(local, box, 1.0)], box))
+
+    def _explained_of(self, obj: np.ndarray) -> tuple[float, int]:
+        """:meth:`_explained` of the object-frame points ``obj``."""
         if len(obj) == 0 or len(self.shape) == 0:
             return 0.0, len(obj)
         if self._shape_nn is None or self._shape_nn_size != len(self.shape):
@@ -450,9 +462,10 @@ class Tracker:
         dist, _ = self._shape_nn.query(obj)
         return float((dist <= 0.2).mean()), len(obj)
 
-    def _quality(self, local: np.ndarray, box: Box) -> float:
-        """Share of the frame's object points within 0.2 m of the shape placed at ``box``, damped when sparse."""
-        explained, count = self._explained(local, box)
+    def _quality_of(self, obj: np.ndarray) -> float:
+        """Share of the frame's object points ``obj`` (object frame: those in the box) within 0.2 m of the shape,
+        damped when sparse."""
+        explained, count = self._explained_of(obj)
         return float(np.clip(explained * min(1.0, count / 20.0), 0.0, 1.0))
 
 
