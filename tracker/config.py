@@ -196,6 +196,8 @@ class MotionConfig:
     consistency: str = "symmetric"
     max_speed_change: float = 0.0        # > 0: |dx, dy - predicted| capped at this along / half across (m/frame)
     max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
+    max_yaw_change_points: int = 0       # > 0: max_yaw_change only while the previous frame's object has fewer
+                                         # points than this (a denser object's registration pins its heading)
     max_lateral_accel: float = 0.0       # > 0: |dtheta| / dt is capped at the yaw rate a vehicle at the frame's
                                          # speed v can drive: min(v / min_turn_radius, this / v) + yaw_rate_margin
     min_turn_radius: float = 4.5         # m: the tightest turn (steering limit, slow speeds)

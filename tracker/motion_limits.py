@@ -1,6 +1,7 @@
 """Physical limits on a registered motion: a vehicle cannot turn or change its velocity that suddenly in one frame.
 
-``motion.max_yaw_change``, ``motion.max_speed_change``: the change against the motion model's prediction.
+``motion.max_yaw_change``, ``motion.max_speed_change``: the change against the motion model's prediction (the
+yaw cap only below ``motion.max_yaw_change_points`` object points, where a few clutter points can swing a fit).
 ``motion.max_lateral_accel``: the heading change itself, at most the yaw rate a vehicle at the frame's speed can
 drive, min(speed / ``min_turn_radius``, ``max_lateral_accel`` / speed) + ``yaw_rate_margin``, per second."""
 
@@ -22,10 +23,10 @@ def max_yaw_rate(speed: float, params: MotionConfig) -> float:
 
 
 def limit_motion(x: np.ndarray, prior: np.ndarray, heading: float, first: bool, steps: int, params: MotionConfig,
-                 flags: list[str], dt: float = 0.1) -> np.ndarray:
+                 flags: list[str], dt: float = 0.1, points: int = 0) -> np.ndarray:
     """``x`` with the change of turn rate and velocity against ``prior`` capped and the heading change capped at the
     physical yaw rate over ``dt`` seconds (flags ``yaw_clamped``, ``motion_clamped``); a non-finite ``x`` gives the
-    prior (flag ``prior_only``). ``heading``: the box's."""
+    prior (flag ``prior_only``). ``heading``: the box's; ``points``: the object's points in the previous frame."""
     if not np.isfinite(x).all():
         flags.append("prior_only")
         return prior.copy()
@@ -35,7 +36,8 @@ def limit_motion(x: np.ndarray, prior: np.ndarray, heading: float, first: bool, 
         if abs(x[3]) > cap:
             flags.append("yaw_clamped")
             x[3] = np.sign(x[3]) * cap
-    if params.max_yaw_change > 0 and not first and abs(x[3] - prior[3]) > params.max_yaw_change:
+    sparse = params.max_yaw_change_points <= 0 or points < params.max_yaw_change_points
+    if params.max_yaw_change > 0 and not first and sparse and abs(x[3] - prior[3]) > params.max_yaw_change:
         flags.append("yaw_clamped")  # a vehicle cannot turn that suddenly: keep the prior's turn rate +- the cap
         x[3] = prior[3] + np.sign(x[3] - prior[3]) * params.max_yaw_change
     if params.max_speed_change > 0 and not first and steps > 2:

@@ -11,8 +11,10 @@ from tracker.config import MotionConfig
 from tracker.motion_limits import limit_motion, max_yaw_rate
 
 DT = 0.1
-# the heading change capped at the physical yaw rate, the motion prior's reference the previous outer iteration
-PHYSICAL = {"motion.max_yaw_change": 0.0, "motion.max_lateral_accel": 10.0, "motion.prior_reference": "iteration"}
+# full's cap around the predicted turn rate only below 100 points, the heading change capped at the physical yaw
+# rate, the motion prior's reference the previous outer iteration
+PHYSICAL = {"motion.max_yaw_change_points": 100, "motion.max_lateral_accel": 10.0,
+            "motion.prior_reference": "iteration"}
 
 
 def test_max_yaw_rate_is_steering_limited_slow_and_grip_limited_fast():
@@ -32,6 +34,16 @@ def test_a_realistic_yaw_rate_passes_and_a_parked_car_does_not_spin():
     parked = np.array([0.0, 0.0, 0.0, 0.1])  # registration rotated a standing car by 0.1 rad
     out = limit_motion(parked.copy(), prior, 0.0, False, 5, params, flags, DT)
     assert out[3] == pytest.approx(0.1 * DT) and flags == ["yaw_clamped"]
+
+
+def test_the_cap_around_the_prediction_holds_only_sparse_objects():
+    params = MotionConfig(max_yaw_change=0.03, max_yaw_change_points=100)
+    prior = np.array([0.8, 0.0, 0.0, 0.0])  # predicted straight on; the registration turns by 0.1 rad
+    dense: list[str] = []
+    assert limit_motion(np.array([0.8, 0.0, 0.0, 0.1]), prior, 0.0, False, 5, params, dense, DT, 500)[3] == 0.1
+    sparse: list[str] = []
+    out = limit_motion(np.array([0.8, 0.0, 0.0, 0.1]), prior, 0.0, False, 5, params, sparse, DT, 20)
+    assert out[3] == pytest.approx(0.03) and dense == [] and sparse == ["yaw_clamped"]
 
 
 def _max_heading_error_deg(changes: dict) -> float:
