@@ -38,7 +38,8 @@ def limit_motion(x: np.ndarray, prior: np.ndarray, heading: float, first: bool, 
             x[3] = np.sign(x[3]) * cap
     sparse = params.max_yaw_change_points <= 0 or points < params.max_yaw_change_points
     if params.max_yaw_change > 0 and not first and sparse and abs(x[3] - prior[3]) > params.max_yaw_change:
-        flags.append("yaw_clamped")  # a vehicle cannot turn that suddenly: keep the prior's turn rate +- the cap
+        if "yaw_clamped" not in flags:  # a vehicle cannot turn that suddenly: the prior's turn rate +- the cap
+            flags.append("yaw_clamped")
         x[3] = prior[3] + np.sign(x[3] - prior[3]) * params.max_yaw_change
     if params.max_speed_change > 0 and not first and steps > 2:
         # a vehicle's velocity changes little in 0.1 s: cap the deviation from the prediction in the box frame
