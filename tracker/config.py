@@ -196,6 +196,12 @@ class MotionConfig:
     consistency: str = "symmetric"
     max_speed_change: float = 0.0        # > 0: |dx, dy - predicted| capped at this along / half across (m/frame)
     max_yaw_change: float = 0.0          # > 0: |dtheta - predicted dtheta| is capped at this per frame (rad)
+    max_yaw_change_points: int = 0       # > 0: max_yaw_change only while the previous frame's object has fewer
+                                         # points than this (a denser object's registration pins its heading)
+    max_lateral_accel: float = 0.0       # > 0: |dtheta| / dt is capped at the yaw rate a vehicle at the frame's
+                                         # speed v can drive: min(v / min_turn_radius, this / v) + yaw_rate_margin
+    min_turn_radius: float = 4.5         # m: the tightest turn (steering limit, slow speeds)
+    yaw_rate_margin: float = 0.1         # rad/s added to the physical yaw rate (registration noise, a lagging box)
     travel_weight: float = 0.0           # > 0: the heading-from-travel term (heading toward the direction of travel
                                          # of the track's recent positions), weight at full speed, no points (0: off)
     travel_min_speed: float = 3.0        # m/s: slower tracks get no travel term; full weight from twice this
@@ -208,6 +214,8 @@ class MotionConfig:
         _choice("motion.model", self.model, ("average", "object", "turn", "ctrv"))
         _choice("motion.prior_reference", self.prior_reference, ("prior", "iteration"))
         _choice("motion.consistency", self.consistency, ("symmetric", "x_only"))
+        if self.min_turn_radius <= 0:
+            raise ValueError(f"motion.min_turn_radius: must be > 0, got {self.min_turn_radius}")
 
 
 @dataclass(frozen=True)

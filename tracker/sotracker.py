@@ -177,7 +177,8 @@ class Tracker:
         local, point_flags = self._local_points(frame, prediction, max(search_scale, self.config.search.scale))
         flags += point_flags
         x = self._register(local, prior, search_scale, first, det_target, flags)
-        x = limit_motion(x, prior, self.box.heading, first, self.steps, self.config.motion, flags)
+        x = limit_motion(x, prior, self.box.heading, first, self.steps, self.config.motion, flags, self._last_dt,
+                         len(self.prev_points))
         x = self._check_quality(x, local, prior, first, flags)
         coasting = "prior_only" in flags
         x = self.strategies.height.motion(x, self.box, self._ground_points, fit=not coasting)

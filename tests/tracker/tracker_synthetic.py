@@ -92,9 +92,11 @@ class SyntheticSequence:
 
 
 def make_sequence(n_frames: int = 24, seed: int = 0, noise: float = 0.01, ego_speed: float = 0.5,
-                  empty_frames: tuple[int, ...] = (), nan_frames: tuple[int, ...] = ()) -> SyntheticSequence:
+                  empty_frames: tuple[int, ...] = (), nan_frames: tuple[int, ...] = (),
+                  boxes: list[Box] | None = None) -> SyntheticSequence:
+    """``boxes``: the vehicle's trajectory (default: ``trajectory(n_frames)``)."""
     rng = np.random.default_rng(seed)
-    boxes = trajectory(n_frames)
+    boxes = trajectory(n_frames) if boxes is None else boxes
     frames = []
     for k, box in enumerate(boxes):
         world_from_ego = make_transform(rotation_z(0.02 * k), np.array([ego_speed * k, 0.0, 1.0]))
