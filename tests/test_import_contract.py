@@ -88,7 +88,7 @@ def test_evaluation_runs_no_tracker():
     and the CLI (sot_apps.bench.sequence_eval, benchmark_eval, reference)."""
     assert [v for r in TRACKER_RUNNERS for v in violations("evaluation only scores", "sot_apps.evaluation", r)] == []
     # the runners import the scorers: the checker sees both sides
-    assert "tracker.track" in imports_by_module()["sot_apps.bench.sequence_eval"]
+    assert "sot_apps.tracking.track_objects" in imports_by_module()["sot_apps.bench.sequence_eval"]
     assert "sot_apps.evaluation.tracker" in imports_by_module()["sot_apps.bench.sequence_eval"]
 
 
