@@ -467,7 +467,7 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
         times.ground += t2 - t1
         times.sweeps += 1
         for o in starting:
-            _start(o, seq, frame, config, refine, lag, shape_growth, times)
+            _start(o, seq, k, frame, config, refine, lag, shape_growth, times)
             if o.tracker is not None:
                 _refine_frame(o, seq, frame, config, refine, times)
         for o in stepping:
@@ -521,12 +521,13 @@ def _fail(o: _Live, error: str, lacks_points: bool = False) -> None:
     o.tracker, o.estimates, o.smoother, o.regions = None, [], None, []
 
 
-def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str, lag: int,
+def _start(o: _Live, seq: Sequence, k: int, frame: LidarFrame, config: TrackerConfig, refine: str, lag: int,
            shape_growth: bool, times: PassTimes) -> None:
-    """Start ``o`` at ``frame`` (an annotated candidate or its given start) as :func:`tracker.track` would."""
+    """Start ``o`` at ``frame``, position ``k`` of ``seq`` (an annotated candidate or its given start), as
+    :func:`tracker.track` would (the pass counts positions, not ``frame.index``: a source may serve its frames in
+    another order, e.g. reversed in time)."""
     from tracker import FixedLagSmoother
 
-    k = frame.index
     t = time.thread_time()
     try:
         started = None

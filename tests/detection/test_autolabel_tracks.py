@@ -33,8 +33,8 @@ def _detections(world):
     moving = sorted(t for t in world.tracks() if t.startswith("veh_"))
     gap_id, duplicate_id = moving[0], moving[1]
     entries = []
-    for k, annotations in enumerate(world.annotations):
-        for a in annotations:
+    for k, frame_annotations in enumerate(world.annotations):
+        for a in frame_annotations:
             box = a.box.to_array() + np.r_[rng.normal(0, 0.05, 3), rng.normal(0, 0.01), rng.normal(0, 0.03, 3)]
             if a.track_id == gap_id and k in GAP:
                 continue
