@@ -6,17 +6,24 @@
    centres within ``max_centre_distance`` for small fast boxes); an unassigned detection with score >=
    ``birth_score`` starts a track; a track missed ``max_misses`` frames in a row ends. Tracks with fewer
    than ``min_detections`` detections are dropped (clutter).
-2. :func:`label_track`: SOT from the track's most reliable detection (highest score; its size is the
-   median size of the track's detections), forward to the track's last frame and backward to its first,
-   with the Detection term on the track's own detections (``det_sot``); then the offline refinement
-   (:mod:`tracker.offline`) over the whole span, and the whole track is moved by the median offset of its
-   detections (:func:`anchor_to_detections`: SOT is exact relative to its seed box, the detections fix where
-   the box sits); finally the box is fitted to the points the track gathered over all its frames
-   (:func:`fit_to_points`): on every axis whose two faces the points show, the points give the extent (the
-   detector's size and offset errors are correlated over time, so their median keeps a bias); on an axis
-   seen from one side only, the box keeps its size and moves just enough to hold the points. Each axis weighs
-   the points' estimate against the detections' median by their errors (:func:`detection_sigma`).
-3. :func:`autolabel`: all tracks; each label box carries its track's mean detection score.
+   A track needs ``confirm_detections`` detections scored >= ``birth_score`` (a confirmed birth).
+2. :func:`track_both_ways`: SOT (``det_sot`` with re-acquisition, :func:`label_config_tracker`) from each track's
+   most reliable detection (highest score; its size is the median size of the track's detections), forward to
+   ``LabelConfig.extend`` frames past the track's last detection and backward to as many before its first, with
+   the Detection term on the track's own detections; all tracks in ONE forward and ONE backward pass over the
+   sweeps (:func:`sot_apps.tracking.track_objects`, ``chunk`` tracks at a time). The frames past the
+   detections are kept up to the first one without support (:func:`_trimmed`).
+3. :func:`merge_duplicates`: tracks whose boxes overlap on most shared frames are one object (the one with the
+   most supported frames keeps the others' detections); tracks with fewer than ``min_supported_frames``
+   supported frames are dropped.
+4. :func:`label_from_result`: the offline refinement (:mod:`tracker.offline`) over the whole span, and the whole
+   track is moved by the median offset of its detections (:func:`anchor_to_detections`: SOT is exact relative
+   to its seed box, the detections fix where the box sits); finally the box is fitted to the points the track
+   gathered over all its frames (:func:`fit_to_points`): on every axis whose two faces the points show, the
+   points give the extent (the detector's size and offset errors are correlated over time, so their median
+   keeps a bias); on an axis seen from one side only, the box keeps its size and moves just enough to hold the
+   points. Each axis weighs the points' estimate against the detections' median by their errors
+   (:func:`detection_sigma`). Each label box carries its track's mean detection score.
 """
 
 from __future__ import annotations
@@ -340,7 +347,8 @@ def _seed(detection_track: DetectionTrack) -> _Seed:
 
 
 def _own_detections(detection_track: DetectionTrack) -> dict[int, FrameDetections]:
-    return {k: FrameDetections(b[None], np.array([detection_track.scores[k]])) for k, b in detection_track.boxes.items()}
+    return {k: FrameDetections(b[None], np.array([detection_track.scores[k]]))
+            for k, b in detection_track.boxes.items()}
 
 
 def track_both_ways(source: FrameSource, tracks: list[DetectionTrack], config: TrackerConfig,
