@@ -341,7 +341,9 @@ class ObjectRequest:
 
     ``annotated``: the object's annotated (frame, box) pairs; when given, the track starts at the first of them
     whose box holds ``min_points`` points (:class:`StartSearch`) and ``start``/``init_box`` are not used.
-    ``max_frames``: track at most this many frames after the start."""
+    ``max_frames``: track at most this many frames after the start. ``detections``: this object's own detections
+    for the Detection term, instead of the pass's (e.g. an auto-label track's); ``initial_motion``: the per-frame
+    motion [dx, dy, dz, dtheta] the motion prior starts from (:meth:`tracker.Tracker.start`)."""
 
     object_id: str
     init_box: Box
@@ -349,6 +351,8 @@ class ObjectRequest:
     end: int
     annotated: tuple[tuple[int, Box], ...] = ()
     max_frames: int | None = None
+    detections: Detections | None = None
+    initial_motion: np.ndarray | None = None
 
 
 @dataclass
@@ -463,13 +467,14 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
         times.ground += t2 - t1
         times.sweeps += 1
         for o in starting:
-            _start(o, seq, frame, config, refine, lag, shape_growth, times)
+            _start(o, seq, k, frame, config, refine, lag, shape_growth, times)
             if o.tracker is not None:
                 _refine_frame(o, seq, frame, config, refine, times)
         for o in stepping:
             try:
                 t = time.thread_time()
-                estimate = o.tracker.step(frame, None if detections is None else detections.get(k))
+                own = detections if o.request.detections is None else o.request.detections
+                estimate = o.tracker.step(frame, None if own is None else own.get(k))
                 o.estimates.append(estimate)
                 if o.recorder is not None:
                     o.recorder(o.tracker, estimate)
@@ -516,12 +521,13 @@ def _fail(o: _Live, error: str, lacks_points: bool = False) -> None:
     o.tracker, o.estimates, o.smoother, o.regions = None, [], None, []
 
 
-def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str, lag: int,
+def _start(o: _Live, seq: Sequence, k: int, frame: LidarFrame, config: TrackerConfig, refine: str, lag: int,
            shape_growth: bool, times: PassTimes) -> None:
-    """Start ``o`` at ``frame`` (an annotated candidate or its given start) as :func:`tracker.track` would."""
+    """Start ``o`` at ``frame``, position ``k`` of ``seq`` (an annotated candidate or its given start), as
+    :func:`tracker.track` would (the pass counts positions, not ``frame.index``: a source may serve its frames in
+    another order, e.g. reversed in time)."""
     from tracker import FixedLagSmoother
 
-    k = frame.index
     t = time.thread_time()
     try:
         started = None
@@ -538,7 +544,7 @@ def _start(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, re
         previous = _pose(seq, k - 1) if config.deskew and k > 0 else None
         if started is None or previous is not None:   # the search's start had no previous pose (no de-skew)
             tracker = Tracker(config)
-            estimate = tracker.start(frame, box, previous)
+            estimate = tracker.start(frame, box, previous, o.request.initial_motion)
         else:
             tracker, estimate = started
     except Exception as exc:  # noqa: BLE001
@@ -644,7 +650,9 @@ def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerCo
                           else (r.start, r.init_box))
             end = r.end if r.max_frames is None else min(r.end, start + r.max_frames)
             recorder = ShapeRecorder() if shape_growth else None
-            result = track(seq, box, start, end, config, detections=detections, on_frame=recorder)
+            own = detections if r.detections is None else r.detections
+            result = track(seq, box, start, end, config, detections=own, initial_motion=r.initial_motion,
+                           on_frame=recorder)
             why = None if min_points is None else lacking_points(result, min_points)
             if why is not None:
                 raise TrackingFailed(why)

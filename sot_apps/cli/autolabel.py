@@ -20,9 +20,12 @@ from .common import (
 def register(subparsers) -> argparse.ArgumentParser:
     parser = add_subcommand(
         subparsers, "autolabel", help="auto-label every vehicle of a sequence from detections (Det+SOT, offline)",
-        description="Associate detections into tracks, start SOT (det_sot) at each track's most reliable detection, "
-                    "track forward and backward, refine offline, and write DIR/sequence (canonical, the labels as "
-                    "its boxes), DIR/kitti/label_02/0000.txt (+ calib; only when the sequence has a camera), "
+        description="Associate detections into tracks (born at score >= 0.5, confirmed by a second one), start SOT "
+                    "(det_sot with re-acquisition) at each track's most reliable detection, track forward and "
+                    "backward past its detections in one pass each way over the sweeps for all tracks, cut the "
+                    "unsupported ends, merge duplicates, drop unsupported tracks, refine offline, and write "
+                    "DIR/sequence (canonical, the labels as its boxes), DIR/kitti/label_02/0000.txt (+ calib; only "
+                    "when the sequence has a camera), "
                     "DIR/av2/annotations.feather and DIR/av2/submission.feather (AV2's detection submission form, "
                     "with scores). With "
                     "--evaluate, print the label quality against the sequence's annotations next to the raw "
@@ -43,6 +46,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--keyframe-sigma", metavar="M[,RAD]",
                         help="with --keyframes: soft keyframes (weight 1/sigma^2) instead of held exactly")
     parser.add_argument("--no-offline", action="store_true", help="skip the offline refinement")
+    parser.add_argument("--chunk", type=int, metavar="N", help="track N objects per pass over the sweeps "
+                        "(bounds memory; the labels do not depend on it; default all)")
     parser.add_argument("--no-sequence", action="store_true", help="do not write the canonical sequence copy")
     parser.add_argument("--evaluate", action="store_true", help="print label quality against the annotations")
     parser.add_argument("--json", metavar="FILE", help="with --evaluate: write the quality rows as JSON")
@@ -57,12 +62,14 @@ def run(args: argparse.Namespace) -> int:
 
     from tracker import get_preset
 
-    from ..detection.autolabel import autolabel, write_autolabels
+    from ..detection.autolabel import LabelConfig, autolabel, write_autolabels
     from ..io.atomic import write_json
     from ..io.cached_source import CachedSource
     from ..objects.selection import DEFAULT_SELECTION
 
     sequence = load_sequence(args)
+    if args.chunk is not None and args.chunk < 1:
+        raise InputError(None, f"--chunk: expected a positive number of objects, got {args.chunk}")
 
     def progress(items, desc="autolabel"):
         return items if args.quiet else tqdm(items, desc=desc, file=sys.stderr, leave=False)
@@ -79,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
 
         detections = detect_sequence(sequence, progress=lambda f: progress(f, "detect"))
     labels, det_tracks = autolabel(CachedSource(sequence), detections, get_preset("det_sot", seed=args.seed),
-                                   offline=not args.no_offline, progress=progress)
+                                   offline=not args.no_offline, progress=progress,
+                                   label_config=LabelConfig(chunk=args.chunk))
     written = write_autolabels(args.out, sequence, labels, with_sequence=not args.no_sequence)
     print(f"{len(labels)} labelled tracks ({sum(len(lbl.boxes) for lbl in labels)} boxes) from "
           f"{sum(len(d) for d in detections.values())} detections")
@@ -97,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
              "detection tracks (CV Kalman)": (tracks_as_detections(det_tracks), {t.track_id: t.boxes for t in det_tracks}),
              "auto-labels": (labels_as_detections(labels),
                              {lbl.track_id: {k: b.to_array() for k, b in lbl.boxes.items()} for lbl in labels})},
-            truth)
+            truth, moving=DEFAULT_SELECTION.moving_vehicles(sequence))
         print(format_quality_table(rows))
         if args.json:
             write_json(args.json, rows_for_json(rows))

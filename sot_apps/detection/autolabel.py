@@ -6,17 +6,24 @@
    centres within ``max_centre_distance`` for small fast boxes); an unassigned detection with score >=
    ``birth_score`` starts a track; a track missed ``max_misses`` frames in a row ends. Tracks with fewer
    than ``min_detections`` detections are dropped (clutter).
-2. :func:`label_track`: SOT from the track's most reliable detection (highest score; its size is the
-   median size of the track's detections), forward to the track's last frame and backward to its first,
-   with the Detection term on the track's own detections (``det_sot``); then the offline refinement
-   (:mod:`tracker.offline`) over the whole span, and the whole track is moved by the median offset of its
-   detections (:func:`anchor_to_detections`: SOT is exact relative to its seed box, the detections fix where
-   the box sits); finally the box is fitted to the points the track gathered over all its frames
-   (:func:`fit_to_points`): on every axis whose two faces the points show, the points give the extent (the
-   detector's size and offset errors are correlated over time, so their median keeps a bias); on an axis
-   seen from one side only, the box keeps its size and moves just enough to hold the points. Each axis weighs
-   the points' estimate against the detections' median by their errors (:func:`detection_sigma`).
-3. :func:`autolabel`: all tracks; each label box carries its track's mean detection score.
+   A track needs ``confirm_detections`` detections scored >= ``birth_score`` (a confirmed birth).
+2. :func:`track_both_ways`: SOT (``det_sot`` with re-acquisition, :func:`label_config_tracker`) from each track's
+   most reliable detection (highest score; its size is the median size of the track's detections), forward to
+   ``LabelConfig.extend`` frames past the track's last detection and backward to as many before its first, with
+   the Detection term on the track's own detections; all tracks in ONE forward and ONE backward pass over the
+   sweeps (:func:`sot_apps.tracking.track_objects`, ``chunk`` tracks at a time). The frames past the
+   detections are kept up to the first one without support (:func:`_trimmed`).
+3. :func:`merge_duplicates`: tracks whose boxes overlap on most shared frames are one object (the one with the
+   most supported frames keeps the others' detections); tracks with fewer than ``min_supported_frames``
+   supported frames are dropped.
+4. :func:`label_from_result`: the offline refinement (:mod:`tracker.offline`) over the whole span, and the whole
+   track is moved by the median offset of its detections (:func:`anchor_to_detections`: SOT is exact relative
+   to its seed box, the detections fix where the box sits); finally the box is fitted to the points the track
+   gathered over all its frames (:func:`fit_to_points`): on every axis whose two faces the points show, the
+   points give the extent (the detector's size and offset errors are correlated over time, so their median
+   keeps a bias); on an axis seen from one side only, the box keeps its size and moves just enough to hold the
+   points. Each axis weighs the points' estimate against the detections' median by their errors
+   (:func:`detection_sigma`). Each label box carries its track's mean detection score.
 """
 
 from __future__ import annotations
@@ -39,12 +46,12 @@ from tracker import (
     get_preset,
     iou_bev_batch,
     points_in_box,
-    track,
     voxel_downsample_centres,
     wrap_angle,
 )
 
-__all__ = ["AssociationConfig", "DetectionTrack", "AutoLabel", "associate_tracks", "label_track", "anchor_to_detections",
+__all__ = ["AssociationConfig", "DetectionTrack", "AutoLabel", "associate_tracks", "LabelConfig", "track_both_ways",
+           "merge_duplicates", "label_from_result", "label_config_tracker", "anchor_to_detections",
            "PointFit", "fit_to_points", "detection_sigma", "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",
            "write_autolabels"]
 
@@ -57,6 +64,7 @@ class AssociationConfig:
     max_centre_distance: float = 1.5
     max_misses: int = 3
     min_detections: int = 3
+    confirm_detections: int = 2    # detections scored >= birth_score a track needs (a confirmed birth)
 
 
 @dataclass(frozen=True)
@@ -133,7 +141,8 @@ def associate_tracks(detections: dict[int, FrameDetections], n_frames: int,
     finished += live
     finished.sort(key=lambda t: t["id"])
     return [DetectionTrack(f"t{t['id']:04d}", t["boxes"], t["scores"]) for t in finished
-            if len(t["boxes"]) >= config.min_detections]
+            if len(t["boxes"]) >= config.min_detections
+            and sum(v >= config.birth_score for v in t["scores"].values()) >= config.confirm_detections]
 
 
 class _Reversed:
@@ -291,26 +300,158 @@ def _object_frame(points: np.ndarray, box: Box) -> np.ndarray:
     return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
 
 
-def label_track(source: FrameSource, detection_track: DetectionTrack, config: TrackerConfig | None = None,
-                offline: bool = True, fit: PointFit | None = PointFit()) -> AutoLabel:
-    """SOT forward and backward from the track's most reliable detection, then the offline refinement."""
-    config = config or get_preset("det_sot")
+@dataclass(frozen=True)
+class LabelConfig:
+    """How detection tracks become labels (:func:`autolabel`).
+
+    ``extend``: frames SOT follows a track past its first / last detection (backward / forward; the extension is
+    cut at its first frame without support). ``support_points``: an estimate supports its track when its box holds
+    at least this many object points and it neither coasted nor continued on the prior; a label needs
+    ``min_supported_frames`` such frames. Duplicates: two tracks whose boxes overlap at BEV IoU >=
+    ``duplicate_iou`` on >= ``duplicate_share`` of their >= ``min_shared_frames`` shared frames are one object.
+    ``reacquire``: SOT runs with re-acquisition (``reacquire.mode="clusters"``, docs/tracker.md).
+    ``chunk``: objects per pass over the sweeps (None: all; bounds memory, the labels do not depend on it)."""
+
+    extend: int = 30
+    support_points: int = 5
+    min_supported_frames: int = 3
+    duplicate_iou: float = 0.3
+    duplicate_share: float = 0.5
+    min_shared_frames: int = 3
+    reacquire: bool = True
+    chunk: int | None = None
+
+
+_UNSUPPORTED = frozenset({"no_points", "prior_only", "coasting", "det_only", "no_sweep"})
+
+
+def _supported(estimate, config: LabelConfig) -> bool:
+    return estimate.num_points >= config.support_points and not _UNSUPPORTED.intersection(estimate.flags)
+
+
+@dataclass(frozen=True)
+class _Seed:
+    """Where SOT starts on a detection track: its most reliable detection with the track's median size."""
+
+    frame: int
+    box: Box
+    velocity: np.ndarray
+
+
+def _seed(detection_track: DetectionTrack) -> _Seed:
     frames = detection_track.frames
-    seed_frame = max(frames, key=lambda k: (detection_track.scores[k], -abs(k - frames[len(frames) // 2])))
+    frame = max(frames, key=lambda k: (detection_track.scores[k], -abs(k - frames[len(frames) // 2])))
     sizes = np.array([detection_track.boxes[k][4:7] for k in frames])
-    seed = Box(*detection_track.boxes[seed_frame][:4], *np.median(sizes, axis=0))
-    own = {k: FrameDetections(b[None], np.array([detection_track.scores[k]])) for k, b in detection_track.boxes.items()}
-    velocity = _detection_velocity(detection_track, seed_frame)
-    forward = track(source, seed, seed_frame, frames[-1], config, detections=own, initial_motion=velocity)
-    backward = None
-    if seed_frame > frames[0]:
-        last = seed_frame
-        flipped = {last - k: d for k, d in own.items() if k <= seed_frame}
-        # backward in time the vehicle drives in reverse; turned by pi it drives forward again, as the
-        # motion-consistency term expects
-        backward = track(_Reversed(source, last), _turned(seed), 0, last - frames[0], config, detections=flipped,
-                         initial_motion=-velocity)
-    result = _merge(backward, forward)
+    box = Box(*detection_track.boxes[frame][:4], *np.median(sizes, axis=0))
+    return _Seed(frame, box, _detection_velocity(detection_track, frame))
+
+
+def _own_detections(detection_track: DetectionTrack) -> dict[int, FrameDetections]:
+    return {k: FrameDetections(b[None], np.array([detection_track.scores[k]]))
+            for k, b in detection_track.boxes.items()}
+
+
+def track_both_ways(source: FrameSource, tracks: list[DetectionTrack], config: TrackerConfig,
+                    label_config: LabelConfig = LabelConfig(), progress=None) -> list[TrackResult]:
+    """SOT of every detection track from its seed (:func:`_seed`) forward to ``extend`` frames past its last
+    detection and backward (on the box turned by pi, in reversed time: the vehicle drives forward, as the motion
+    term expects) to ``extend`` frames before its first, with its own detections in the Detection term. All
+    tracks (or ``chunk`` of them at a time) in ONE forward and ONE backward pass over the sweeps
+    (:func:`sot_apps.tracking.track_objects`). One online result per track, in frame order."""
+    from ..tracking import ObjectRequest, track_objects
+
+    n = len(source)
+    last = n - 1
+    reverse = _Reversed(source, last)
+    chunk = label_config.chunk or max(len(tracks), 1)
+    results: list[TrackResult] = []
+    for at in range(0, len(tracks), chunk):
+        part = tracks[at:at + chunk]
+        seeds = [_seed(t) for t in part]
+        forward, backward = [], []
+        for t, seed in zip(part, seeds, strict=True):
+            own = _own_detections(t)
+            forward.append(ObjectRequest(t.track_id, seed.box, seed.frame,
+                                         min(t.frames[-1] + label_config.extend, last),
+                                         detections=own, initial_motion=seed.velocity))
+            first = max(t.frames[0] - label_config.extend, 0)
+            if seed.frame > first:
+                backward.append(ObjectRequest(t.track_id, _turned(seed.box), last - seed.frame, last - first,
+                                              detections={last - k: d for k, d in own.items() if k <= seed.frame},
+                                              initial_motion=-seed.velocity))
+        ahead, _ = track_objects(source, forward, config, detections=None, min_points=None,
+                                 progress=(lambda f: progress(f, "forward")) if progress else None)
+        behind, _ = track_objects(reverse, backward, config, detections=None, min_points=None,
+                                  progress=(lambda f: progress(f, "backward")) if progress else None)
+        back = {o.object_id: o for o in behind}
+        for out in ahead:
+            if out.result is None:
+                raise RuntimeError(f"auto-label track {out.object_id}: {out.error}")
+            b = back.get(out.object_id)
+            if b is not None and b.result is None:
+                raise RuntimeError(f"auto-label track {out.object_id} (backward): {b.error}")
+            results.append(_merge(None if b is None else b.result, out.result))
+    return results
+
+
+def _trimmed(result: TrackResult, detection_track: DetectionTrack, config: LabelConfig) -> TrackResult:
+    """``result`` without the frames past the detections beyond the first unsupported one (either way)."""
+    frames = [e.frame for e in result.estimates]
+    first, last = detection_track.frames[0], detection_track.frames[-1]
+    keep = np.array([first <= k <= last for k in frames])
+    ok = np.array([_supported(e, config) for e in result.estimates])
+    i = frames.index(last) if last in frames else len(frames) - 1
+    while i + 1 < len(frames) and ok[i + 1]:
+        i += 1
+        keep[i] = True
+    i = frames.index(first) if first in frames else 0
+    while i - 1 >= 0 and ok[i - 1]:
+        i -= 1
+        keep[i] = True
+    estimates = [e for e, kept in zip(result.estimates, keep, strict=True) if kept]
+    return dataclasses.replace(result, estimates=estimates)
+
+
+def merge_duplicates(results: list[TrackResult], tracks: list[DetectionTrack], config: LabelConfig = LabelConfig()
+                     ) -> tuple[list[TrackResult], list[DetectionTrack]]:
+    """One track per object: a track whose boxes overlap a kept track's (BEV IoU >= ``duplicate_iou``) on >=
+    ``duplicate_share`` of their (>= ``min_shared_frames``) shared frames is folded into it (its detections
+    join the kept track's on the frames that have none). Tracks are kept in order of supported frames, then
+    detections; the survivors come back in their original order."""
+    support = [sum(_supported(e, config) for e in r.estimates) for r in results]
+    order = sorted(range(len(results)), key=lambda i: (-support[i], -len(tracks[i].boxes), i))
+    boxes = [{e.frame: e.box.to_array() for e in r.estimates} for r in results]
+    kept: list[int] = []
+    folded: dict[int, list[int]] = {}
+    for i in order:
+        into = None
+        for j in kept:
+            shared = sorted(set(boxes[i]) & set(boxes[j]))
+            if len(shared) < config.min_shared_frames:
+                continue
+            iou = iou_bev_batch(np.array([boxes[i][k] for k in shared]), np.array([boxes[j][k] for k in shared]))
+            if np.mean(iou >= config.duplicate_iou) >= config.duplicate_share:
+                into = j
+                break
+        if into is None:
+            kept.append(i)
+        else:
+            folded.setdefault(into, []).append(i)
+    out_results, out_tracks = [], []
+    for i in sorted(kept):
+        joined = tracks[i]
+        for j in folded.get(i, []):
+            extra = {k: b for k, b in tracks[j].boxes.items() if k not in joined.boxes}
+            joined = DetectionTrack(joined.track_id, {**joined.boxes, **extra},
+                                    {**joined.scores, **{k: tracks[j].scores[k] for k in extra}})
+        out_results.append(results[i])
+        out_tracks.append(joined)
+    return out_results, out_tracks
+
+
+def label_from_result(source: FrameSource, result: TrackResult, detection_track: DetectionTrack,
+                      config: TrackerConfig, offline: bool = True, fit: PointFit | None = PointFit()) -> AutoLabel:
+    """The offline refinement of a track's online result, anchored on its detections and fitted to its points."""
     if offline and len(result.estimates) > 2:
         from tracker import refine_offline
 
@@ -319,6 +460,13 @@ def label_track(source: FrameSource, detection_track: DetectionTrack, config: Tr
     if fit is not None:
         boxes = fit_to_points(source, boxes, fit, detection_track)
     return AutoLabel(detection_track.track_id, boxes, detection_track.mean_score, result.shape, detection_track)
+
+
+def label_config_tracker(config: TrackerConfig, label_config: LabelConfig) -> TrackerConfig:
+    """The tracker config of the auto-labeller: ``config`` with re-acquisition when ``label_config`` asks."""
+    if not label_config.reacquire:
+        return config
+    return dataclasses.replace(config, reacquire=dataclasses.replace(config.reacquire, mode="clusters"))
 
 
 def anchor_to_detections(boxes: dict[int, Box], detection_track: DetectionTrack) -> dict[int, Box]:
@@ -349,10 +497,20 @@ def anchor_to_detections(boxes: dict[int, Box], detection_track: DetectionTrack)
 
 def autolabel(source: FrameSource, detections: dict[int, FrameDetections], config: TrackerConfig | None = None,
               association: AssociationConfig = AssociationConfig(), offline: bool = True,
-              progress=None) -> tuple[list[AutoLabel], list[DetectionTrack]]:
-    """Auto-labels of every detection track of ``source`` (and the detection tracks themselves)."""
+              progress=None, label_config: LabelConfig = LabelConfig()) -> tuple[list[AutoLabel], list[DetectionTrack]]:
+    """Auto-labels of every vehicle of ``source`` (and the detection tracks they came from): detection tracks
+    (:func:`associate_tracks`), SOT both ways in one pass each (:func:`track_both_ways`), extensions cut where
+    support ends, duplicates merged (:func:`merge_duplicates`), tracks with fewer than ``min_supported_frames``
+    supported frames dropped, then each refined offline, anchored and fitted (:func:`label_from_result`)."""
+    config = label_config_tracker(config or get_preset("det_sot"), label_config)
     tracks = associate_tracks(detections, len(source), association)
-    labels = [label_track(source, t, config, offline) for t in (progress(tracks) if progress else tracks)]
+    results = track_both_ways(source, tracks, config, label_config, progress)
+    results = [_trimmed(r, t, label_config) for r, t in zip(results, tracks, strict=True)]
+    results, merged = merge_duplicates(results, tracks, label_config)
+    pairs = [(r, t) for r, t in zip(results, merged, strict=True)
+             if sum(_supported(e, label_config) for e in r.estimates) >= label_config.min_supported_frames]
+    labels = [label_from_result(source, r, t, config, offline)
+              for r, t in (progress(pairs, "refine") if progress else pairs)]
     return labels, tracks
 
 

@@ -201,11 +201,25 @@ def format_ap_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def only_objects(truth: Mapping[int, GroundTruthFrame], track_ids) -> dict[int, GroundTruthFrame]:
+    """``truth`` restricted to the ground-truth objects ``track_ids`` (e.g. the moving vehicles)."""
+    wanted = set(track_ids)
+    out = {}
+    for k, gt in truth.items():
+        keep = np.array([tid in wanted for tid in gt.track_ids], dtype=bool)
+        out[k] = GroundTruthFrame(gt.boxes[keep], gt.points[keep], gt.ego_xy,
+                                  tuple(t for t, kept in zip(gt.track_ids, keep, strict=True) if kept))
+    return out
+
+
 def autolabel_quality(candidates: Mapping[str, tuple[Mapping[int, FrameDetections], Mapping | None]],
-                      truth: Mapping[int, GroundTruthFrame], config: APConfig = APConfig()) -> list[dict]:
+                      truth: Mapping[int, GroundTruthFrame], config: APConfig = APConfig(),
+                      moving: Sequence[str] | None = None) -> list[dict]:
     """Per candidate (name -> (boxes per frame, tracks or None)): BEV and 3D AP at each IoU threshold over all
-    ranges up to the last band's end, and the identity coverage of its tracks (IoU 0.5)."""
+    ranges up to the last band's end, and the identity coverage of its tracks (IoU 0.5), over all objects and,
+    with ``moving`` (ground-truth ids), over those objects only (``coverage_moving``)."""
     band = (0.0, max(b[1] for b in config.range_bands))
+    moving_truth = None if moving is None else only_objects(truth, moving)
     rows = []
     for name, (boxes, tracks) in candidates.items():
         row: dict = {"name": name}
@@ -215,17 +229,22 @@ def autolabel_quality(candidates: Mapping[str, tuple[Mapping[int, FrameDetection
                                                               config.recall_points)["ap"]
         row["coverage"] = (identity_coverage(tracks, truth, 0.5, config.min_points, band[1])["coverage"]
                            if tracks is not None else float("nan"))
+        if moving_truth is not None:
+            row["coverage_moving"] = (identity_coverage(tracks, moving_truth, 0.5, config.min_points,
+                                                        band[1])["coverage"] if tracks is not None else float("nan"))
         rows.append(row)
     return rows
 
 
 def format_quality_table(rows: list[dict]) -> str:
     keys = [k for k in rows[0] if k.endswith(("_0.5", "_0.7"))]
+    coverages = [k for k in ("coverage", "coverage_moving") if k in rows[0]]
+    names = {"coverage": "one-track coverage", "coverage_moving": "one-track coverage (moving)"}
     head = "| labels | " + " | ".join(k.replace("_ap_", " AP@").upper().replace("AP@", "AP@") for k in keys) \
-        + " | one-track coverage |"
-    lines = [head, "|---|" + "---|" * (len(keys) + 1)]
+        + " | " + " | ".join(names[k] for k in coverages) + " |"
+    lines = [head, "|---|" + "---|" * (len(keys) + len(coverages))]
     for r in rows:
-        cov = "—" if not np.isfinite(r["coverage"]) else f"{100 * r['coverage']:.1f} %"
+        cov = " | ".join("—" if not np.isfinite(r[k]) else f"{100 * r[k]:.1f} %" for k in coverages)
         lines.append(f"| {r['name']} | " + " | ".join(f"{100 * r[k]:.1f}" for k in keys) + f" | {cov} |")
     return "\n".join(lines)
 

@@ -156,3 +156,41 @@ def test_eval_tracks_every_object_in_one_pass_as_each_alone(tiny_worlds, monkeyp
         assert np.array_equal([e.box.to_array() for e in got.estimates], [e.box.to_array() for e in want.estimates])
         assert [(e.num_points, e.flags) for e in got.estimates] == [(e.num_points, e.flags) for e in want.estimates]
         assert np.array_equal(got.shape, want.shape)
+
+
+class _Reversed:
+    """The sequence's frames last..0 in reversed order (each frame keeps its own index)."""
+
+    def __init__(self, seq):
+        self.seq = seq
+
+    def __len__(self):
+        return len(self.seq)
+
+    def lidar_frame(self, index):
+        return self.seq.lidar_frame(len(self.seq) - 1 - index)
+
+
+def test_own_detections_initial_motion_and_a_reversed_source_as_tracked_alone(tiny_worlds):
+    """Per-object detections and initial motion (the auto-labeller's requests), on a source serving its frames in
+    reversed order, give what tracker.track gives with the same inputs."""
+    from tracker import FrameDetections
+
+    seq = open_sequence(tiny_worlds[0])
+    source, last = _Reversed(seq), len(seq) - 1
+    config = get_preset("det_sot")
+    requests, wants = [], []
+    for tid, start in (("veh_000", 1), ("veh_002", 2)):
+        t = seq.tracks()[tid]
+        box = t.box_at(last - start)
+        turned = Box(box.x, box.y, box.z, box.heading + np.pi, box.length, box.width, box.height)
+        own = {last - k: FrameDetections(t.box_at(k).to_array()[None], np.array([0.9])) for k in t.frames}
+        motion = np.array([0.3, -0.1, 0.0, 0.0])
+        requests.append(ObjectRequest(tid, turned, start, 5, detections=own, initial_motion=motion))
+        wants.append(track(source, turned, start, 5, config, detections=own, initial_motion=motion))
+    tracks, _ = track_objects(source, requests, config, mode="online", min_points=None)
+    for got, want, request in zip(tracks, wants, requests, strict=True):
+        assert got.error is None and got.start == request.start   # positions in the source, not frame indices
+        assert got.result.frames == want.frames == [last - k for k in range(request.start, 6)]
+        assert np.array_equal([e.box.to_array() for e in got.result.estimates],
+                              [e.box.to_array() for e in want.estimates])
