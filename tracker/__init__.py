@@ -18,13 +18,15 @@ _EXPORTS = {  # name -> submodule: imported on first use, so `import tracker` st
     "Box": "geometry", "State": "geometry", "invert_transform": "geometry", "make_transform": "geometry",
     "interpolate_pose": "geometry", "ctrv_arc": "motion_filter",
     "points_in_box": "geometry", "rotation_z": "geometry", "rotation_zyx": "geometry", "transform_points": "geometry", "wrap_angle": "geometry",
-    "GroundParams": "ground", "fit_plane": "ground", "ground_mask": "ground", "remove_ground": "ground",
+    "GroundParams": "ground_params", "fit_plane": "ground", "ground_mask": "ground", "remove_ground": "ground",
     "DIFFICULTIES": "metrics", "DIFFICULTY_THRESHOLDS": "metrics", "PRECISION_THRESHOLDS": "metrics",
     "PooledMetrics": "metrics", "ROB_THRESHOLDS": "metrics", "SUCCESS_THRESHOLDS": "metrics",
     "TrackletScores": "metrics", "accuracy": "metrics", "centre_errors_batch": "metrics",
     "chamfer_distance": "metrics", "difficulty": "metrics", "iou_3d_batch": "metrics", "iou_bev_batch": "metrics",
     "pool_metrics": "metrics", "robustness": "metrics", "score_tracklet": "metrics", "tracklet_metrics": "metrics",
     "voxel_downsample_centres": "metrics",
+    "KeyframeParams": "keyframes", "interpolate_ctrv": "keyframes", "interpolate_linear": "keyframes",
+    "keyframe_passes": "keyframes", "keyframe_schedule": "keyframes", "track_keyframes": "keyframes",
     "MotionPrior": "motion",
     "refine_offline": "offline", "frame_region_points": "offline",
     "mean_points_in_boxes": "pseudo_gt", "pseudo_gt_shape": "pseudo_gt",
@@ -54,6 +56,8 @@ __all__ = [
     "rotation_zyx", "parse_overrides", "interpolate_pose", "ctrv_arc",
     # the multi-object pass of sot_apps.tracking feeds the refinements from the sweeps it reads
     "FixedLagSmoother", "frame_region_points", "remember_sweep_ground_mask",
+    "KeyframeParams", "track_keyframes", "keyframe_passes", "keyframe_schedule", "interpolate_linear",
+    "interpolate_ctrv",
 ]
 
 

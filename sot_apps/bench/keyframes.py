@@ -31,9 +31,10 @@ import sys
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:   # numpy loads when a benchmark runs (`sot-apps --help` imports this module)
+    import numpy as np
 
 __all__ = ["register", "add_arguments", "run", "KeyframeBenchTrack", "KEYFRAME_ROWS"]
 
@@ -109,6 +110,7 @@ def _tracks(source: str, first: int | None, track_ids: list[str] | None) -> list
 
 
 def _ious(result_boxes: dict[int, Any], track: KeyframeBenchTrack) -> np.ndarray:
+
     from tracker import score_tracklet
 
     predicted = [result_boxes[k] for k in track.frames]
@@ -117,16 +119,18 @@ def _ious(result_boxes: dict[int, Any], track: KeyframeBenchTrack) -> np.ndarray
 
 def evaluate_track(track: KeyframeBenchTrack, source, every: list[int], config) -> dict[str, Any]:
     """IoUs (frames 1..n-1) of every row and interval, and which scored frames are keyframes."""
-    from tracker import refine_offline
-    from tracker import track as track_online
-    from tracker.keyframes import (
+    import numpy as np
+
+    from tracker import (
         KeyframeParams,
         interpolate_ctrv,
         interpolate_linear,
         keyframe_passes,
         keyframe_schedule,
+        refine_offline,
         track_keyframes,
     )
+    from tracker import track as track_online
 
     frames = list(track.frames)
     boxes = dict(zip(frames, track.boxes, strict=True))
@@ -153,6 +157,8 @@ def evaluate_track(track: KeyframeBenchTrack, source, every: list[int], config) 
 
 
 def _acc(parts: list[np.ndarray], masks: list[np.ndarray] | None = None) -> float:
+    import numpy as np
+
     if masks is not None:
         parts = [p[m] for p, m in zip(parts, masks, strict=True)]
     values = np.concatenate(parts) if parts else np.zeros(0)

@@ -117,8 +117,7 @@ def _run_keyframes(args: argparse.Namespace, sequence, progress) -> int:
     """Labels from a keyframe file: each of its tracks over its first..last keyframe (tracker.keyframes)."""
     import numpy as np
 
-    from tracker import get_preset
-    from tracker.keyframes import track_keyframes
+    from tracker import get_preset, track_keyframes
 
     from ..detection.autolabel import AutoLabel, DetectionTrack, labels_as_detections, write_autolabels
     from ..io.atomic import write_json

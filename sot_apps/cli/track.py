@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
 def keyframe_params(sigma: str | None):
     """``--keyframe-sigma M[,RAD]`` as :class:`tracker.keyframes.KeyframeParams` (None: hard keyframes)."""
-    from tracker.keyframes import KeyframeParams
+    from tracker import KeyframeParams
 
     if sigma is None:
         return KeyframeParams()
@@ -149,7 +149,7 @@ def keyframe_params(sigma: str | None):
 
 
 def _run_keyframes(args: argparse.Namespace, seq, config) -> int:
-    from tracker.keyframes import track_keyframes
+    from tracker import track_keyframes
 
     from ..io.cached_source import CachedSource
     from ..io.keyframes import pick_keyframe_track, read_keyframes
