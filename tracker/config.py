@@ -595,6 +595,7 @@ _FULL = TrackerConfig(
                         consistency="x_only", max_yaw_change=0.03),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
+    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True),
 )
 # faithful: the authors' implementation (docs/tracker.md)
 _FAITHFUL = TrackerConfig(

@@ -63,7 +63,7 @@ def test_an_empty_start_is_held_then_reacquired_when_the_points_appear():
 
 def test_without_reacquire_the_empty_start_loses_the_car():
     frames, truth = _sequence()
-    result = track(_Source(frames), truth[0], 0, len(frames) - 1, get_preset("full", seed=0))
+    result = track(_Source(frames), truth[0], 0, len(frames) - 1, get_preset("full", seed=0, **{"reacquire.mode": "none"}))
     assert _iou(result, truth)[-4:].max() < 0.1
 
 

@@ -14,6 +14,7 @@ from tracker.geometry import Box, invert_transform, make_transform, rotation_z, 
 from tracker.metrics import iou_3d_batch
 
 REACQUIRE = {"reacquire.mode": "clusters"}
+NO_REACQUIRE = {"reacquire.mode": "none"}     # `full` re-acquires: the comparisons switch it off
 _EGO = make_transform(rotation_z(0.0), np.array([0.0, 0.0, 1.0]))   # a parked ego, sensor 1 m up
 
 
@@ -105,7 +106,7 @@ def test_a_car_that_changes_lane_while_hidden_is_found_by_the_search_and_lost_wi
     region and the lateral gate (reach + lateral_growth x lost time = 3.7 m when it is seen again)."""
     boxes = _straight(30, (10.0, 4.0), 0.0, 1.0, side_shift=(8, 3.5, 17))
     seq = _scene(boxes, 0, hidden=range(8, 24), ground_half=24.0)
-    on, off = _track(seq, **REACQUIRE), _track(seq)
+    on, off = _track(seq, **REACQUIRE), _track(seq, **NO_REACQUIRE)
     iou_on, iou_off = _iou(on, boxes), _iou(off, boxes)
     assert "reacquired" in on.estimates[25].flags and iou_on[25:].min() > 0.7   # seen again at 24, re-locked at 25
     assert iou_off[24:].max() < 0.1
@@ -153,7 +154,7 @@ def test_a_far_sparse_start_that_approaches_is_found_before_it_is_within_30_m():
     seq = _scene(boxes, 0, density=lambda r: 0.0 if r > 50.0 else 80.0 * (6.0 / r) ** 2, ground_centre=(35.0, 3.5),
                  ground_half=30.0)
     near = next(k for k, b in enumerate(boxes) if np.hypot(b.x, b.y) < 30.0)
-    on, off = _track(seq, **REACQUIRE), _track(seq)
+    on, off = _track(seq, **REACQUIRE), _track(seq, **NO_REACQUIRE)
     found = [k for k, e in enumerate(on.estimates) if "reacquired" in e.flags]
     assert found and found[0] < near                                    # re-locked at 48 m here
     assert np.linalg.norm(on.estimates[found[0]].box.center[:2] - boxes[found[0]].center[:2]) < 1.0
@@ -182,8 +183,8 @@ def test_a_straight_drive_seen_obliquely_keeps_its_heading_with_the_travel_term(
     points rotate the box by ~8 deg per frame from frame 1 on (> 100 deg by the end without the term)."""
     boxes = _straight(30, (18.0, -14.0), np.deg2rad(45.0), 0.6)
     seq = _scene(boxes, seed, density=lambda r: 80.0 * (6.0 / r) ** 2, ground_centre=(28.0, -4.0), ground_half=22.0)
-    on = _heading_error_deg(_track(seq, **{"motion.travel_weight": 5.0}), boxes)
-    off = _heading_error_deg(_track(seq), boxes)
+    on = _heading_error_deg(_track(seq, **NO_REACQUIRE, **{"motion.travel_weight": 5.0}), boxes)
+    off = _heading_error_deg(_track(seq, **NO_REACQUIRE), boxes)
     assert on[-1] < 6.0
     assert on[-1] <= off[-1] + 0.5
     if seed == 1:
