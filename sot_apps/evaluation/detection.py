@@ -51,19 +51,32 @@ def ground_truth_frames(sequence, labels: Sequence[str] | None = None, frames: S
     for k in (range(len(sequence)) if frames is None else frames):
         anns = [a for a in (sequence.annotations[k] if sequence.annotations else [])
                 if wanted is None or a.label.lower() in wanted]
-        boxes = np.array([a.box.to_array() for a in anns]).reshape(-1, 7)
+        boxes = np.array([[*a.box.to_array(), a.box.roll, a.box.pitch] for a in anns]).reshape(-1, 9)
         out[k] = GroundTruthFrame(boxes, count_points_in_boxes(sequence.points_world(k), boxes),
                                   np.asarray(sequence.frames[k].world_from_ego)[:2, 3], tuple(a.track_id for a in anns))
     return out
 
 
 def _pairwise_iou(dets: np.ndarray, gts: np.ndarray, kind: str) -> np.ndarray:
+    """(len(dets), len(gts)) IoU; boxes (N, 7) or (N, 9) with roll and pitch. BEV: the footprints; 3D: the
+    tilted boxes' exact IoU, computed only for pairs whose footprints overlap (the others are 0)."""
     if len(dets) == 0 or len(gts) == 0:
         return np.zeros((len(dets), len(gts)))
-    a = np.repeat(dets, len(gts), axis=0)
-    b = np.tile(gts, (len(dets), 1))
-    iou = iou_bev_batch(a, b) if kind == "bev" else iou_3d_batch(a, b)
+    a9, b9 = _with_tilt(dets), _with_tilt(gts)
+    a = np.repeat(a9, len(gts), axis=0)
+    b = np.tile(b9, (len(dets), 1))
+    iou = iou_bev_batch(a[:, :7], b[:, :7])
+    if kind != "bev":
+        overlap = iou > 0.0
+        iou = np.zeros(len(a))
+        iou[overlap] = iou_3d_batch(a[overlap], b[overlap])
     return iou.reshape(len(dets), len(gts))
+
+
+def _with_tilt(boxes: np.ndarray) -> np.ndarray:
+    """(N, 9) boxes: (N, 7) level ones with roll = pitch = 0."""
+    boxes = np.asarray(boxes, dtype=np.float64)
+    return boxes if boxes.shape[1] == 9 else np.hstack([boxes, np.zeros((len(boxes), 2))])
 
 
 def average_precision(detections: Mapping[int, FrameDetections], truth: Mapping[int, GroundTruthFrame],

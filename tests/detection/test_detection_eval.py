@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from sot_apps.evaluation.detection import GroundTruthFrame, average_precision, identity_coverage
 from tracker.detection import FrameDetections
@@ -54,3 +55,24 @@ def test_operating_point_counts_confident_detections_within_range():
     # low-scored duplicate are not counted
     assert point["n_gt"] == 1 and point["recall"] == 1.0
     assert point["n_det"] == 3 and abs(point["precision"] - 2 / 3) < 1e-9
+
+
+def test_ground_truth_boxes_keep_their_tilt_in_counts_and_3d_iou():
+    """A pitched box (0.3 rad): the points inside it are all counted with its tilt (a level copy misses some), and
+    a level detection of it scores the tilted 3D IoU (< 1) but the full footprint IoU."""
+    from sot_apps.evaluation.detection import _pairwise_iou
+    from sot_apps.objects.box_points import count_points_in_boxes
+    from tracker import Box, iou_3d_batch, transform_points
+
+    tilted = Box(10.0, 5.0, 1.0, 0.4, 4.0, 2.0, 1.5, roll=0.0, pitch=0.3)
+    rng = np.random.default_rng(0)
+    inside = rng.uniform(-0.49, 0.49, (500, 3)) * np.array([4.0, 2.0, 1.5])
+    world = transform_points(tilted.world_from_object(), inside)
+    row9 = np.array([[*tilted.to_array(), 0.0, 0.3]])
+    assert count_points_in_boxes(world, row9)[0] == 500
+    assert count_points_in_boxes(world, row9[:, :7])[0] < 500
+    level = row9[:, :7]
+    expected = iou_3d_batch(np.hstack([level, np.zeros((1, 2))]), row9)[0]
+    assert 0.5 < expected < 0.99
+    assert _pairwise_iou(level, row9, "3d")[0, 0] == pytest.approx(expected)
+    assert _pairwise_iou(level, row9, "bev")[0, 0] == pytest.approx(1.0)
