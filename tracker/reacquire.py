@@ -20,7 +20,7 @@ from scipy import ndimage
 from .geometry import Box, points_in_box
 from .shape import to_object_frame
 
-__all__ = ["Candidate", "cluster_candidates", "search_region", "start_shift"]
+__all__ = ["Candidate", "box_holds_against", "cluster_candidates", "search_region", "start_shift"]
 
 
 def search_region(box: Box, ahead: float, behind: float, across: float = 0.5, rise: float = 0.0) -> Box:
@@ -101,3 +101,22 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     placed = np.where(faced & (extent[keep] < 2.0 * half) & (not centred), placed, mid)
     world = box.center[:2] + placed[:, :1] * np.array([c, s]) + placed[:, 1:] * np.array([-s, c])
     return [Candidate(world[i], extent[k], int(sizes[k]), time_s) for i, k in enumerate(keep)]
+
+
+def box_holds_against(box: Box, centre: np.ndarray, points: np.ndarray, hold_ties: bool, crop_scale: float) -> bool:
+    """Whether a lost track's ``box`` stays where it is against a confirmed candidate at ``centre`` (xy; the search
+    goes on): the box placed there would hold fewer of the region's non-ground ``points`` than the box does (the
+    frame's points support the track where it is better; a candidate may be only a part of the object, e.g. the
+    top of one that re-appears from behind an occluder). On a tie (a far car's few points fit in both boxes) the
+    candidate wins: it is centred on them. With ``hold_ties`` (``reacquire.supported_holds_ties`` while the frame's
+    estimate has support: ``min_points`` object points, not continued on the prior) the box also stays when the
+    candidate would hold no more points than it, both counted in the box scaled by ``crop_scale`` (the points on
+    its faces count, which a box that fits them exactly splits by their noise): the normal step already holds the
+    object again, and a candidate centred on the same partial view of it is no better (which end of the object
+    the points show is ambiguous for the candidate, not for the registration against the track's shape)."""
+    moved = Box(float(centre[0]), float(centre[1]), box.z, box.heading, box.length, box.width, box.height)
+    if points_in_box(points, moved, 1.0).sum() < points_in_box(points, box, 1.0).sum():
+        return True
+    if not hold_ties:
+        return False
+    return bool(points_in_box(points, moved, crop_scale).sum() <= points_in_box(points, box, crop_scale).sum())

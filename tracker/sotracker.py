@@ -33,7 +33,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .local_region import LocalCrop, local_region
 from .motion_limits import limit_motion
-from .reacquire import cluster_candidates, search_region, start_shift
+from .reacquire import box_holds_against, cluster_candidates, search_region, start_shift
 from .registration import box_moved
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .strategies.choose import choose_strategies
@@ -381,36 +381,15 @@ class Tracker:
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)
         confirms = (relock is not None and start is None
                     and float(np.linalg.norm(relock.centre - self.box.center[:2])) < r.hold_distance)
-        if relock is None or confirms or (start is None and self._holds_against(relock, points, estimate)):
+        supported = estimate.num_points >= r.min_points and "prior_only" not in estimate.flags
+        if relock is None or confirms or (start is None and box_holds_against(
+                self.box, relock.centre, points, r.supported_holds_ties and supported, self.config.search.crop_scale)):
             if confirms:  # the candidate is where the track is: it holds, the search ends
                 s.reacquire.reset(time_s, self.box.center)
             coasting = ("coasting",) if relock is None and "prior_only" in estimate.flags else ()
             return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
                            time_ms=(time.perf_counter() - t0) * 1e3)
         return self._relock(frame, relock, start is None, t0)
-
-    def _holds_against(self, relock: Relock, points: np.ndarray, estimate: FrameEstimate) -> bool:
-        """Whether a lost track's box stays where it is against a confirmed candidate (the search goes on): the
-        box placed there would hold fewer of the region's non-ground ``points`` than the box does (the frame's
-        points support the track where it is better; a candidate is only a part of the object, e.g. the top of
-        one that re-appears from behind an occluder). On a tie (a far car's few points fit in both boxes) the
-        candidate wins: it is centred on them. With ``reacquire.supported_holds_ties``, while the frame's
-        ``estimate`` has support (``min_points`` object points, not continued on the prior) the box also stays
-        when the candidate would hold no more points than it with both counted in the box scaled by
-        ``search.crop_scale`` (the points on its faces count, which a box that fits them exactly splits by their
-        noise): the normal step already holds the object again, and a candidate centred on the same partial view
-        of it is no better (which end of the object the points show is ambiguous for the candidate, not for the
-        registration against the track's shape)."""
-        box, r = self.box, self.config.reacquire
-        moved = Box(float(relock.centre[0]), float(relock.centre[1]), box.z, box.heading, box.length, box.width,
-                    box.height)
-        if points_in_box(points, moved, 1.0).sum() < points_in_box(points, box, 1.0).sum():
-            return True
-        supported = estimate.num_points >= r.min_points and "prior_only" not in estimate.flags
-        if not (r.supported_holds_ties and supported):
-            return False
-        scale = self.config.search.crop_scale   # the points on the box's faces count (the ICP's crop)
-        return bool(points_in_box(points, moved, scale).sum() <= points_in_box(points, box, scale).sum())
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
         """Restart the track at a confirmed candidate, its velocity seeding the motion model; with
