@@ -11,7 +11,7 @@ One core (the process is pinned). Reported (best of ``--repeats``):
   and the compiled backend on ground + 20 plain boxes (12 triangles each);
 - full sweep: ``simulate_scan`` with range noise, grazing drop, intensity and the rolling scan (per-column firing
   times; the sensor and the vehicles stand still, so no ray is re-timed), random draws and the ``Scan`` arrays
-  included; the per-return models run in the compiled loop too;
+  included; the per-return models, their counter-based draws and every ``Scan`` array come from the compiled loop;
 - the CPU time of cast and full sweep (``time.process_time``, best of the repeats): rays per second per core even
   when other processes share the machine (wall-clock figures then include waiting for the CPU);
 - Open3D ``RaycastingScene`` on the same triangles when open3d is installed (it is not a dependency);

@@ -12,7 +12,8 @@ import numpy as np
 
 from .hits import RayHits
 
-__all__ = ["CompiledBackend", "compiled_backend_available", "SweepReturns", "compiled_sweep_returns"]
+__all__ = ["CompiledBackend", "compiled_backend_available", "SweepReturns", "ReturnModels", "compiled_sweep_returns",
+           "compiled_draws"]
 
 
 class _CompiledTracer:
@@ -39,31 +40,40 @@ class _CompiledTracer:
             raise OSError("the compiled ray tracer was not built (pip install needs a C compiler)")
         embree = _embree_library_path()
         lib = ctypes.CDLL(built[0])
+        if not hasattr(lib, "sot_rt_version") or lib.sot_rt_version() != _INTERFACE_VERSION:
+            raise OSError(f"{built[0]} was built from an older _embree_trace.c (rebuild it: pip install, or "
+                          "python setup.py build_ext --inplace)")
+        ptr, c_long = ctypes.c_void_p, ctypes.c_long
         lib.sot_rt_error.restype = ctypes.c_char_p
         lib.sot_rt_load.argtypes = [ctypes.c_char_p]
-        lib.sot_rt_scene_new.restype = ctypes.c_void_p
+        lib.sot_rt_scene_new.restype = ptr
         lib.sot_rt_scene_new.argtypes = [ctypes.c_char_p]
-        lib.sot_rt_scene_add_mesh.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_void_p, ctypes.c_long,
-                                              ctypes.c_void_p, ctypes.c_long]
-        lib.sot_rt_scene_add_rect.argtypes = [ctypes.c_void_p, ctypes.c_uint] + [ctypes.c_double] * 5
-        lib.sot_rt_scene_commit.argtypes = [ctypes.c_void_p]
-        lib.sot_rt_scene_free.argtypes = [ctypes.c_void_p]
-        c_double_p, c_long = ctypes.c_void_p, ctypes.c_long
-        if hasattr(lib, "sot_rt_returns"):   # absent from a library built before it existed (rebuild: pip install)
-            lib.sot_rt_returns.restype = c_long
-            lib.sot_rt_returns.argtypes = [c_long, c_double_p, c_double_p, c_double_p, c_double_p, ctypes.c_int,
-                                           c_double_p, c_double_p, c_long, ctypes.c_double, ctypes.c_double, c_double_p,
-                                           c_double_p, ctypes.c_double, c_double_p, ctypes.c_double, c_double_p,
-                                           ctypes.c_double, ctypes.c_double, ctypes.c_int, ctypes.c_double, c_double_p,
-                                           c_double_p, c_double_p, c_double_p, c_double_p]
-        lib.sot_rt_cast.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_long,
-                                    ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
-        if hasattr(lib, "sot_rt_cast8"):   # absent from a library built before it existed (rebuild: pip install)
-            lib.sot_rt_cast8.argtypes = lib.sot_rt_cast.argtypes
-            lib.sot_rt_has_packets.restype = ctypes.c_int
+        lib.sot_rt_scene_add_mesh.argtypes = [ptr, ctypes.c_uint, ptr, c_long, ptr, c_long]
+        lib.sot_rt_scene_add_rect.argtypes = [ptr, ctypes.c_uint] + [ctypes.c_double] * 5
+        lib.sot_rt_scene_commit.argtypes = [ptr]
+        lib.sot_rt_scene_free.argtypes = [ptr]
+        lib.sot_rt_cast.argtypes = [ptr, ptr, ctypes.c_int, ptr, ctypes.c_int, c_long, ptr, ptr, ptr, ptr]
+        lib.sot_rt_cast16.argtypes = lib.sot_rt_cast.argtypes
+        lib.sot_rt_has_packets.restype = ctypes.c_int
+        lib.sot_rt_draws.argtypes = [ctypes.c_uint64, ctypes.c_int, ctypes.c_int, c_long, ptr]
+        lib.sot_rt_returns.restype = c_long
+        lib.sot_rt_returns.argtypes = [c_long, ptr, ptr, ptr, ptr, ctypes.c_int, ptr, ptr, ptr, c_long,
+                                       ctypes.POINTER(_Models), ptr, c_long, ptr] + [ptr] * 9
         if lib.sot_rt_load(str(embree).encode()) != 0:
             raise OSError(lib.sot_rt_error().decode(errors="replace"))
         return lib
+
+
+_INTERFACE_VERSION = 2   # sot_rt_version() of _embree_trace.c
+
+
+class _Models(ctypes.Structure):
+    """The ``Models`` struct of _embree_trace.c."""
+
+    _fields_ = [("min_range", ctypes.c_double), ("max_range", ctypes.c_double), ("seed", ctypes.c_uint64),
+                ("noise_sigma", ctypes.c_double), ("drop_random", ctypes.c_double), ("drop_grazing", ctypes.c_int),
+                ("grazing_start_deg", ctypes.c_double), ("drop_range", ctypes.c_int), ("range_a", ctypes.c_double),
+                ("range_b", ctypes.c_double), ("intensity", ctypes.c_int), ("attenuation", ctypes.c_double)]
 
 
 def _embree_library_path() -> Path:
@@ -86,12 +96,11 @@ def _embree_library_path() -> Path:
 
 
 def _packets(lib: ctypes.CDLL) -> bool:
-    """Trace with 8-ray packets (``sot_rt_cast8``) when the library has them; ``SOT_APPS_RAY_PACKETS=0`` turns
-    them off (tests compare both paths)."""
+    """Trace with 16-ray packets (``sot_rt_cast16``) when Embree has them; ``SOT_APPS_RAY_PACKETS=0`` turns them
+    off (tests compare both paths)."""
     import os
 
-    return (os.environ.get("SOT_APPS_RAY_PACKETS", "1") != "0" and hasattr(lib, "sot_rt_cast8")
-            and bool(lib.sot_rt_has_packets()))
+    return os.environ.get("SOT_APPS_RAY_PACKETS", "1") != "0" and bool(lib.sot_rt_has_packets())
 
 
 def compiled_backend_available() -> bool:
@@ -130,16 +139,20 @@ class CompiledBackend:
             raise RuntimeError(f"Embree scene build failed: {self._error()}")
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
+        """Directions and origins float32, or float64 (rounded to float32 ray by ray in C: no converted copy)."""
+        dtype = np.float64 if directions.dtype == np.float64 else np.float32
+        directions = np.ascontiguousarray(directions, dtype=dtype)
         n = directions.shape[0]
         single = origins.ndim == 1 or origins.shape[0] == 1 or origins.strides[0] == 0  # one shared origin
-        origins = np.ascontiguousarray(origins.reshape(-1, 3)[:1] if single else origins, dtype=np.float32)
+        origins = np.ascontiguousarray(origins.reshape(-1, 3)[:1] if single else origins, dtype=dtype)
         distance = np.empty(n, np.float64)
         normal = np.empty((n, 3), np.float32)
         prim = np.empty(n, np.int32)
         geom = np.empty(n, np.int32)
-        cast = self._lib.sot_rt_cast8 if _packets(self._lib) else self._lib.sot_rt_cast
-        err = cast(self._handle, origins.ctypes.data, 0 if single else 1, directions.ctypes.data, n,
-                                    distance.ctypes.data, normal.ctypes.data, prim.ctypes.data, geom.ctypes.data)
+        cast = self._lib.sot_rt_cast16 if _packets(self._lib) else self._lib.sot_rt_cast
+        err = cast(self._handle, origins.ctypes.data, 0 if single else 1, directions.ctypes.data,
+                   int(dtype == np.float64), n, distance.ctypes.data, normal.ctypes.data, prim.ctypes.data,
+                   geom.ctypes.data)
         if err != 0:
             raise RuntimeError(f"Embree ray casting failed: {self._error()}")
         return RayHits(distance, normal, prim, geom)
@@ -147,51 +160,90 @@ class CompiledBackend:
 
 @dataclass(frozen=True)
 class SweepReturns:
-    """The kept returns of a sweep, in ray order: ray index, measured range, intensity, point (float32)."""
+    """The kept returns of a sweep, in ray order (the per-return arrays of a ``Scan``)."""
 
-    keep: np.ndarray        # (K,) int64
-    measured: np.ndarray    # (K,) float64
-    intensity: np.ndarray   # (K,) float32
-    xyz: np.ndarray         # (K, 3) float32
+    keep: np.ndarray             # (K,) int64 ray index
+    xyz: np.ndarray              # (K, 3) float32 point
+    distance: np.ndarray         # (K,) float32 measured range
+    intensity: np.ndarray        # (K,) float32
+    beam: np.ndarray             # (K,) int32
+    column: np.ndarray           # (K,) int32
+    time_offset_ns: np.ndarray   # (K,) int64 firing time of the column
+    object_index: np.ndarray     # (K,) int32
+    instance: np.ndarray         # (K,) int32
+
+    def __len__(self) -> int:
+        return int(self.keep.shape[0])
 
 
-def _pointer(array: np.ndarray | None, dtype) -> int | None:
-    if array is None:
+@dataclass(frozen=True)
+class ReturnModels:
+    """What :func:`compiled_sweep_returns` applies (formulas in :mod:`sot_apps.sensor.noise`): returns with a finite
+    distance in [min_range, max_range]; range noise ``noise_sigma`` (0: off); a random drop ``drop_random`` (0: off);
+    the grazing drop (``drop_grazing``, from ``grazing_start_deg``); the range drop ``clip(range_a + range_b * r, 0,
+    1)`` (``drop_range``); Lambertian intensity with ``attenuation`` per metre (``intensity``); draws from ``seed``."""
+
+    min_range: float
+    max_range: float
+    seed: int = 0
+    noise_sigma: float = 0.0
+    drop_random: float = 0.0
+    drop_grazing: bool = False
+    grazing_start_deg: float = 75.0
+    drop_range: bool = False
+    range_a: float = 0.0
+    range_b: float = 0.0
+    intensity: bool = False
+    attenuation: float = 0.0
+
+
+def compiled_draws(seed: int, stream: int, n: int, normal: bool = False) -> np.ndarray | None:
+    """The compiled loop's random draws of rays 0..n-1 in ``stream`` (uniforms, or standard normals); None when the
+    loop is not built. :func:`sot_apps.sensor.noise.ray_draws` is the numpy twin."""
+    lib = _CompiledTracer.load()
+    if lib is None:
         return None
-    assert array.dtype == dtype and array.flags.c_contiguous
-    return array.ctypes.data
+    out = np.empty(int(n), np.float64)
+    lib.sot_rt_draws(int(seed) % 2**64, int(stream), int(bool(normal)), int(n), out.ctypes.data)
+    return out
 
 
 def compiled_sweep_returns(distance: np.ndarray, normal: np.ndarray, dirs: np.ndarray, origins: np.ndarray,
-                           object_index: np.ndarray, reflectivity: np.ndarray, min_range: float, max_range: float,
-                           noise: np.ndarray | None, u_random: np.ndarray | None, drop_random: float,
-                           u_grazing: np.ndarray | None, grazing_start_deg: float, u_range: np.ndarray | None,
-                           range_a: float, range_b: float, with_intensity: bool, attenuation: float,
-                           target_from_world: np.ndarray) -> SweepReturns | None:
+                           object_index: np.ndarray, reflectivity: np.ndarray, instance: np.ndarray,
+                           models: ReturnModels, target_from_world: np.ndarray, columns: int,
+                           column_time_ns: np.ndarray) -> SweepReturns | None:
     """The per-return models of :func:`sot_apps.sensor.scan.simulate_scan` in the compiled loop (``sot_rt_returns``
-    in _embree_trace.c: same formulas, same random draws, one pass); None when the loop is not built."""
+    in _embree_trace.c: one pass over the rays, each ray's random numbers drawn there when it needs them, every
+    per-return output written); None when the loop is not built. Ray ``i`` is beam ``i // columns``, column
+    ``i % columns``; ``reflectivity`` and ``instance`` are per object (``object_index`` -1: none)."""
     lib = _CompiledTracer.load()
-    if lib is None or not hasattr(lib, "sot_rt_returns"):
+    if lib is None:
         return None
     n = len(distance)
     single = origins.ndim == 1 or origins.shape[0] == 1 or origins.strides[0] == 0
     origins = np.ascontiguousarray(origins.reshape(-1, 3)[:1] if single else origins, dtype=np.float64)
-    arrays = {"distance": np.ascontiguousarray(distance, dtype=np.float64),
-              "normal": np.ascontiguousarray(normal, dtype=np.float32),
-              "dirs": np.ascontiguousarray(dirs, dtype=np.float64),
-              "object_index": np.ascontiguousarray(object_index, dtype=np.int32),
-              "reflectivity": np.ascontiguousarray(reflectivity, dtype=np.float64),
-              "matrix": np.ascontiguousarray(np.asarray(target_from_world, dtype=np.float64)[:3, :4])}
-    draws = [None if u is None else np.ascontiguousarray(u, dtype=np.float64) for u in (noise, u_random, u_grazing, u_range)]
-    keep = np.empty(n, np.int64)
-    measured = np.empty(n, np.float64)
-    intensity = np.empty(n, np.float32)
-    xyz = np.empty((n, 3), np.float32)
-    count = lib.sot_rt_returns(
-        n, arrays["distance"].ctypes.data, arrays["normal"].ctypes.data, arrays["dirs"].ctypes.data,
-        origins.ctypes.data, 0 if single else 1, arrays["object_index"].ctypes.data, arrays["reflectivity"].ctypes.data,
-        len(arrays["reflectivity"]), float(min_range), float(max_range), _pointer(draws[0], np.float64),
-        _pointer(draws[1], np.float64), float(drop_random), _pointer(draws[2], np.float64), float(grazing_start_deg),
-        _pointer(draws[3], np.float64), float(range_a), float(range_b), int(bool(with_intensity)), float(attenuation),
-        arrays["matrix"].ctypes.data, keep.ctypes.data, measured.ctypes.data, intensity.ctypes.data, xyz.ctypes.data)
-    return SweepReturns(keep[:count], measured[:count], intensity[:count], xyz[:count])
+    inputs = [np.ascontiguousarray(distance, dtype=np.float64), np.ascontiguousarray(normal, dtype=np.float32),
+              np.ascontiguousarray(dirs, dtype=np.float64), origins, np.ascontiguousarray(object_index, dtype=np.int32),
+              np.ascontiguousarray(reflectivity, dtype=np.float64), np.ascontiguousarray(instance, dtype=np.int32)]
+    if len(inputs[5]) != len(inputs[6]):
+        raise ValueError("reflectivity and instance need one entry per object")
+    matrix = np.ascontiguousarray(np.asarray(target_from_world, dtype=np.float64)[:3, :4])
+    times = np.ascontiguousarray(column_time_ns, dtype=np.int64)
+    if len(times) != columns:
+        raise ValueError("column_time_ns needs one entry per column")
+    m = models
+    c_models = _Models(float(m.min_range), float(m.max_range), int(m.seed) % 2**64, float(m.noise_sigma),
+                       float(m.drop_random), int(bool(m.drop_grazing)), float(m.grazing_start_deg),
+                       int(bool(m.drop_range)), float(m.range_a), float(m.range_b), int(bool(m.intensity)),
+                       float(m.attenuation))
+    out = SweepReturns(np.empty(n, np.int64), np.empty((n, 3), np.float32), np.empty(n, np.float32),
+                       np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.int32), np.empty(n, np.int64),
+                       np.empty(n, np.int32), np.empty(n, np.int32))
+    arrays = [out.keep, out.xyz, out.distance, out.intensity, out.beam, out.column, out.time_offset_ns,
+              out.object_index, out.instance]
+    count = lib.sot_rt_returns(n, *(a.ctypes.data for a in inputs[:4]), 0 if single else 1,
+                               *(a.ctypes.data for a in inputs[4:]), len(inputs[5]), ctypes.byref(c_models),
+                               matrix.ctypes.data, int(columns), times.ctypes.data, *(a.ctypes.data for a in arrays))
+    if count < 0:
+        raise MemoryError("the compiled per-return pass could not allocate its scratch arrays")
+    return SweepReturns(*(a[:count] for a in arrays))

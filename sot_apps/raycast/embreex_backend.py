@@ -37,6 +37,7 @@ class EmbreexBackend:
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
         n = directions.shape[0]
+        directions = np.ascontiguousarray(directions, dtype=np.float32)
         origins = np.ascontiguousarray(np.broadcast_to(origins, (n, 3)), dtype=np.float32)
         rect_t, rect_geom = rect_hits(self._rects, origins, directions)
         if self._meshes:

@@ -80,10 +80,10 @@ def rect_hits(rects: list[_Rect], origins: np.ndarray, directions: np.ndarray) -
     o = origins.astype(np.float64)
     d = directions.astype(np.float64)
     for r in rects:
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):   # rays parallel to the plane: rejected below
             t = (r.z - o[:, 2]) / d[:, 2]
-        x = o[:, 0] + t * d[:, 0]
-        y = o[:, 1] + t * d[:, 1]
+            x = o[:, 0] + t * d[:, 0]
+            y = o[:, 1] + t * d[:, 1]
         ok = (d[:, 2] != 0) & (t > 0) & (t < best_t) & (x >= r.x0) & (x <= r.x1) & (y >= r.y0) & (y <= r.y1)
         best_t[ok] = t[ok]
         best_g[ok] = r.geom_id

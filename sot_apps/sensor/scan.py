@@ -23,9 +23,19 @@ from tracker import invert_transform
 
 from ..objects.trajectory import Trajectory
 from ..raycast import RaycastScene, RayHits
-from ..raycast.compiled import SweepReturns, compiled_sweep_returns
+from ..raycast.compiled import ReturnModels, SweepReturns, compiled_sweep_returns
 from .model import Sensor
-from .noise import Realism, grazing_drop_probability, incidence_cosine, lambertian_intensity
+from .noise import (
+    GRAZING_DROP,
+    NOISE,
+    RANDOM_DROP,
+    RANGE_DROP,
+    Realism,
+    grazing_drop_probability,
+    incidence_cosine,
+    lambertian_intensity,
+    ray_draws,
+)
 
 __all__ = ["SimObject", "Scan", "simulate_scan", "range_image", "build_static_scene"]
 
@@ -107,8 +117,7 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
     ``objects``) to save rebuilding it every frame.
     """
     realism = realism or Realism()
-    rng = np.random.default_rng(realism.seed)
-    dirs_s, beam, column = sensor.ray_grid()
+    dirs_s, _, column = sensor.ray_grid()
     col_t = sensor.column_time_offsets_ns()
     times = col_t if realism.motion_distortion else np.zeros_like(col_t)
     abs_times = frame_time_ns + times  # per column
@@ -158,66 +167,67 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
         object_index[sel] = i
 
     sensor_from_world = invert_transform(world_from_sensor_frame)
-    reflect = np.array([o.reflectivity for o in objects] + [0.0], dtype=np.float64)
-    # the random draws: every ray of the sweep gets one per effect, in this order, so a seed gives the same scan
-    # whatever the scene (and whichever implementation below runs)
-    n = len(dist)
-    noise = None
-    if realism.range_noise and sensor.range_noise_sigma > 0:
-        # rng.normal(0, sigma, n) is 0.0 + sigma * standard_normal: the same numbers (a -0.0 becomes +0.0, which
-        # adds the same to a range), drawn ~20 % faster
-        noise = rng.standard_normal(n)
-        noise *= sensor.range_noise_sigma
-    range_on = realism.drop_range and sensor.has_range_drop
-    u_random = u_grazing = u_range = None
-    if realism.drop_random > 0 or realism.drop_grazing or range_on:
-        u_random = rng.random(n)
-        u_grazing = rng.random(n) if realism.drop_grazing else None
-        u_range = rng.random(n) if range_on else None
-    returns = compiled_sweep_returns(
-        dist, normal, dirs, origins, object_index, reflect[:-1], sensor.min_range, sensor.max_range, noise,
-        u_random if realism.drop_random > 0 else None, realism.drop_random, u_grazing, realism.grazing_start_deg,
-        u_range, sensor.drop_at_zero_range, sensor.drop_per_m, realism.intensity, realism.attenuation_per_m,
-        sensor_from_world)
+    models = ReturnModels(
+        sensor.min_range, sensor.max_range, realism.seed,
+        noise_sigma=sensor.range_noise_sigma if realism.range_noise else 0.0, drop_random=realism.drop_random,
+        drop_grazing=realism.drop_grazing, grazing_start_deg=realism.grazing_start_deg,
+        drop_range=realism.drop_range and sensor.has_range_drop, range_a=sensor.drop_at_zero_range,
+        range_b=sensor.drop_per_m, intensity=realism.intensity, attenuation=realism.attenuation_per_m)
+    reflectivity = np.array([o.reflectivity for o in objects], dtype=np.float64)
+    instance = np.array([o.instance for o in objects], dtype=np.int32)
+    # the random draws are counter-based (noise.ray_draws): each ray's number per effect depends on the seed and
+    # the ray only, so a seed gives the same scan whatever the scene and whichever implementation below runs
+    args = (dist, normal, dirs, origins, object_index, reflectivity, instance, models, sensor_from_world,
+            sensor.columns, col_t)
+    returns = compiled_sweep_returns(*args)
     if returns is None:   # the compiled loop is not built: the same models in numpy
-        returns = _sweep_returns_numpy(sensor, realism, dist, normal, dirs, origins, object_index, reflect, noise,
-                                       u_random, u_grazing, u_range, sensor_from_world)
-    keep, measured, intensity, xyz = returns.keep, returns.measured, returns.intensity, returns.xyz
-    inst_of_obj = np.array([o.instance for o in objects] + [-1], dtype=np.int32)
-    kept_object, kept_column = object_index[keep], column[keep]   # each gather once (they cost ~0.3 ms apiece)
-    return Scan(xyz=xyz, instance=inst_of_obj[kept_object], intensity=intensity,
-                time_offset_ns=col_t[kept_column].astype(np.int64, copy=False), beam=beam[keep], column=kept_column,
-                distance=measured.astype(np.float32), object_index=kept_object,
-                num_beams=sensor.beams, num_columns=sensor.columns)
+        returns = sweep_returns_numpy(*args)
+    return Scan(xyz=returns.xyz, instance=returns.instance, intensity=returns.intensity,
+                time_offset_ns=returns.time_offset_ns, beam=returns.beam, column=returns.column,
+                distance=returns.distance, object_index=returns.object_index, num_beams=sensor.beams,
+                num_columns=sensor.columns)
 
 
-def _sweep_returns_numpy(sensor: Sensor, realism: Realism, dist: np.ndarray, normal: np.ndarray, dirs: np.ndarray,
-                        origins: np.ndarray, object_index: np.ndarray, reflect: np.ndarray, noise: np.ndarray | None,
-                        u_random: np.ndarray | None, u_grazing: np.ndarray | None, u_range: np.ndarray | None,
-                        sensor_from_world: np.ndarray) -> SweepReturns:
-    """numpy twin of the compiled ``sot_rt_returns`` (the fallback when it is not built; tests compare the two)."""
-    valid = np.isfinite(dist) & (dist >= sensor.min_range) & (dist <= sensor.max_range)
+def sweep_returns_numpy(distance: np.ndarray, normal: np.ndarray, dirs: np.ndarray, origins: np.ndarray,
+                        object_index: np.ndarray, reflectivity: np.ndarray, instance: np.ndarray,
+                        models: ReturnModels, target_from_world: np.ndarray, columns: int,
+                        column_time_ns: np.ndarray) -> SweepReturns:
+    """numpy twin of the compiled ``sot_rt_returns`` (:func:`compiled_sweep_returns`: same arguments, same draws,
+    same results; the fallback when the loop is not built; tests compare the two)."""
+    m = models
+    valid = np.isfinite(distance) & (distance >= m.min_range) & (distance <= m.max_range)
     cand = np.flatnonzero(valid)
     cos_cand = incidence_cosine(np.take(dirs, cand, axis=0), np.take(normal, cand, axis=0))  # take: 3x faster
-    measured = dist if noise is None else dist + noise
+    dist_cand = distance[cand]
     dropped = np.zeros(len(cand), dtype=bool)
-    if u_random is not None:
-        dropped |= u_random[cand] < realism.drop_random
-    if u_grazing is not None:
-        dropped |= u_grazing[cand] < grazing_drop_probability(cos_cand, realism.grazing_start_deg)
-    if u_range is not None:
-        dropped |= u_range[cand] < sensor.range_drop_probability(dist[cand])
+    if m.drop_random > 0:
+        dropped |= ray_draws(m.seed, RANDOM_DROP, cand) < m.drop_random
+    if m.drop_grazing:
+        dropped |= ray_draws(m.seed, GRAZING_DROP, cand) < grazing_drop_probability(cos_cand, m.grazing_start_deg)
+    if m.drop_range:
+        dropped |= ray_draws(m.seed, RANGE_DROP, cand) < np.clip(m.range_a + m.range_b * dist_cand, 0.0, 1.0)
     keep = cand[~dropped]
-    if realism.intensity:
-        intensity = lambertian_intensity(cos_cand[~dropped], reflect[object_index[keep]], measured[keep],
-                                         realism.attenuation_per_m)
+    measured = dist_cand[~dropped]
+    if m.noise_sigma > 0:
+        measured = measured + m.noise_sigma * ray_draws(m.seed, NOISE, keep, normal=True)
+    objects = np.asarray(object_index)[keep]
+    known = (objects >= 0) & (objects < len(reflectivity))
+    if m.intensity:
+        rho = np.where(known, np.append(reflectivity, 0.0)[np.where(known, objects, -1)], 0.0)
+        intensity = lambertian_intensity(cos_cand[~dropped], rho, measured, m.attenuation)
     else:
         intensity = np.zeros(len(keep))
-    single_origin = origins.ndim == 2 and origins.strides[0] == 0
-    pts_world = (origins[0] if single_origin else np.take(origins, keep, axis=0)) + \
-        np.take(dirs, keep, axis=0) * measured[keep, None]
-    xyz = (rotate(sensor_from_world[:3, :3], pts_world) + sensor_from_world[:3, 3]).astype(np.float32)
-    return SweepReturns(keep, measured[keep], intensity.astype(np.float32), xyz)
+    single_origin = origins.ndim == 1 or origins.shape[0] == 1 or origins.strides[0] == 0
+    pts_world = (origins.reshape(-1, 3)[0] if single_origin else np.take(origins, keep, axis=0)) + \
+        np.take(dirs, keep, axis=0) * measured[:, None]
+    target_from_world = np.asarray(target_from_world, dtype=np.float64)
+    xyz = (rotate(target_from_world[:3, :3], pts_world) + target_from_world[:3, 3]).astype(np.float32)
+    column = (keep % columns).astype(np.int32)
+    inst = np.where(known, np.append(np.asarray(instance, dtype=np.int32), -1)[np.where(known, objects, -1)], -1)
+    return SweepReturns(keep, xyz, measured.astype(np.float32), intensity.astype(np.float32),
+                        (keep // columns).astype(np.int32), column,
+                        np.asarray(column_time_ns, dtype=np.int64)[column], objects.astype(np.int32),
+                        inst.astype(np.int32))
 
 
 def build_static_scene(objects: list[SimObject]) -> RaycastScene:
