@@ -98,8 +98,8 @@ def hard_benchmark(hard_background, real_bank, tmp_path_factory) -> Path:
     from sot_apps.benchmark.make import MakeConfig, make_benchmark
 
     out = tmp_path_factory.mktemp("hard") / "b"
-    # seed 1: every profile listed (a far start often shows > 30 points and is not listed; same seed, same bytes)
-    config = MakeConfig(str(hard_background), str(real_bank), HARD["tracklets"], HARD["frames"], 1, str(out),
+    # seed 3: every profile listed (a far start often shows > 30 points and is not listed; same seed, same bytes)
+    config = MakeConfig(str(hard_background), str(real_bank), HARD["tracklets"], HARD["frames"], 3, str(out),
                         per_copy=HARD["per_copy"], sensor="pandaset_pandar64", profiles=HARD["profiles"])
     make_benchmark(config, progress=False)
     return out
