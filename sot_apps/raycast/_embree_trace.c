@@ -109,7 +109,7 @@ static struct {
 static char last_error[512];
 
 /* The interface version: compiled.py refuses a library built from another version of this file. */
-SOT_EXPORT int sot_rt_version(void) { return 2; }
+SOT_EXPORT int sot_rt_version(void) { return 3; }
 
 SOT_EXPORT const char *sot_rt_error(void) { return last_error; }
 
@@ -506,12 +506,15 @@ typedef struct {
  * (rho * cos(theta) * exp(-2 * attenuation * measured), clipped to [0, 1]; 0 when intensity is off; rho =
  * reflectivity[object], 0 for object -1), beam i / columns and column i % columns (int32), the column's firing
  * time (int64, `column_time_ns`), its object (int32) and that object's instance (int32, -1 for object -1).
+ * The object of ray i is object_index[i], or, when `object_of` is given, object_of[object_index[i]] (a geometry id
+ * mapped to its object; -1 and ids outside [0, num_ids) map to -1).
  * Returns the count (-1: out of memory). Directions are float64 (n, 3); normals float32 (n, 3); origins float64 (n, 3) or one when
  * origin_step == 0.
  */
 SOT_EXPORT long sot_rt_returns(long n, const double *distance, const float *normal, const double *dirs,
                                const double *origins, int origin_step, const int *object_index,
-                               const double *reflectivity, const int *instance, long num_objects, const Models *m,
+                               const int *object_of, long num_ids, const double *reflectivity, const int *instance,
+                               long num_objects, const Models *m,
                                const double *target_from_world, long columns, const int64_t *column_time_ns,
                                long *keep, float *xyz, float *range, float *intensity, int *beam, int *column,
                                int64_t *time_offset, int *object_out, int *instance_out) {
@@ -583,7 +586,8 @@ SOT_EXPORT long sot_rt_returns(long n, const double *distance, const float *norm
         const long i = keep[k];
         const double r = measured[k];
         const double *dir = dirs + 3 * i;
-        const int obj = object_index[i];
+        const int v = object_index[i];
+        const int obj = object_of ? (v >= 0 && v < num_ids ? object_of[v] : -1) : v;
         const int known = obj >= 0 && obj < num_objects;
         double value = 0.0;
         if (m->intensity) {

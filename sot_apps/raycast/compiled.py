@@ -57,14 +57,14 @@ class _CompiledTracer:
         lib.sot_rt_has_packets.restype = ctypes.c_int
         lib.sot_rt_draws.argtypes = [ctypes.c_uint64, ctypes.c_int, ctypes.c_int, c_long, ptr]
         lib.sot_rt_returns.restype = c_long
-        lib.sot_rt_returns.argtypes = [c_long, ptr, ptr, ptr, ptr, ctypes.c_int, ptr, ptr, ptr, c_long,
+        lib.sot_rt_returns.argtypes = [c_long, ptr, ptr, ptr, ptr, ctypes.c_int, ptr, ptr, c_long, ptr, ptr, c_long,
                                        ctypes.POINTER(_Models), ptr, c_long, ptr] + [ptr] * 9
         if lib.sot_rt_load(str(embree).encode()) != 0:
             raise OSError(lib.sot_rt_error().decode(errors="replace"))
         return lib
 
 
-_INTERFACE_VERSION = 2   # sot_rt_version() of _embree_trace.c
+_INTERFACE_VERSION = 3   # sot_rt_version() of _embree_trace.c
 
 
 class _Models(ctypes.Structure):
@@ -211,11 +211,13 @@ def compiled_draws(seed: int, stream: int, n: int, normal: bool = False) -> np.n
 def compiled_sweep_returns(distance: np.ndarray, normal: np.ndarray, dirs: np.ndarray, origins: np.ndarray,
                            object_index: np.ndarray, reflectivity: np.ndarray, instance: np.ndarray,
                            models: ReturnModels, target_from_world: np.ndarray, columns: int,
-                           column_time_ns: np.ndarray) -> SweepReturns | None:
+                           column_time_ns: np.ndarray, object_of: np.ndarray | None = None) -> SweepReturns | None:
     """The per-return models of :func:`sot_apps.sensor.scan.simulate_scan` in the compiled loop (``sot_rt_returns``
     in _embree_trace.c: one pass over the rays, each ray's random numbers drawn there when it needs them, every
     per-return output written); None when the loop is not built. Ray ``i`` is beam ``i // columns``, column
-    ``i % columns``; ``reflectivity`` and ``instance`` are per object (``object_index`` -1: none)."""
+    ``i % columns``; ``reflectivity`` and ``instance`` are per object (``object_index`` -1: none). With
+    ``object_of``, ``object_index`` holds geometry ids and ray i's object is ``object_of[object_index[i]]`` (-1 for
+    -1): the mapping is applied in the loop instead of a gather over every ray."""
     lib = _CompiledTracer.load()
     if lib is None:
         return None
@@ -227,6 +229,7 @@ def compiled_sweep_returns(distance: np.ndarray, normal: np.ndarray, dirs: np.nd
               np.ascontiguousarray(reflectivity, dtype=np.float64), np.ascontiguousarray(instance, dtype=np.int32)]
     if len(inputs[5]) != len(inputs[6]):
         raise ValueError("reflectivity and instance need one entry per object")
+    mapping = None if object_of is None else np.ascontiguousarray(object_of, dtype=np.int32)
     matrix = np.ascontiguousarray(np.asarray(target_from_world, dtype=np.float64)[:3, :4])
     times = np.ascontiguousarray(column_time_ns, dtype=np.int64)
     if len(times) != columns:
@@ -241,8 +244,9 @@ def compiled_sweep_returns(distance: np.ndarray, normal: np.ndarray, dirs: np.nd
                        np.empty(n, np.int32), np.empty(n, np.int32))
     arrays = [out.keep, out.xyz, out.distance, out.intensity, out.beam, out.column, out.time_offset_ns,
               out.object_index, out.instance]
-    count = lib.sot_rt_returns(n, *(a.ctypes.data for a in inputs[:4]), 0 if single else 1,
-                               *(a.ctypes.data for a in inputs[4:]), len(inputs[5]), ctypes.byref(c_models),
+    count = lib.sot_rt_returns(n, *(a.ctypes.data for a in inputs[:4]), 0 if single else 1, inputs[4].ctypes.data,
+                               None if mapping is None else mapping.ctypes.data, 0 if mapping is None else len(mapping),
+                               inputs[5].ctypes.data, inputs[6].ctypes.data, len(inputs[5]), ctypes.byref(c_models),
                                matrix.ctypes.data, int(columns), times.ctypes.data, *(a.ctypes.data for a in arrays))
     if count < 0:
         raise MemoryError("the compiled per-return pass could not allocate its scratch arrays")

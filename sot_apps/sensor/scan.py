@@ -142,7 +142,10 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
         static_scene = build_static_scene(objects)
     hits = static_scene.cast(origins, dirs)
     obj_of_geom = np.array(static_idx + [-1], dtype=np.int32)
-    object_index = obj_of_geom[hits.geom_id]   # a miss (geom -1) picks the last entry, -1
+    if moving_idx:   # moving objects overwrite the object of the rays they hit first (below)
+        object_index, object_of = obj_of_geom[hits.geom_id], None   # a miss (geom -1) picks the last entry, -1
+    else:            # the returns pass maps geometry ids to objects itself (no gather over every ray)
+        object_index, object_of = hits.geom_id, obj_of_geom[:-1]
     # moving objects overwrite the nearer hits below; without any, the cast's arrays are only read
     dist, normal = (hits.distance.copy(), hits.normal.copy()) if moving_idx else (hits.distance, hits.normal)
 
@@ -178,7 +181,7 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
     # the random draws are counter-based (noise.ray_draws): each ray's number per effect depends on the seed and
     # the ray only, so a seed gives the same scan whatever the scene and whichever implementation below runs
     args = (dist, normal, dirs, origins, object_index, reflectivity, instance, models, sensor_from_world,
-            sensor.columns, col_t)
+            sensor.columns, col_t, object_of)
     returns = compiled_sweep_returns(*args)
     if returns is None:   # the compiled loop is not built: the same models in numpy
         returns = sweep_returns_numpy(*args)
@@ -191,7 +194,7 @@ def simulate_scan(sensor: Sensor, objects: list[SimObject], world_from_sensor: T
 def sweep_returns_numpy(distance: np.ndarray, normal: np.ndarray, dirs: np.ndarray, origins: np.ndarray,
                         object_index: np.ndarray, reflectivity: np.ndarray, instance: np.ndarray,
                         models: ReturnModels, target_from_world: np.ndarray, columns: int,
-                        column_time_ns: np.ndarray) -> SweepReturns:
+                        column_time_ns: np.ndarray, object_of: np.ndarray | None = None) -> SweepReturns:
     """numpy twin of the compiled ``sot_rt_returns`` (:func:`compiled_sweep_returns`: same arguments, same draws,
     same results; the fallback when the loop is not built; tests compare the two)."""
     m = models
@@ -211,6 +214,9 @@ def sweep_returns_numpy(distance: np.ndarray, normal: np.ndarray, dirs: np.ndarr
     if m.noise_sigma > 0:
         measured = measured + m.noise_sigma * ray_draws(m.seed, NOISE, keep, normal=True)
     objects = np.asarray(object_index)[keep]
+    if object_of is not None:   # geometry ids: their objects
+        objects = np.append(np.asarray(object_of, dtype=np.int32), -1)[
+            np.where((objects >= 0) & (objects < len(object_of)), objects, -1)]
     known = (objects >= 0) & (objects < len(reflectivity))
     if m.intensity:
         rho = np.where(known, np.append(reflectivity, 0.0)[np.where(known, objects, -1)], 0.0)

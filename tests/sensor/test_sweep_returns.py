@@ -60,14 +60,18 @@ def _assert_same_scan(a, b):
 
 @pytest.mark.parametrize("realism", REALISMS)
 @pytest.mark.parametrize("sensor_name", ["pandaset_pandar64", "vlp16"])
-def test_compiled_returns_equal_the_numpy_models(realism, sensor_name, monkeypatch):
+@pytest.mark.parametrize("moving", [True, False])   # without moving objects the loop maps geometry ids itself
+def test_compiled_returns_equal_the_numpy_models(realism, sensor_name, moving, monkeypatch):
     assert compiled_backend_available()   # built by pip install (a C compiler is part of the dev setup)
     sensor = load_sensor(sensor_name)
     ego = Trajectory(np.array([-100_000_000, 0]), np.array([[0.0, 0.0, 0.3, 0.1], [1.2, 0.4, 0.3, 0.15]]))
-    compiled = simulate_scan(sensor, _scene(), ego, 0, realism)
+    scene = _scene() if moving else _scene()[:3]
+    compiled = simulate_scan(sensor, scene, ego, 0, realism)
     monkeypatch.setattr(scan_module, "compiled_sweep_returns", lambda *args, **kwargs: None)
-    reference = simulate_scan(sensor, _scene(), ego, 0, realism)
+    reference = simulate_scan(sensor, scene, ego, 0, realism)
     _assert_same_scan(compiled, reference)
+    assert set(np.unique(compiled.object_index)) <= set(range(len(scene)))
+    assert (compiled.instance == np.array([o.instance for o in scene])[compiled.object_index]).all()
 
 
 def test_without_the_compiled_loop_embreex_and_numpy_give_the_same_scan(monkeypatch):
