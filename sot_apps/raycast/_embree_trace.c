@@ -312,10 +312,10 @@ static void write_hit(const Scene *s, long i, const float *d, unsigned int geom_
 }
 
 /*
- * Trace n rays with unit directions `dirs` (n, 3) from `origins` ((n, 3), or one origin when
- * origin_step == 0), all float32 (f64 == 0) or all float64 (f64 == 1, traced as float32). Writes distance (float64, +inf on a miss), normal (float32 (n, 3),
- * the unit geometric normal turned to face the ray origin, zero on a miss), prim and geom (int32, -1 on
- * a miss). Returns the scene's Embree error code (0 when fine).
+ * Trace n rays with unit directions `dirs` (n, 3) from `origins` ((n, 3), or one origin when origin_step == 0),
+ * all float32 (f64 == 0) or all float64 (f64 == 1, traced as float32). Writes distance (float64, +inf on a miss),
+ * normal (float32 (n, 3), the unit geometric normal turned to face the ray origin, zero on a miss), prim and geom
+ * (int32, -1 on a miss). Returns the scene's Embree error code (0 when fine).
  */
 SOT_EXPORT int sot_rt_cast(void *handle, const void *origins, int origin_step, const void *dirs, int f64, long n,
                            double *distance, float *normal, int *prim, int *geom) {
@@ -426,12 +426,14 @@ static inline double ray_uniform(uint64_t key, long i) {
  * central one for |p - 0.5| <= 0.425 (85 % of draws, no branch, no libm call) and the tails. */
 static inline double ndtri_central(double q) {
     const double r = 0.180625 - q * q;
-    const double num = (((((((2.5090809287301226727e+3 * r + 3.3430575583588128105e+4) * r + 6.7265770927008700853e+4) * r +
-                            4.5921953931549871457e+4) * r + 1.3731693765509461125e+4) * r + 1.9715909503065514427e+3) * r +
-                         1.3314166789178437745e+2) * r + 3.3871328727963666080e+0) * q;
-    const double den = (((((((5.2264952788528545610e+3 * r + 2.8729085735721942674e+4) * r + 3.9307895800092710610e+4) * r +
-                            2.1213794301586595867e+4) * r + 5.3941960214247511077e+3) * r + 6.8718700749205790830e+2) * r +
-                         4.2313330701600911252e+1) * r + 1.0);
+    const double num =
+        (((((((2.5090809287301226727e+3 * r + 3.3430575583588128105e+4) * r + 6.7265770927008700853e+4) * r +
+             4.5921953931549871457e+4) * r + 1.3731693765509461125e+4) * r + 1.9715909503065514427e+3) * r +
+          1.3314166789178437745e+2) * r + 3.3871328727963666080e+0) * q;
+    const double den =
+        (((((((5.2264952788528545610e+3 * r + 2.8729085735721942674e+4) * r + 3.9307895800092710610e+4) * r +
+             2.1213794301586595867e+4) * r + 5.3941960214247511077e+3) * r + 6.8718700749205790830e+2) * r +
+          4.2313330701600911252e+1) * r + 1.0);
     return num / den;
 }
 
@@ -508,8 +510,8 @@ typedef struct {
  * time (int64, `column_time_ns`), its object (int32) and that object's instance (int32, -1 for object -1).
  * The object of ray i is object_index[i], or, when `object_of` is given, object_of[object_index[i]] (a geometry id
  * mapped to its object; -1 and ids outside [0, num_ids) map to -1).
- * Returns the count (-1: out of memory). Directions are float64 (n, 3); normals float32 (n, 3); origins float64 (n, 3) or one when
- * origin_step == 0.
+ * Returns the count (-1: out of memory). Directions are float64 (n, 3); normals float32 (n, 3); origins float64
+ * (n, 3), or one when origin_step == 0.
  */
 SOT_EXPORT long sot_rt_returns(long n, const double *distance, const float *normal, const double *dirs,
                                const double *origins, int origin_step, const int *object_index,
