@@ -241,9 +241,10 @@ class PairWriter:
 
 def _pair_record(k: int, camera: Camera, result: PairFlow, elapsed_ms: float) -> dict:
     objects = [s.to_dict() for s in result.objects]
-    mag = np.linalg.norm(result.flow[result.valid_occ], axis=1)
-    pixels = int(result.valid_occ.sum())
-    noc = int(result.valid_noc.sum())
+    valid = np.flatnonzero(result.valid_occ)
+    mag = np.linalg.norm(result.flow.reshape(-1, 2)[valid], axis=1)
+    pixels = len(valid)
+    noc = int(np.count_nonzero(result.valid_noc))
     return {"frame": k, "frame_next": k + 1, "timestamp_ns": int(camera.frames[k].timestamp_ns),
             "timestamp_next_ns": int(camera.frames[k + 1].timestamp_ns), "pixels": pixels, "pixels_noc": noc,
             "mean_flow_px": round(float(mag.mean()), 4) if pixels else 0.0,
