@@ -101,6 +101,20 @@ def test_kitti_png_and_flo_read_back_by_opencv_bit_identical(tmp_path):
     np.testing.assert_array_equal(known, (np.abs(expected) < 1e9).all(axis=-1))
 
 
+def test_float64_and_strided_flow_maps_are_written_like_their_float32_cast(tmp_path):
+    """The fast float32 gathers are for C-ordered float32 maps; other maps are written as their float32 cast (.flo)
+    and scaled in float64 (KITTI), as the formats define."""
+    flow, valid = _flow_1080p(np.random.default_rng(2))
+    wide = flow.astype(np.float64) + 1e-7                      # not representable in float32
+    for given in (wide, np.asfortranarray(flow)):
+        write_kitti_flow(tmp_path / "f.png", given, valid)
+        np.testing.assert_array_equal(cv2.imread(str(tmp_path / "f.png"), cv2.IMREAD_UNCHANGED),
+                                      encode_kitti_flow(given, valid))
+        write_flo(tmp_path / "f.flo", given, valid)
+        expected = np.where(valid[..., None], given.astype(np.float32), UNKNOWN_FLOW)
+        assert cv2.readOpticalFlow(str(tmp_path / "f.flo")).tobytes() == expected.tobytes()
+
+
 def test_writers_take_a_non_utf8_directory(tmp_path):
     out = tmp_path / NON_UTF8
     flow, valid = _flow_1080p(np.random.default_rng(1))
