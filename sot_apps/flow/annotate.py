@@ -83,6 +83,8 @@ def _lidar_occluders(seq: Sequence, k: int, objects: list[TrackedObject], camera
     # Only points the camera sees can occlude: cut to the view first (cheap), then remove object points.
     slack = 0.25 * max(model.width, model.height)  # generous: distortion may move points inwards
     xyz = seq.sweep(k).xyz
+    if len(xyz) == 0:   # no sweep at this frame (or an empty one): no occluders
+        return ProjectedPoints.empty()
     world_from_ego = seq.frames[k].world_from_ego
     # A float32 pass over the whole sweep keeps a superset of the view (margins far above float32 rounding);
     # the exact float64 test below then runs on that subset only, so the result is as if run on every point.

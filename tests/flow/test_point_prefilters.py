@@ -85,3 +85,9 @@ def test_restamped_box_times_equal_the_box_test_over_every_point(tmp_path):
     inside = points_in_box(transform_points(WORLD_FROM_EGO, ego.astype(np.float32)), box)
     assert 1000 < inside.sum() < 4000
     assert stamped.trajectory.times_ns[0] == 1_000_000_000 + int(np.median(offsets[inside]))
+
+
+def test_a_frame_without_points_has_no_lidar_occluders():
+    seq = _sequence(np.zeros((0, 3)))
+    got = _lidar_occluders(seq, 0, [], invert_transform(WORLD_FROM_EGO @ EGO_FROM_CAMERA), MODEL, 0.4)
+    assert len(got.uv) == len(got.depth) == len(got.world_z) == 0
