@@ -95,11 +95,13 @@ class _FlowBlock:
         content.reshape(-1)[candidates] = True
         self.height, self.rows, self.pixels, self.content, self.candidates = height, rows, pixels, content, candidates
 
-    def png(self) -> bytes:
-        return encode_rows_png(self.pixels, self.rows, self.height, _INVALID_RGB, self.content)
+    def png(self, reuse: dict | None = None, keep: dict | None = None) -> bytes:
+        """The PNG (``reuse``/``keep``: row segments, :func:`~sot_apps.flow.png.encode_rows_png`)."""
+        return encode_rows_png(self.pixels, self.rows, self.height, _INVALID_RGB, self.content, reuse, keep)
 
-    def restricted(self, keep: np.ndarray) -> "_FlowBlock":
-        """The block with only the pixels of ``keep`` (an (H, W) mask) still valid (a copy; this one unchanged)."""
+    def restricted(self, keep: np.ndarray) -> tuple["_FlowBlock", np.ndarray]:
+        """The block with only the pixels of ``keep`` (an (H, W) mask) still valid (a copy; this one unchanged), and
+        the block rows that changed."""
         out = object.__new__(_FlowBlock)
         kept = keep[self.rows].reshape(-1)[self.candidates]
         drop = self.candidates[~kept]
@@ -107,7 +109,7 @@ class _FlowBlock:
         out.pixels, out.content = self.pixels.copy(), self.content.copy()
         out.pixels.reshape(-1, 3)[drop] = _INVALID_RGB
         out.content.reshape(-1)[drop] = False
-        return out
+        return out, np.unique(drop // self.pixels.shape[1])
 
 
 def kitti_flow_png(flow: np.ndarray, valid: np.ndarray) -> bytes:
@@ -126,7 +128,12 @@ def kitti_flow_pngs(flow: np.ndarray, valid: np.ndarray, valid_subset: np.ndarra
     block = _FlowBlock(flow, valid)
     if (subset & ~valid).any():
         return block.png(), kitti_flow_png(flow, subset)
-    return block.png(), block.restricted(subset).png()
+    segments: dict[int, tuple[bytes, bytes]] = {}
+    data = block.png(keep=segments)
+    noc, changed = block.restricted(subset)
+    for row in changed.tolist():   # rows that lost pixels are compressed again; the others are the same rows
+        segments.pop(row, None)
+    return data, noc.png(reuse=segments)
 
 
 def write_kitti_flow(path: str | Path, flow: np.ndarray, valid: np.ndarray) -> None:
