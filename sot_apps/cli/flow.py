@@ -74,7 +74,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.track_id and not args.from_annotations:
         raise InputError(None, "--track-id needs --from-annotations (track directories name their object)")
-    seq = load_sequence(args)
+    from ..io.sweep_cache import with_sweep_cache
+
+    # sweeps through the one-time conversion cache ($SOT_APPS_CACHE_DIR=off disables it), as the pipeline reads them
+    seq = with_sweep_cache(load_sequence(args))
     if args.camera not in seq.cameras:
         raise InputError(seq.root, f"no camera {args.camera!r}; cameras: {', '.join(seq.cameras) or 'none'}")
     if args.from_annotations:

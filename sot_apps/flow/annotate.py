@@ -80,12 +80,25 @@ def _lidar_occluders(seq: Sequence, k: int, objects: list[TrackedObject], camera
     """Frame k's points minus those in (or near) any tracked object during the sweep, projected."""
     if not 0 <= k < len(seq.frames):
         return ProjectedPoints.empty()
-    points = seq.points_world(k)
     # Only points the camera sees can occlude: cut to the view first (cheap), then remove object points.
+    slack = 0.25 * max(model.width, model.height)  # generous: distortion may move points inwards
+    xyz = seq.sweep(k).xyz
+    if len(xyz) == 0:   # no sweep at this frame (or an empty one): no occluders
+        return ProjectedPoints.empty()
+    world_from_ego = seq.frames[k].world_from_ego
+    # A float32 pass over the whole sweep keeps a superset of the view (margins far above float32 rounding);
+    # the exact float64 test below then runs on that subset only, so the result is as if run on every point.
+    cam32 = cv2.transform(np.ascontiguousarray(xyz, dtype=np.float32).reshape(1, -1, 3),
+                          (camera_from_world @ world_from_ego)[:3]).reshape(-1, 3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = cam32[:, :2] / cam32[:, 2:3] * np.diag(model.K)[:2].astype(np.float32) + model.K[:2, 2].astype(np.float32)
+    near = slack + 16.0
+    maybe = np.flatnonzero((cam32[:, 2] > 0.45) & (uv[:, 0] > -near) & (uv[:, 0] < model.width + near)
+                           & (uv[:, 1] > -near) & (uv[:, 1] < model.height + near))
+    points = transform_points(world_from_ego, xyz[maybe])
     cam = transform_points(camera_from_world, points)
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = cam[:, :2] / cam[:, 2:3] * np.diag(model.K)[:2] + model.K[:2, 2]
-    slack = 0.25 * max(model.width, model.height)  # generous: distortion may move points inwards
     view = ((cam[:, 2] > 0.5) & (uv[:, 0] > -slack) & (uv[:, 0] < model.width + slack)
             & (uv[:, 1] > -slack) & (uv[:, 1] < model.height + slack))
     points = points[view]
@@ -230,9 +243,10 @@ class PairWriter:
 
 def _pair_record(k: int, camera: Camera, result: PairFlow, elapsed_ms: float) -> dict:
     objects = [s.to_dict() for s in result.objects]
-    mag = np.linalg.norm(result.flow[result.valid_occ], axis=1)
-    pixels = int(result.valid_occ.sum())
-    noc = int(result.valid_noc.sum())
+    valid = np.flatnonzero(result.valid_occ)
+    mag = np.linalg.norm(result.flow.reshape(-1, 2)[valid], axis=1)
+    pixels = len(valid)
+    noc = int(np.count_nonzero(result.valid_noc))
     return {"frame": k, "frame_next": k + 1, "timestamp_ns": int(camera.frames[k].timestamp_ns),
             "timestamp_next_ns": int(camera.frames[k + 1].timestamp_ns), "pixels": pixels, "pixels_noc": noc,
             "mean_flow_px": round(float(mag.mean()), 4) if pixels else 0.0,

@@ -75,7 +75,7 @@ def visible_in_k1(setup: PairSetup, objects: list[FlowObject], obj: FlowObject, 
     """Mask of points (camera k+1 frame) of ``obj`` that are the nearest surface in image k+1."""
     model, params = setup.model, setup.params
     z1 = points_k1[:, 2]
-    ok = (z1 > 0.05) & _in_image(np.nan_to_num(uv1, nan=-1e6), model)
+    ok = (z1 > 0.05) & _in_image(uv1, model)   # a NaN coordinate (behind the camera) compares False: not in it
     if scene_k1 is not None and ok.any():
         dirs = points_k1[ok] / z1[ok, None]
         geom, t = scene_k1.first_hit(np.zeros(3), dirs)
@@ -124,12 +124,15 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
     scene_k = MultiMeshScene(placed)
     geom, t = scene_k.first_hit(np.zeros(3), rays)
     scene_k1, order_k1 = scene_at_k1(setup, objects)
-    hit = geom >= 0
+    hit = np.flatnonzero(geom >= 0)
     pixels, rays, geom, t = pixels[hit], rays[hit], geom[hit], t[hit]
+    width = model.width
     for pos, obj in enumerate(objects):
-        sel = geom == pos
-        pix = pixels[sel]
-        points_k = rays[sel] * t[sel, None]
+        if len(objects) == 1:   # every hit is this object's: no selection (a copy of every array) needed
+            pix, points_k = pixels, rays * t[:, None]
+        else:
+            sel = np.flatnonzero(geom == pos)
+            pix, points_k = pixels[sel], rays[sel] * t[sel, None]
         z = points_k[:, 2]
         hidden = np.zeros(len(pix), dtype=bool)
         if setup.lidar_k is not None and len(pix):
@@ -137,8 +140,11 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
             bottom = obj.bottom_z(obj.world_from_object_k) + params.ground_clearance
             dm = depth_map(setup.lidar_k, roi, params.dilate_px, min_world_z=bottom)
             hidden = lookup_depth(dm, roi, pix.astype(np.float64)) < z - params.margin(z)
-        pix, points_k = pix[~hidden], points_k[~hidden]
-        out.instance[pix[:, 1], pix[:, 0]] = obj.index + 1
+        if hidden.any():
+            shown = np.flatnonzero(~hidden)
+            pix, points_k = pix[shown], points_k[shown]
+        flat = pix[:, 1] * width + pix[:, 0]             # the pixels' flat indices into the (H, W) maps
+        out.instance.reshape(-1)[flat] = obj.index + 1
         stats = ObjectPairStats.fields_before_flow(obj, len(pix), hidden.sum())
         if obj.world_from_object_k1 is not None and len(pix):
             motion = setup.motion(obj)
@@ -147,11 +153,17 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
             flow = uv1 - pix
             good = np.isfinite(flow).all(axis=1)
             noc = visible_in_k1(setup, objects, obj, points_k1, uv1, scene_k1, order_k1) & good
-            out.flow[pix[good, 1], pix[good, 0]] = flow[good]
-            out.valid_occ[pix[good, 1], pix[good, 0]] = True
-            out.valid_noc[pix[noc, 1], pix[noc, 0]] = True
-            mag = np.linalg.norm(flow[good], axis=1)
-            stats.update(pixels_noc=int(noc.sum()), has_flow=True, mean_flow=float(mag.mean()) if len(mag) else 0.0,
-                         mean_flow_noc=float(np.linalg.norm(flow[noc], axis=1).mean()) if noc.any() else 0.0)
+            mag = np.linalg.norm(flow, axis=1)    # per pixel: the same values as the norm of any selection
+            mean_flow_noc = float(mag[noc].mean()) if noc.any() else 0.0
+            if not good.all():
+                keep = np.flatnonzero(good)
+                flow, mag, flat_good = flow[keep], mag[keep], flat[keep]
+            else:
+                flat_good = flat
+            out.flow.reshape(-1, 2)[flat_good] = flow
+            out.valid_occ.reshape(-1)[flat_good] = True
+            out.valid_noc.reshape(-1)[flat[noc]] = True
+            stats.update(pixels_noc=int(np.count_nonzero(noc)), has_flow=True,
+                         mean_flow=float(mag.mean()) if len(mag) else 0.0, mean_flow_noc=mean_flow_noc)
         out.objects.append(ObjectPairStats(**stats))
     return out

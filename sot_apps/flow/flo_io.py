@@ -29,10 +29,11 @@ def flo_arrays(flow: np.ndarray, valid: np.ndarray | None = None) -> tuple[bytes
         raise ValueError(f"flow must be (H, W, 2), got {flow.shape}")
     if valid is None:
         data = np.ascontiguousarray(flow, dtype="<f4")
-    else:   # fill and scatter the (few) valid pixels: ~2x faster than np.where over the frame
+    else:   # fill and scatter the (few) valid pixels, each as one 8-byte item (bits copied as they are)
         data = np.full(flow.shape, UNKNOWN_FLOW, dtype="<f4")
         known = np.flatnonzero(np.asarray(valid, dtype=bool))
-        data.reshape(-1, 2)[known] = flow.reshape(-1, 2)[known]
+        source = np.ascontiguousarray(flow, dtype="<f4").reshape(-1, 2).view(np.uint64).reshape(-1)
+        data.reshape(-1, 2).view(np.uint64).reshape(-1)[known] = source[known]
     header = _TAG + np.array([flow.shape[1], flow.shape[0]], dtype="<i4").tobytes()
     return header, data
 

@@ -24,7 +24,12 @@ _INVALID_RGB = (2 ** 15, 2 ** 15, 0)   # an invalid pixel in PNG channel order (
 
 def _kitti_values(flow: np.ndarray) -> np.ndarray:
     """(..., 2) flow -> (..., 2) uint16 u, v as stored (1/64 px, offset 2**15, clipped)."""
-    return np.clip(np.rint(flow.astype(np.float64) * 64.0 + 2.0 ** 15), 0, 65535).astype(np.uint16)
+    scaled = flow.astype(np.float64)      # float64: flow * 64 + 2**15 is exact before the rounding
+    scaled *= 64.0
+    scaled += 2.0 ** 15
+    np.rint(scaled, out=scaled)
+    np.clip(scaled, 0, 65535, out=scaled)
+    return scaled.astype(np.uint16)
 
 
 def encode_kitti_flow(flow: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -51,6 +56,19 @@ def decode_kitti_flow(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return flow, valid
 
 
+def _pixels_of(flow: np.ndarray, flat: np.ndarray) -> np.ndarray:
+    """(N, 2) flow of the pixels with flat indices ``flat``. A float32 map is gathered as one 8-byte item per pixel
+    (~10x faster than a row gather; the bits are copied as they are); other types row by row."""
+    if flow.dtype == np.float32 and flow.flags.c_contiguous:
+        return flow.reshape(-1, 2).view(np.uint64).reshape(-1)[flat].view(np.float32).reshape(-1, 2)
+    return flow.reshape(-1, 2)[flat]
+
+
+def _both_finite(values: np.ndarray) -> np.ndarray:
+    """(N,) bool: both components of the (N, 2) float32 ``values`` are finite (two bools read as one uint16)."""
+    return np.isfinite(values).view(np.uint16).reshape(-1) == 0x0101
+
+
 class _FlowBlock:
     """The rows of a KITTI flow PNG that hold valid pixels, filled: ``pixels`` (len(rows), W, 3) uint16 in PNG
     order, ``content`` their valid mask, ``candidates`` the valid pixels' flat indices into the block."""
@@ -59,40 +77,39 @@ class _FlowBlock:
         height, width = valid.shape
         rows = np.flatnonzero(valid.any(axis=1))
         candidates = np.flatnonzero(valid[rows])           # flat indices into the (len(rows), W) block
-        # the same pixels' flat indices into the image: no copy of the rows' flow
-        image_index = rows[candidates // width] * width + candidates % width
-        values = flow.reshape(-1, 2)[image_index]
-        finite = np.isfinite(values).reshape(-1, 2)
-        finite = finite[:, 0] & finite[:, 1]
-        candidates, values = candidates[finite], values[finite]
+        image_index = np.flatnonzero(valid)                 # the same pixels, in the same order, in the image
+        values = _pixels_of(flow, image_index)
+        finite = _both_finite(values)
+        if not finite.all():
+            candidates, values = candidates[finite], values[finite]
         row = np.empty((width, 3), dtype=np.uint16)
         row[:] = _INVALID_RGB                               # invalid pixels: u = v = 0 px, valid = 0
         pixels = np.empty((len(rows), width, 3), dtype=np.uint16)
         pixels[:] = row                                     # row by row: a plain copy, not a 3-value broadcast
-        channels = pixels.reshape(-1)
-        scaled = _kitti_values(values)
-        channels[3 * candidates] = scaled[:, 0]
-        channels[3 * candidates + 1] = scaled[:, 1]
-        channels[3 * candidates + 2] = 1
+        stored = np.empty((len(candidates), 3), dtype=np.uint16)
+        stored[:, :2] = _kitti_values(values)
+        stored[:, 2] = 1
+        # one scatter of whole 6-byte pixels (as opaque items: ~2x faster than a (N, 3) row scatter)
+        pixels.reshape(-1, 3).view("V6").reshape(-1)[candidates] = stored.view("V6").reshape(-1)
         content = np.zeros((len(rows), width), dtype=bool)
         content.reshape(-1)[candidates] = True
         self.height, self.rows, self.pixels, self.content, self.candidates = height, rows, pixels, content, candidates
 
-    def png(self) -> bytes:
-        return encode_rows_png(self.pixels, self.rows, self.height, _INVALID_RGB, self.content)
+    def png(self, reuse: dict | None = None, keep: dict | None = None) -> bytes:
+        """The PNG (``reuse``/``keep``: row segments, :func:`~sot_apps.flow.png.encode_rows_png`)."""
+        return encode_rows_png(self.pixels, self.rows, self.height, _INVALID_RGB, self.content, reuse, keep)
 
-    def restricted(self, keep: np.ndarray) -> "_FlowBlock":
-        """The block with only the pixels of ``keep`` (an (H, W) mask) still valid (a copy; this one unchanged)."""
+    def restricted(self, keep: np.ndarray) -> tuple["_FlowBlock", np.ndarray]:
+        """The block with only the pixels of ``keep`` (an (H, W) mask) still valid (a copy; this one unchanged), and
+        the block rows that changed."""
         out = object.__new__(_FlowBlock)
         kept = keep[self.rows].reshape(-1)[self.candidates]
         drop = self.candidates[~kept]
         out.height, out.rows, out.candidates = self.height, self.rows, self.candidates[kept]
         out.pixels, out.content = self.pixels.copy(), self.content.copy()
-        channels = out.pixels.reshape(-1)
-        for channel, value in enumerate(_INVALID_RGB):
-            channels[3 * drop + channel] = value
+        out.pixels.reshape(-1, 3)[drop] = _INVALID_RGB
         out.content.reshape(-1)[drop] = False
-        return out
+        return out, np.unique(drop // self.pixels.shape[1])
 
 
 def kitti_flow_png(flow: np.ndarray, valid: np.ndarray) -> bytes:
@@ -111,7 +128,12 @@ def kitti_flow_pngs(flow: np.ndarray, valid: np.ndarray, valid_subset: np.ndarra
     block = _FlowBlock(flow, valid)
     if (subset & ~valid).any():
         return block.png(), kitti_flow_png(flow, subset)
-    return block.png(), block.restricted(subset).png()
+    segments: dict[int, tuple[bytes, bytes]] = {}
+    data = block.png(keep=segments)
+    noc, changed = block.restricted(subset)
+    for row in changed.tolist():   # rows that lost pixels are compressed again; the others are the same rows
+        segments.pop(row, None)
+    return data, noc.png(reuse=segments)
 
 
 def write_kitti_flow(path: str | Path, flow: np.ndarray, valid: np.ndarray) -> None:

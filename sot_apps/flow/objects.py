@@ -16,7 +16,7 @@ from typing import Iterable
 
 import numpy as np
 
-from tracker import points_in_box, transform_points
+from tracker import Box, invert_transform, points_in_box, transform_points
 
 from ..errors import InputError
 from ..io.sequence import Sequence
@@ -66,6 +66,16 @@ def mesh_for(points: np.ndarray, size: np.ndarray, method: str = "hull", extend_
     return mesh if mesh is not None else box_mesh(*(float(v) for v in size))
 
 
+def _near_box(points_ego: np.ndarray, world_from_ego: np.ndarray, box: Box) -> np.ndarray:
+    """Indices of the ego-frame points within the box's bounding sphere + 1 m: a float32 pass over the sweep whose
+    result holds every point inside the box (the margin is far above float32 rounding), so the exact float64 test
+    needs to run on these only."""
+    centre = transform_points(invert_transform(world_from_ego), box.center.reshape(1, 3))[0].astype(np.float32)
+    radius = np.float32(np.linalg.norm(box.size) / 2.0 + 1.0)
+    d = np.asarray(points_ego, dtype=np.float32) - centre
+    return np.flatnonzero(np.einsum("ij,ij->i", d, d) <= radius * radius)
+
+
 def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hull", seq: Sequence | None = None,
                         box_time: str = "points", frames: Iterable[int] | None = None) -> list[TrackedObject]:
     """Objects from track directories (track.json + shape.ply).
@@ -95,8 +105,10 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
                 sweep = seq.sweep(record.frame)
                 if sweep.time_offset_ns is None:
                     continue
-                world = transform_points(seq.frames[record.frame].world_from_ego, sweep.xyz)
-                inside = points_in_box(world, track.box_at_record(record))
+                box = track.box_at_record(record)
+                near = _near_box(sweep.xyz, seq.frames[record.frame].world_from_ego, box)
+                world = transform_points(seq.frames[record.frame].world_from_ego, sweep.xyz[near])
+                inside = near[points_in_box(world, box)]
                 times[i] = box_capture_time(seq.frames[record.frame].timestamp_ns, sweep.time_offset_ns[inside], 3)
         states = [r.state.to_array() for r in track.frames]
         size = track.size.to_array()

@@ -81,9 +81,16 @@ def encode_png(image: np.ndarray, background: tuple[int, ...] | int = 0, content
 
 
 def encode_rows_png(pixels: np.ndarray, rows: np.ndarray, height: int, background: tuple[int, ...] | int = 0,
-                    content: np.ndarray | None = None) -> bytes:
+                    content: np.ndarray | None = None, reuse: dict[int, tuple[bytes, bytes]] | None = None,
+                    keep: dict[int, tuple[bytes, bytes]] | None = None) -> bytes:
     """As :func:`encode_png` for an image of ``height`` rows of which only ``rows`` (increasing) hold anything
-    but background: ``pixels[i]`` is row ``rows[i]`` and ``content[i]`` its mask (same rules as above)."""
+    but background: ``pixels[i]`` is row ``rows[i]`` and ``content[i]`` its mask (same rules as above).
+
+    ``keep``: filled with each content row's deflate segment ({i: (segment, filtered span)}). ``reuse``: such
+    segments of an earlier call whose pixel row i and content row i were the same as this call's (same width,
+    background and dtype): they are copied instead of compressed again (a segment ends with a full flush, so it
+    stands on its own). flow_noc differs from flow_occ only in the rows holding occluded pixels.
+    """
     image = np.asarray(pixels)
     if image.dtype not in (np.uint8, np.uint16) or image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
         raise ValueError(f"encode_png needs (H, W) or (H, W, 3) uint8/uint16, got {image.shape} {image.dtype}")
@@ -118,18 +125,25 @@ def encode_rows_png(pixels: np.ndarray, rows: np.ndarray, height: int, backgroun
         adler = _adler_repeat(adler, empty_adler, len(empty_row), row - done)
         # the filtered span: pixels c0 .. c1 + 1 (the pixel after the content differs from its left neighbour)
         stop = min(c1 + 2, width)
-        raw = image[index, max(c0 - 1, 0):stop].astype(be_dtype).view(np.uint8).reshape(-1)
-        if c0 == 0:
-            span = np.concatenate([[_SUB], raw[:bpp], raw[bpp:] - raw[:-bpp]]).astype(np.uint8).tobytes()
-        else:
+        if c0 > 0:
             parts.append(head_segment)
             adler = zlib.adler32(head, adler)
             gap = (c0 - 1) * bpp                      # zero differences between the first pixel and the span
             parts.extend(_zeros(gap))
             adler = _adler_zeros(adler, gap)
-            span = (raw[bpp:] - raw[:-bpp]).tobytes()
-        parts.append(compressor.compress(span))
-        parts.append(compressor.flush(zlib.Z_FULL_FLUSH))
+        known = reuse.get(index) if reuse is not None else None
+        if known is not None:
+            segment, span = known
+        else:
+            raw = image[index, max(c0 - 1, 0):stop].astype(be_dtype).view(np.uint8).reshape(-1)
+            if c0 == 0:
+                span = np.concatenate([[_SUB], raw[:bpp], raw[bpp:] - raw[:-bpp]]).astype(np.uint8).tobytes()
+            else:
+                span = (raw[bpp:] - raw[:-bpp]).tobytes()
+            segment = compressor.compress(span) + compressor.flush(zlib.Z_FULL_FLUSH)
+        if keep is not None:
+            keep[index] = (segment, span)
+        parts.append(segment)
         adler = zlib.adler32(span, adler)
         tail = (width - stop) * bpp
         parts.extend(_zeros(tail))

@@ -101,6 +101,20 @@ def test_kitti_png_and_flo_read_back_by_opencv_bit_identical(tmp_path):
     np.testing.assert_array_equal(known, (np.abs(expected) < 1e9).all(axis=-1))
 
 
+def test_float64_and_strided_flow_maps_are_written_like_their_float32_cast(tmp_path):
+    """The fast float32 gathers are for C-ordered float32 maps; other maps are written as their float32 cast (.flo)
+    and scaled in float64 (KITTI), as the formats define."""
+    flow, valid = _flow_1080p(np.random.default_rng(2))
+    wide = flow.astype(np.float64) + 1e-7                      # not representable in float32
+    for given in (wide, np.asfortranarray(flow)):
+        write_kitti_flow(tmp_path / "f.png", given, valid)
+        np.testing.assert_array_equal(cv2.imread(str(tmp_path / "f.png"), cv2.IMREAD_UNCHANGED),
+                                      encode_kitti_flow(given, valid))
+        write_flo(tmp_path / "f.flo", given, valid)
+        expected = np.where(valid[..., None], given.astype(np.float32), UNKNOWN_FLOW)
+        assert cv2.readOpticalFlow(str(tmp_path / "f.flo")).tobytes() == expected.tobytes()
+
+
 def test_writers_take_a_non_utf8_directory(tmp_path):
     out = tmp_path / NON_UTF8
     flow, valid = _flow_1080p(np.random.default_rng(1))
@@ -167,6 +181,54 @@ def test_pair_writer_records_follow_their_files_and_errors_propagate(tmp_path):
         with PairWriter(workers=1, max_pending=0) as writer:
             writer.submit([fail], lambda: written.append("record"))
     assert written == []   # no record for a pair whose files failed
+
+
+def test_pair_writer_keeps_pair_order_when_files_finish_out_of_order_and_leaves_nothing_partial(tmp_path):
+    """Earlier pairs' files finish last (a slow file per pair, slower for earlier pairs): the records still come in
+    pair order, each after its own files. A pair whose file fails mid-write gets no record and leaves no file (atomic
+    writes), and the pairs after it get none either."""
+    import threading
+    import time
+
+    from sot_apps.io.atomic import atomic_path, write_bytes
+
+    order, lock = [], threading.Lock()
+
+    def file_job(k, part, delay):
+        def run():
+            time.sleep(delay)
+            write_bytes(tmp_path / f"{k}{part}.bin", bytes(1000))
+            with lock:
+                order.append(f"file{k}{part}")
+        return run
+
+    def record(k):
+        return lambda: order.append(f"record{k}")
+
+    with PairWriter(workers=2, max_pending=3) as writer:
+        for k in range(4):
+            writer.submit([file_job(k, "a", 0.1 * (3 - k)), file_job(k, "b", 0.0)], record(k))
+    finished = [n for n in order if n.startswith("file") and n.endswith("a")]
+    assert finished != sorted(finished)                     # the files did finish out of pair order
+    assert [n for n in order if n.startswith("record")] == [f"record{k}" for k in range(4)]
+    for k in range(4):
+        assert order.index(f"record{k}") > max(order.index(f"file{k}a"), order.index(f"file{k}b"))
+
+    out = tmp_path / "failing"
+
+    def half_written():
+        with atomic_path(out / "000002.png") as tmp, open(tmp, "wb") as handle:
+            handle.write(b"\x89PNG half")
+            raise OSError("disk on fire")
+
+    records = []
+    with pytest.raises(OSError, match="disk on fire"):
+        with PairWriter(workers=2, max_pending=0) as writer:
+            for k in range(4):
+                jobs = [half_written] if k == 2 else [lambda k=k: write_bytes(out / f"{k:06d}.png", b"ok")]
+                writer.submit(jobs, lambda k=k: records.append(k))
+    assert records == [0, 1]
+    assert sorted(p.name for p in out.iterdir()) == ["000000.png", "000001.png"]   # no partial, no temporary
 
 
 def test_occ_and_noc_pngs_written_together_decode_to_the_format_arrays(tmp_path):

@@ -46,6 +46,19 @@ def _delete(doc: dict, path: list) -> dict:
     return doc
 
 
+def test_every_shipped_schema_is_a_valid_2020_12_schema():
+    from jsonschema import Draft202012Validator
+    from jsonschema.exceptions import SchemaError
+
+    from sot_apps.schemas import load_schema
+
+    assert len(schema_names()) >= 10
+    for name in schema_names():
+        Draft202012Validator.check_schema(load_schema(name))
+    with pytest.raises(SchemaError):   # the check itself bites
+        Draft202012Validator.check_schema({"type": "no-such-type"})
+
+
 def test_schemas_are_versioned_and_have_ids():
     from sot_apps.schemas import load_schema
 
