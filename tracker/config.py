@@ -224,6 +224,8 @@ class MotionConfig:
             raise ValueError(f"motion.min_turn_radius: must be > 0, got {self.min_turn_radius}")
         if not 0.0 <= self.trend <= 1.0:
             raise ValueError(f"motion.trend: must be in [0, 1], got {self.trend}")
+        if self.trend_points < 0:
+            raise ValueError(f"motion.trend_points: must be >= 0, got {self.trend_points}")
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,8 @@ def _rotate(xy: np.ndarray, angle: float) -> np.ndarray:
 class MotionPrior:
     """Predicted per-frame motion [dx, dy, dz, dtheta] (zero until the first update)."""
 
-    def __init__(self, alpha: float = 0.5, frame: str = "world", trend: float = 0.0, trend_velocity: bool = True) -> None:
+    def __init__(self, alpha: float = 0.5, frame: str = "world", trend: float = 0.0,
+                 trend_velocity: bool = True) -> None:
         if frame not in ("world", "object", "turn"):
             raise ValueError(f"motion prior frame must be 'world', 'object' or 'turn', not {frame!r}")
         self.alpha = alpha
