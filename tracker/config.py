@@ -190,6 +190,12 @@ class MotionConfig:
     coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
     first_motion_along_heading: bool = False  # "average" models: the first motion seeds the prior with only its
                                          # part along the start box's heading
+    trend: float = 0.0                   # > 0, "average" models: Holt's trend weight beta (tracker/motion.py): a
+                                         # speed or turn-rate ramp is predicted without the average's lag (0: off)
+    trend_points: int = 0                # > 0: a frame with n object points adds n / (n + this) of its change to the
+                                         # trend, and the next is predicted that share of the way from the average
+                                         # to the trend's prediction (sparse: the average; 0: the trend's alone)
+    trend_velocity: bool = True          # False: the trend acts on the turn rate only
     prior_weight: float = 0.1            # MP (paper 0.1; 0: off)
     prior_reference: str = "prior"
     consistency_weight: float = 0.1      # MC (paper 0.1; 0: off)
@@ -216,6 +222,10 @@ class MotionConfig:
         _choice("motion.consistency", self.consistency, ("symmetric", "x_only"))
         if self.min_turn_radius <= 0:
             raise ValueError(f"motion.min_turn_radius: must be > 0, got {self.min_turn_radius}")
+        if not 0.0 <= self.trend <= 1.0:
+            raise ValueError(f"motion.trend: must be in [0, 1], got {self.trend}")
+        if self.trend_points < 0:
+            raise ValueError(f"motion.trend_points: must be >= 0, got {self.trend_points}")
 
 
 @dataclass(frozen=True)

@@ -214,8 +214,9 @@ class CTRVMotion:
         return self.filter.position_sigma()
 
     def update(self, box: Box, x: np.ndarray, previous_centroid: np.ndarray | None,
-               current_centroid: np.ndarray | None, dt: float = 0.1) -> np.ndarray:
+               current_centroid: np.ndarray | None, dt: float = 0.1, points: int = 0) -> np.ndarray:
         """Fuse the registered motion ``x`` (from ``box``, ``dt`` seconds ago); returns the corrected motion.
+        ``points``: the object's points in the new box (unused here).
 
         The direction of travel over the interval is the heading at its middle (``dt / 2`` ago)."""
         x = np.asarray(x, dtype=np.float64).copy()
@@ -249,18 +250,26 @@ class AverageMotion:
 
     ``per_second``: the average is kept per second (each motion divided by its interval) and predicted for the
     elapsed time, so a gap of several frames is predicted correctly; else per frame (the paper; dt ignored).
+    ``trend``: Holt's trend weight (:class:`~tracker.motion.MotionPrior`); a coasting frame is predicted on the
+    average alone. ``trend_points`` (n0 > 0): the support of a motion registered on n object points is
+    n / (n + n0): it adds that share of its change to the trend, and the next frame is predicted that share of
+    the way from the average to the trend's prediction (a dense object's registrations pin its motion, a sparse
+    or partly seen one's slide: it keeps the average's robust, lagging prediction).
     """
 
     def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
-                 first_along_heading: bool = False) -> None:
-        self.prior = MotionPrior(alpha, frame)
+                 first_along_heading: bool = False, trend: float = 0.0, trend_points: int = 0,
+                 trend_velocity: bool = True) -> None:
+        self.prior = MotionPrior(alpha, frame, trend, trend_velocity)
+        self.trend_points = trend_points
+        self._support = 1.0  # the last update's support: the share of the trend's prediction
         self.coast_yaw_decay = coast_yaw_decay
         self.per_second = per_second
         self.first_along_heading = first_along_heading
 
     def predict(self, box: Box, dt: float, coasting: int = 0) -> np.ndarray:
         interval = dt if self.per_second else 1.0
-        out = self.prior.predict(box.heading, interval) * interval
+        out = self.prior.predict(box.heading, interval, 0.0 if coasting else self._support) * interval
         out[3] *= self.coast_yaw_decay ** coasting  # coasting keeps the velocity, the turn rate dies out
         return out
 
@@ -268,7 +277,9 @@ class AverageMotion:
         return 0.0
 
     def update(self, box: Box, x: np.ndarray, previous_centroid: np.ndarray | None,
-               current_centroid: np.ndarray | None, dt: float = 0.1) -> np.ndarray:
+               current_centroid: np.ndarray | None, dt: float = 0.1, points: int = 0) -> np.ndarray:
+        """Average the registered motion ``x`` (from ``box``, ``dt`` seconds); ``points``: the object's points in
+        the new box, the support of the trend's change (``trend_points``)."""
         motion = np.asarray(x, dtype=np.float64)
         if self.first_along_heading and not self.prior.initialised:
             # the first motion seeds the prior with only its part along the start box's heading: the start box is
@@ -277,5 +288,7 @@ class AverageMotion:
             c, s = np.cos(box.heading), np.sin(box.heading)
             along = c * motion[0] + s * motion[1]
             motion = np.array([c * along, s * along, motion[2], motion[3]])
-        self.prior.update(motion / dt if self.per_second else motion, box.heading, dt if self.per_second else 1.0)
+        self._support = points / (points + self.trend_points) if self.trend_points > 0 else 1.0
+        self.prior.update(motion / dt if self.per_second else motion, box.heading, dt if self.per_second else 1.0,
+                          self._support)
         return x

@@ -293,7 +293,7 @@ class Tracker:
             before = self.prev_points[points_in_box(self.prev_points, prev, 1.0)]
             now = local[points_in_box(local, box_moved(prev, x), 1.0)]
             x = self.motion.update(prev, x, before.mean(axis=0) if len(before) else None,
-                                   now.mean(axis=0) if len(now) else None, self._last_dt)
+                                   now.mean(axis=0) if len(now) else None, self._last_dt, len(now))
         x[3] = wrap_angle(x[3])
         return x
 

@@ -21,4 +21,5 @@ def choose_motion_model(params: MotionConfig, box: Box) -> AverageMotion | CTRVM
         return CTRVMotion(box, CTRVParams(accel_sigma=k.accel_sigma, yaw_accel_sigma=k.yaw_accel_sigma),
                           k.position_sigma, k.heading_sigma, k.travel_heading_sigma, k.travel_min_distance)
     return AverageMotion(params.alpha, _AVERAGE_FRAMES[params.model], params.coast_yaw_decay, params.per_second,
-                         params.first_motion_along_heading)
+                         params.first_motion_along_heading, params.trend, params.trend_points,
+                         params.trend_velocity)
