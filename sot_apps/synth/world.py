@@ -374,7 +374,7 @@ def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
 def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pandar64",
                 seed: int = 0, cameras: bool = False, camera_size: tuple[int, int] = (640, 360),
                 world: World | None = None, progress: bool = False, profiles: bool = False,
-                open_road: bool = False, clutter: bool = False) -> Path:
+                open_road: bool = False, clutter: bool = False, parked: int | None = None) -> Path:
     """Synthesise a world and write it as a canonical sequence with ground truth; returns ``out``.
 
     Pass ``world`` (from :func:`make_world`) to write a world you built or modified yourself.
@@ -382,7 +382,7 @@ def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: st
     out = Path(out)
     if world is None:
         world = make_world(frames, vehicles, sensor, seed, cameras, camera_size, profiles=profiles, open_road=open_road,
-                           clutter=clutter)
+                           clutter=clutter, parked=parked)
     out.mkdir(parents=True, exist_ok=True)
     static = world.static_scene()
     sweeps: list[Sweep] = []
