@@ -73,19 +73,23 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {path}: {sum(len(d) for d in detections.values())} boxes in {len(detections)} frames{source}")
     if args.evaluate:
         from ..evaluation.detection import (
+            OperatingPoint,
             ap_table,
             format_ap_table,
             ground_truth_frames,
+            only_labels,
             operating_point,
             rows_for_json,
         )
 
         if not sequence.annotations:
             raise InputError(sequence.root, "--evaluate needs annotations")
-        truth = ground_truth_frames(sequence, DEFAULT_SELECTION.vehicle_labels(sequence), frames)
+        vehicles = DEFAULT_SELECTION.vehicle_labels(sequence)
+        everything = ground_truth_frames(sequence, None, frames)     # other classes: don't-care at the operating point
+        truth = only_labels(everything, vehicles)
         rows = ap_table(detections, truth, kinds=("bev", "3d") if args.three_d else ("bev",))
         print(format_ap_table(rows))
-        point = operating_point(detections, truth)
+        point = operating_point(detections, everything, OperatingPoint(labels=vehicles))
         print(f"score >= 0.5, BEV IoU >= 0.5, within 40 m: recall {point['recall']:.2f} of {point['n_gt']} vehicles "
               f"with >= 50 points, precision {point['precision']:.2f} of {point['n_det']} detections")
         if args.json:

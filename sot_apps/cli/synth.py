@@ -33,6 +33,12 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--open-road", action="store_true",
                         help="no walls and no poles: open ground all round (a background for the benchmark's "
                              "far_approach, passing and oblique profiles; docs/benchmark.md)")
+    parser.add_argument("--clutter", action="store_true",
+                        help="unannotated roadside clutter: bushes, hedges, trees, building corners, kiosks, "
+                             "pedestrians (what a model-free detector must not call a vehicle; docs/detection.md)")
+    parser.add_argument("--parked", type=nonnegative_int, default=None, metavar="N",
+                        help="number of parked cars, alternating sides, >= 7 m apart (default: 4-8 drawn from the "
+                             "seed); 24 gives rows of parked cars that hide each other, as on a city street")
     parser.add_argument("--profiles", action="store_true",
                         help="moving vehicles follow the benchmark's motion profiles (kinematic bicycle, bounded "
                              "acceleration and jerk: constant speed, hard braking, strong acceleration, stop-and-go, "
@@ -59,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(None, "--frames must be >= 1 and --vehicles >= 0")
     out = write_world(Path(args.out), frames=args.frames, vehicles=args.vehicles, sensor=args.sensor,
                       seed=args.seed, cameras=args.cameras, camera_size=_size(args.camera_size), progress=True,
-                      profiles=args.profiles, open_road=args.open_road)
+                      profiles=args.profiles, open_road=args.open_road, clutter=args.clutter,
+                      parked=args.parked)
     print(f"wrote {out / 'sequence.json'} ({args.frames} frames, {args.vehicles} moving vehicles; ground truth in {out / 'gt'})")
     return 0

@@ -12,7 +12,8 @@ No learned network. Per frame k (ego frame of k, boxes moved to the world at the
 4. clustering in bird's-eye view with a range-adaptive link radius (:mod:`.clustering`); a cluster larger
    than any vehicle is split again with a smaller radius (``split_factors``: parked cars in a row), and so is
    one typed truck or bus, whose parts replace it when they give >= 2 boxes;
-5. per cluster a rectangle: heading from the L-shape fit (:mod:`.lshape`, Zhang et al. 2017) on the visible
+5. per cluster a rectangle: heading from the L-shape fit (:mod:`.lshape`, Zhang et al. 2017, variance
+   criterion: straight sides whatever their length, suited to partial views) on the visible
    contour (:func:`visible_contour`); the longer
    side is the length, except for a short single face (<= ``max_face_width``): then the length runs along the
    axis nearer the line of sight (the rear or front of a vehicle seen end-on); a MOVING cluster's heading
@@ -20,9 +21,12 @@ No learned network. Per frame k (ego frame of k, boxes moved to the world at the
 6. the nearest vehicle type (``VEHICLE_TYPES``: car, van, truck, bus; nuScenes' mean sizes) completes a
    partially seen side to the type's size, away from the sensor (the visible face is the near one);
 7. gates (the visible extent fits in a vehicle, is long enough not to be a pole, its height is a
-   vehicle's); the score is a logistic model of the cluster's features (:func:`cluster_features`) whose
-   weights were fitted on the synthetic worlds' exact boxes (``python -m sot_apps.detection.calibrate``):
-   the probability that the box overlaps a vehicle at BEV IoU >= 0.5.
+   vehicle's); the score is a logistic model of the cluster's features (:func:`cluster_features`: support,
+   range, fit to the size priors, share of the type seen, L-shape quality, motion, and clutter cues: how
+   high the cluster floats, how ragged its outline is, how much of its rectangle it fills) whose weights
+   were fitted on synthetic worlds with roadside clutter and rows of parked cars and on the generated
+   benchmark, exact boxes (``python -m sot_apps.detection.calibrate``): the probability that the box
+   overlaps a vehicle at BEV IoU >= 0.5.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ VEHICLE_TYPES: tuple[tuple[str, float, float, float], ...] = (
     ("car", 4.63, 1.96, 1.74), ("van", 5.3, 2.1, 2.1), ("truck", 6.9, 2.5, 2.8), ("bus", 11.0, 2.9, 3.5))
 
 FEATURES = ("log_points", "range", "height_fit", "oversize", "length_seen", "width_seen", "edge_share",
-            "moving_share")
+            "moving_share", "bottom", "roughness", "fill")
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,7 @@ class DetectorConfig:
     resplit_keep: tuple[str, ...] = ("car", "van")   # other types are split again when that gives >= 2 boxes
     min_points: int = 8
     heading_steps: int = 90             # over [0, 90) degrees
+    lshape_criterion: str = "variance"   # or "closeness" (.lshape.CRITERIA)
     contour_arc: float = 0.1            # the L-shape is fitted to the nearest point per azimuth bin this wide
     max_length: float = 12.0            # a cluster whose visible extent exceeds this is not a vehicle
     max_width: float = 3.2
@@ -83,7 +88,8 @@ class DetectorConfig:
     min_travel: float = 0.6             # a moving cluster's heading follows its travel when it moved this far
     min_score: float = 0.05             # candidates scored lower are not reported
     # logistic score: bias, then one weight per FEATURES entry (python -m sot_apps.detection.calibrate)
-    score_weights: tuple[float, ...] = (-2.663, -0.269, -1.416, 0.029, -1.671, 2.5, 7.061, -0.148, 0.154)
+    score_weights: tuple[float, ...] = (-1.995, -0.312, 0.039, -0.126, -1.652, 4.952, 5.573, -0.670, 1.862, -1.798,
+                                        -1.267, -1.324)
 
 
 @dataclass(frozen=True)
@@ -114,13 +120,17 @@ def _vehicle_type(visible: np.ndarray, height: float) -> tuple[str, float, float
 
 
 def cluster_features(n_current: int, range_m: float, visible: np.ndarray, height: float, prior: tuple,
-                     edge_share: float, moving_share: float) -> np.ndarray:
-    """The score's inputs (order of FEATURES)."""
+                     edge_share: float, moving_share: float, bottom: float, roughness: float, fill: float
+                     ) -> np.ndarray:
+    """The score's inputs (order of FEATURES). ``bottom``: height above the ground below which a tenth of the
+    points lie (m; a tree's canopy floats); ``roughness``: median distance of the visible outline from the
+    rectangle's sides (m; foliage is ragged, a car's or a wall's side straight); ``fill``: share of the
+    visible rectangle's 0.3 m cells that hold points (a bush is seen all over, a car's side and roof less)."""
     _, length, width, h = prior
     oversize = (max(visible[0] - length, 0.0) / 0.5) ** 2 + (max(visible[1] - width, 0.0) / 0.3) ** 2
     return np.array([np.log1p(n_current), range_m / 40.0, min(((height - h) / (0.2 * h)) ** 2, 9.0),
                      min(oversize, 9.0), min(visible[0] / length, 1.5), min(visible[1] / width, 1.5),
-                     edge_share, moving_share])
+                     edge_share, moving_share, min(bottom, 2.5), min(roughness / 0.1, 5.0), fill])
 
 
 def _score(features: np.ndarray, weights: tuple[float, ...]) -> np.ndarray:
@@ -162,7 +172,8 @@ def _fit_cluster(points: np.ndarray, n_current: int, moving_share: float, travel
     span = xy.max(axis=0) - xy.min(axis=0)
     if np.hypot(*span) > np.hypot(config.max_length, config.max_width) + 0.5:
         return "split"
-    heading, _, _ = fit_rectangle(visible_contour(xy, sensor_xy, config.contour_arc), config.heading_steps)
+    contour = visible_contour(xy, sensor_xy, config.contour_arc)
+    heading, _, _ = fit_rectangle(contour, config.heading_steps, config.lshape_criterion)
     c, s = np.cos(heading), np.sin(heading)
     uv = xy @ np.array([[c, -s], [s, c]])
     lo, hi = uv.min(axis=0), uv.max(axis=0)
@@ -209,8 +220,17 @@ def _fit_cluster(points: np.ndarray, n_current: int, moving_share: float, travel
     near_u = u0 if abs(su - u0) < abs(su - u1) else u1
     near_v = v0 if abs(sv - v0) < abs(sv - v1) else v1
     on_edge = (np.abs(pu - near_u) <= config.edge_distance) | (np.abs(pv - near_v) <= config.edge_distance)
+    # clutter: the outline's distance from the rectangle of the visible points, how much of it holds points
+    cu_, cv_ = contour @ np.array([c, s]), contour @ np.array([-s, c])
+    vis_lo = np.array([pu.min(), pv.min()])
+    vis_hi = np.array([pu.max(), pv.max()])
+    off = np.minimum(np.minimum(cu_ - vis_lo[0], vis_hi[0] - cu_), np.minimum(cv_ - vis_lo[1], vis_hi[1] - cv_))
+    cells = np.floor((np.column_stack([pu, pv]) - vis_lo) / 0.3).astype(np.int64)
+    n_cells = np.prod(np.floor((vis_hi - vis_lo) / 0.3).astype(np.int64) + 1)
+    fill = len(np.unique(cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1])) / max(int(n_cells), 1)
+    bottom = float(np.percentile(points[:, 2] - ground_z, 10))
     features = cluster_features(n_current, float(np.hypot(*sight)), extent, height, prior, float(on_edge.mean()),
-                                moving_share)
+                                moving_share, bottom, float(np.median(np.maximum(off, 0.0))), fill)
     return Candidate(box, features, prior[0])
 
 

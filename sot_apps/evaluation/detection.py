@@ -20,8 +20,8 @@ from tracker import FrameDetections, iou_3d_batch, iou_bev_batch
 
 from ..objects.box_points import count_points_in_boxes
 
-__all__ = ["APConfig", "GroundTruthFrame", "ground_truth_frames", "average_precision", "ap_table", "identity_coverage",
-           "operating_point"]
+__all__ = ["APConfig", "OperatingPoint", "GroundTruthFrame", "ground_truth_frames", "average_precision", "ap_table",
+           "identity_coverage", "operating_point"]
 
 
 @dataclass(frozen=True)
@@ -33,13 +33,29 @@ class APConfig:
 
 
 @dataclass(frozen=True)
+class OperatingPoint:
+    """The criteria of the recall / precision operating point (issue 27's target): detections scored
+    >= ``min_score``; a ground-truth box COUNTS when it is within ``max_range`` (BEV, from the ego), holds >=
+    ``min_points`` sweep points and its label is one of ``labels`` (None: every box of the truth). Matching
+    at IoU >= ``iou_threshold`` (``kind`` "bev" or "3d")."""
+
+    min_score: float = 0.5
+    iou_threshold: float = 0.5
+    max_range: float = 40.0
+    min_points: int = 50
+    kind: str = "bev"
+    labels: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True)
 class GroundTruthFrame:
-    """One frame's ground-truth boxes (M, 7), their point counts, track ids, and the ego position."""
+    """One frame's ground-truth boxes (M, 7), their point counts, track ids, labels, and the ego position."""
 
     boxes: np.ndarray
     points: np.ndarray
     ego_xy: np.ndarray
     track_ids: tuple[str, ...] = field(default=())
+    labels: tuple[str, ...] = field(default=())
 
 
 def ground_truth_frames(sequence, labels: Sequence[str] | None = None, frames: Sequence[int] | None = None
@@ -53,7 +69,8 @@ def ground_truth_frames(sequence, labels: Sequence[str] | None = None, frames: S
                 if wanted is None or a.label.lower() in wanted]
         boxes = np.array([[*a.box.to_array(), a.box.roll, a.box.pitch] for a in anns]).reshape(-1, 9)
         out[k] = GroundTruthFrame(boxes, count_points_in_boxes(sequence.points_world(k), boxes),
-                                  np.asarray(sequence.frames[k].world_from_ego)[:2, 3], tuple(a.track_id for a in anns))
+                                  np.asarray(sequence.frames[k].world_from_ego)[:2, 3], tuple(a.track_id for a in anns),
+                                  tuple(a.label for a in anns))
     return out
 
 
@@ -138,33 +155,41 @@ def ap_table(detections: Mapping[int, FrameDetections], truth: Mapping[int, Grou
 
 
 def operating_point(detections: Mapping[int, FrameDetections], truth: Mapping[int, GroundTruthFrame],
-                    min_score: float = 0.5, iou_threshold: float = 0.5, max_range: float = 40.0,
-                    min_points: int = 50, kind: str = "bev") -> dict[str, float]:
-    """Recall and precision of the detections scored >= ``min_score``. Recall: share of the ground-truth
-    boxes within ``max_range`` of the ego with >= ``min_points`` points that such a detection overlaps at
-    IoU >= the threshold. Precision: share of such detections within ``max_range`` that overlap ANY
-    ground-truth box (whatever its points) at IoU >= the threshold (one detection per box, best score first)."""
-    found = wanted = true = kept = 0
+                    criteria: OperatingPoint = OperatingPoint()) -> dict[str, float]:
+    """Recall and precision of the detections scored >= ``criteria.min_score``, KITTI's rule for boxes that
+    do not count. Per frame, detections best score first, each is matched to the not yet matched
+    ground-truth box (ANY box of ``truth``: every label, range and point count) it overlaps most at IoU >=
+    the threshold. Matched to a box that counts (``OperatingPoint``): a true positive; matched to one that
+    does not (too far, too few points, another class): ignored, neither true nor false (a don't-care
+    region); unmatched: a false positive if within ``max_range`` of the ego (farther ones are not scored).
+    Recall: the counting boxes matched over all counting boxes; precision: true over true + false."""
+    c = criteria
+    wanted_labels = None if c.labels is None else {lbl.lower() for lbl in c.labels}
+    found = wanted = false = 0
     for k, gt in truth.items():
         det = detections.get(k, FrameDetections.empty())
-        confident = det.scores >= min_score
+        confident = det.scores >= c.min_score
         boxes, scores = det.boxes[confident], det.scores[confident]
-        iou = _pairwise_iou(boxes, gt.boxes, kind)
+        iou = _pairwise_iou(boxes, gt.boxes, c.kind)
         gd = np.hypot(gt.boxes[:, 0] - gt.ego_xy[0], gt.boxes[:, 1] - gt.ego_xy[1])
         dd = np.hypot(boxes[:, 0] - gt.ego_xy[0], boxes[:, 1] - gt.ego_xy[1])
-        want = (gd < max_range) & (gt.points >= min_points)
+        want = (gd < c.max_range) & (gt.points >= c.min_points)
+        if wanted_labels is not None:
+            if len(gt.labels) != len(gt.boxes):
+                raise ValueError(f"frame {k}: OperatingPoint.labels needs the ground truth's labels")
+            want &= np.array([lbl.lower() in wanted_labels for lbl in gt.labels], dtype=bool).reshape(-1)
         wanted += int(want.sum())
-        found += int(((iou >= iou_threshold).any(axis=0) & want).sum()) if len(boxes) else 0
         taken = np.zeros(len(gt.boxes), dtype=bool)
         for i in np.argsort(-scores, kind="stable"):
-            if dd[i] >= max_range:
-                continue
-            kept += 1
-            candidates = np.where(~taken & (iou[i] >= iou_threshold), iou[i], -1.0)
+            candidates = np.where(~taken & (iou[i] >= c.iou_threshold), iou[i], -1.0)
             if len(candidates) and candidates.max() >= 0:
-                taken[int(np.argmax(candidates))] = True
-                true += 1
-    return {"recall": found / wanted if wanted else float("nan"), "precision": true / kept if kept else float("nan"),
+                j = int(np.argmax(candidates))
+                taken[j] = True
+                found += int(want[j])           # a match to a box that does not count is ignored
+            elif dd[i] < c.max_range:
+                false += 1
+    kept = found + false
+    return {"recall": found / wanted if wanted else float("nan"), "precision": found / kept if kept else float("nan"),
             "n_gt": wanted, "n_det": kept}
 
 
@@ -214,15 +239,23 @@ def format_ap_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _subset(gt: GroundTruthFrame, keep: np.ndarray) -> GroundTruthFrame:
+    keep = np.asarray(keep, dtype=bool).reshape(-1)
+    return GroundTruthFrame(gt.boxes[keep], gt.points[keep], gt.ego_xy,
+                            tuple(t for t, kept in zip(gt.track_ids, keep, strict=True) if kept),
+                            tuple(lbl for lbl, kept in zip(gt.labels, keep, strict=True) if kept) if gt.labels else ())
+
+
 def only_objects(truth: Mapping[int, GroundTruthFrame], track_ids) -> dict[int, GroundTruthFrame]:
     """``truth`` restricted to the ground-truth objects ``track_ids`` (e.g. the moving vehicles)."""
     wanted = set(track_ids)
-    out = {}
-    for k, gt in truth.items():
-        keep = np.array([tid in wanted for tid in gt.track_ids], dtype=bool)
-        out[k] = GroundTruthFrame(gt.boxes[keep], gt.points[keep], gt.ego_xy,
-                                  tuple(t for t, kept in zip(gt.track_ids, keep, strict=True) if kept))
-    return out
+    return {k: _subset(gt, np.array([tid in wanted for tid in gt.track_ids], dtype=bool)) for k, gt in truth.items()}
+
+
+def only_labels(truth: Mapping[int, GroundTruthFrame], labels) -> dict[int, GroundTruthFrame]:
+    """``truth`` restricted to the boxes whose label is one of ``labels`` (case-insensitive)."""
+    wanted = {lbl.lower() for lbl in labels}
+    return {k: _subset(gt, np.array([lbl.lower() in wanted for lbl in gt.labels], dtype=bool)) for k, gt in truth.items()}
 
 
 def autolabel_quality(candidates: Mapping[str, tuple[Mapping[int, FrameDetections], Mapping | None]],

@@ -58,6 +58,7 @@ from ..raycast import RaycastScene
 from ..sensor.model import Sensor, load_sensor
 from ..sensor.noise import Realism
 from ..sensor.scan import Scan, SimObject, simulate_scan
+from .clutter import clutter_objects
 from .vehicles import random_vehicle
 
 __all__ = ["WorldObject", "World", "SynthCamera", "make_world", "write_world", "SENSOR_HEIGHT", "BASE_TIME_NS"]
@@ -272,13 +273,16 @@ def default_front_camera(width: int = 640, height: int = 360, period_ns: int = 1
 
 def make_world(frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pandar64", seed: int = 0,
                cameras: bool = False, camera_size: tuple[int, int] = (640, 360), parked: int | None = None,
-               realism: Realism | None = None, profiles: bool = False, open_road: bool = False) -> World:
+               realism: Realism | None = None, profiles: bool = False, open_road: bool = False,
+               clutter: bool = False) -> World:
     """Build (but do not simulate) a synthetic world; cheap (well under a second).
 
     ``profiles``: moving vehicle i follows motion profile ``PROFILES[i % 7]`` of
     :mod:`sot_apps.objects.motion_profiles` (the benchmark's: kinematic bicycle, bounded acceleration and
     jerk; ``occluded`` is left out) instead of the random piecewise profile. ``open_road``: no walls and no
-    poles, open ground all round (the generated benchmark's hard profiles need room off the road)."""
+    poles, open ground all round (the generated benchmark's hard profiles need room off the road). ``clutter``:
+    unannotated roadside bushes, hedges, trees, building corners, kiosks and pedestrians
+    (:mod:`.clutter`), drawn from their own generator (``[seed, 1]``) so the rest of the world is the same."""
     if frames < 1 or vehicles < 0:
         raise ValueError("frames must be >= 1 and vehicles >= 0")
     sensor = load_sensor(sensor)
@@ -327,6 +331,8 @@ def make_world(frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pand
         objects.append(WorldObject(f"parked_{j:03d}", mesh.label, mesh.kind, mesh.size, mesh.vertices, mesh.faces,
                                    traj, moving=False, color=_color(rng), reflectivity=float(rng.uniform(0.3, 0.8))))
     background = _background(rng, x_min, x_max, open_road)
+    if clutter:
+        background += clutter_objects(np.random.default_rng([seed, 1]), x_min, x_max)
     cams = [default_front_camera(*camera_size, period_ns=period_ns)] if cameras else []
     return World(sensor, seed, frame_times, ego, objects, background, cams, realism or Realism())
 
@@ -368,14 +374,15 @@ def _gt_document(world: World, camera_times: list[np.ndarray]) -> dict:
 def write_world(out: str | Path, frames: int = 20, vehicles: int = 3, sensor: str | Sensor = "pandar64",
                 seed: int = 0, cameras: bool = False, camera_size: tuple[int, int] = (640, 360),
                 world: World | None = None, progress: bool = False, profiles: bool = False,
-                open_road: bool = False) -> Path:
+                open_road: bool = False, clutter: bool = False, parked: int | None = None) -> Path:
     """Synthesise a world and write it as a canonical sequence with ground truth; returns ``out``.
 
     Pass ``world`` (from :func:`make_world`) to write a world you built or modified yourself.
     """
     out = Path(out)
     if world is None:
-        world = make_world(frames, vehicles, sensor, seed, cameras, camera_size, profiles=profiles, open_road=open_road)
+        world = make_world(frames, vehicles, sensor, seed, cameras, camera_size, profiles=profiles, open_road=open_road,
+                           clutter=clutter, parked=parked)
     out.mkdir(parents=True, exist_ok=True)
     static = world.static_scene()
     sweeps: list[Sweep] = []

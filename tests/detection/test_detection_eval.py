@@ -51,10 +51,32 @@ def test_operating_point_counts_confident_detections_within_range():
     far = [[50.0, 0.0, 1.0, 0.0, 4.5, 1.9, 1.6]]
     dets = {0: FrameDetections(np.vstack([CARS, fp, far, CARS[:1]]), np.array([0.9, 0.8, 0.7, 0.9, 0.3]))}
     point = operating_point(dets, gt)
-    # recall: only car a counts (>= 50 points); precision: a and b matched, the fp not; far (50 m) and the
-    # low-scored duplicate are not counted
+    # recall: only car a counts (>= 50 points); precision: a is true, the fp false; the detection of b (a box
+    # that does not count) is ignored, the unmatched far one (50 m) and the low-scored duplicate not scored
     assert point["n_gt"] == 1 and point["recall"] == 1.0
-    assert point["n_det"] == 3 and abs(point["precision"] - 2 / 3) < 1e-9
+    assert point["n_det"] == 2 and abs(point["precision"] - 1 / 2) < 1e-9
+
+
+def test_operating_point_ignores_detections_of_boxes_that_do_not_count():
+    """KITTI's don't-care rule: a detection matched to a box beyond the range, with too few points or of another
+    class is neither true nor false; the same detection with no box under it is false."""
+    from sot_apps.evaluation.detection import OperatingPoint, operating_point
+
+    boxes = np.array([[10.0, 0.0, 1.0, 0.0, 4.5, 1.9, 1.6], [0.0, 12.0, 1.0, 0.0, 4.5, 1.9, 1.6],
+                      [41.0, 0.0, 1.0, 0.0, 4.5, 1.9, 1.6], [0.0, -15.0, 1.0, 0.0, 4.5, 1.9, 1.6]])
+    gt = {0: GroundTruthFrame(boxes, np.array([80, 80, 80, 20]), np.zeros(2), ("a", "b", "c", "d"),
+                              ("Car", "Towed Object", "Car", "Car"))}
+    # detections of all four, the one of c (41 m) shifted to 39.5 m: within range, matched to a far box
+    dets = boxes.copy()
+    dets[2, 0] = 39.5
+    point = operating_point({0: FrameDetections(dets, np.full(4, 0.9))}, gt, OperatingPoint(labels=("Car",)))
+    assert point == {"recall": 1.0, "precision": 1.0, "n_gt": 1, "n_det": 1}
+    # without boxes under them the three would be false positives
+    alone = {0: GroundTruthFrame(boxes[:1], np.array([80]), np.zeros(2), ("a",), ("Car",))}
+    point = operating_point({0: FrameDetections(dets, np.full(4, 0.9))}, alone, OperatingPoint(labels=("Car",)))
+    assert point["n_det"] == 4 and point["precision"] == 0.25
+    # every class counts when no labels are given: the towed object's box is then a true positive
+    assert operating_point({0: FrameDetections(dets, np.full(4, 0.9))}, gt)["n_gt"] == 2
 
 
 def test_ground_truth_boxes_keep_their_tilt_in_counts_and_3d_iou():

@@ -23,15 +23,21 @@ def _l_shape(heading: float, length: float = 4.5, width: float = 1.8, n: int = 1
     return local @ np.array([[c, s], [-s, c]]) + np.array([12.0, -3.0])
 
 
+@pytest.mark.parametrize("criterion", ["closeness", "variance"])
 @pytest.mark.parametrize("heading_deg", [0.0, 17.0, 33.0, 45.0, 61.0, 88.0])
-def test_l_shape_heading_of_exact_and_noisy_l_shapes(heading_deg):
+def test_l_shape_heading_of_exact_and_noisy_l_shapes(heading_deg, criterion):
     heading = np.deg2rad(heading_deg)
     for noise in (0.0, 0.03):
-        fitted, lo, hi = fit_rectangle(_l_shape(heading, noise=noise), heading_steps=90)
+        fitted, lo, hi = fit_rectangle(_l_shape(heading, noise=noise), heading_steps=90, criterion=criterion)
         error = (fitted - heading + np.pi / 4) % (np.pi / 2) - np.pi / 4   # modulo 90 degrees
         assert abs(error) <= np.deg2rad(1.0) + (np.deg2rad(2.0) if noise else 0.0), (heading_deg, noise, fitted)
         extent = np.sort(hi - lo)
         assert np.allclose(extent, [1.8, 4.5], atol=0.05 + 3 * noise), extent
+
+
+def test_l_shape_rejects_an_unknown_criterion():
+    with pytest.raises(ValueError, match="criterion"):
+        fit_rectangle(_l_shape(0.2), criterion="area")
 
 
 def test_l_shape_of_a_single_straight_face_is_along_it():
