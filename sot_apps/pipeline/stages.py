@@ -14,7 +14,15 @@ from pathlib import Path
 import numpy as np
 
 from ..apps import track_dir
-from ..tracking import ObjectRequest, ObjectTrack, TrackingFailed, write_shape_growth, write_track_result
+from ..evaluation.track_health import track_health
+from ..tracking import (
+    ObjectRequest,
+    ObjectTrack,
+    TrackingFailed,
+    track_result_to_trackfile,
+    write_shape_growth,
+    write_track_result,
+)
 from ..tracking import track_objects as track_objects_pass
 from .config import TrackStage
 from .manifest import DoneMarker
@@ -80,16 +88,20 @@ def write_object(out: str, plan: ObjectPlan, track: ObjectTrack, digest: str) ->
     directory = track_dir(out, plan.sequence, plan.object_id)
     # Per-frame time_ms is left out (it differs run to run): pipeline outputs are reproducible byte for byte;
     # the unit's total time is in the manifest.
-    write_track_result(directory, open_cached(plan.sequence_path, plan.format), result, plan.object_id,
-                       track.init_box, plan.label, with_time_ms=False)
+    seq = open_cached(plan.sequence_path, plan.format)
+    write_track_result(directory, seq, result, plan.object_id, track.init_box, plan.label, with_time_ms=False)
     growth_path = write_shape_growth(directory, track.growth)
     qualities = [float(np.clip(e.quality, 0.0, 1.0)) for e in result.estimates]
+    # the run's track-health verdict from the records just written (pipeline.health: no re-reading of the file)
+    health = track_health(track_result_to_trackfile(seq, result, plan.object_id, track.init_box, plan.label,
+                                                    with_time_ms=False)).to_json()
     DoneMarker(Path(out), f"track/{plan.key}").mark(digest, [directory / "track.json", directory / "shape.ply",
                                                              growth_path],
-                                                    extra={"frames": len(qualities)})
+                                                    extra={"frames": len(qualities), "health": health})
     return {"sequence": plan.sequence, "object": plan.object_id, "frames": len(qualities),
             "tracked_frames": len(qualities) - 1, "seconds": round(track.seconds, 3),
-            "mean_quality": round(float(np.mean(qualities)), 4), "shape_points": int(len(result.shape))}
+            "mean_quality": round(float(np.mean(qualities)), 4), "shape_points": int(len(result.shape)),
+            "health": health}
 
 
 # ----------------------------------------------------------------------------------------------- apps
