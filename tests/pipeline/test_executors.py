@@ -58,12 +58,13 @@ def test_dask_workers_open_each_sequence_once(tiny_worlds, tmp_path):
     assert sum(info["reused"] for info in infos) >= 3   # every tracking task reused it
 
 
-def test_prestart_workers_start_with_the_named_modules_loaded(tmp_path):
+def test_prestart_workers_start_with_the_named_modules_loaded():
     """``ExecutorSession.prestart``: the local workers (forked from multiprocessing's fork server, which prestart
     starts importing the named modules) have those modules loaded before their first task, without importing
     them; the batch runs on them. In a fresh process: the fork server is one per process."""
     import json
     import multiprocessing
+    import os
     import subprocess
     import sys
     from pathlib import Path
@@ -82,7 +83,7 @@ print(json.dumps({"main": os.getpid(), "main_loaded": "colorsys" in sys.modules,
 """
     root = Path(__file__).resolve().parents[2]
     run = subprocess.run([sys.executable, "-c", script], cwd=root, capture_output=True, text=True, timeout=300,
-                         env={**__import__("os").environ, "PYTHONPATH": str(root)})
+                         env={**os.environ, "PYTHONPATH": str(root)})
     assert run.returncode == 0, run.stderr
     doc = json.loads(run.stdout.strip().splitlines()[-1])
     assert not doc["main_loaded"]                                  # the run itself never imported it
