@@ -233,8 +233,10 @@ class Box:
 def points_in_box(points: np.ndarray, box: Box, scale: float | tuple[float, float, float] = 1.0) -> np.ndarray:
     """Boolean mask of the (N, 3) points inside ``box`` with its size scaled by ``scale``."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    scale_xyz = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,))
-    half = box.size * scale_xyz / 2.0
+    if isinstance(scale, (int, float)):   # the common case, without broadcast_to's overhead (same values)
+        half = box.size * float(scale) / 2.0
+    else:
+        half = box.size * np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)) / 2.0
     d = points - box.center
     if not box.is_level:  # tilted box: object-frame coordinates R^T d
         r = box.rotation()

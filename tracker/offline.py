@@ -48,7 +48,7 @@ from .config import OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
-from .metrics import voxel_downsample_centres
+from .metrics import unique_sorted, voxel_downsample_centres
 from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
 
@@ -372,7 +372,7 @@ class _Solver:
                 continue
             d, idx = self.trees[f].query(local[sel], k=1)
             matched.append((f, sel, d, idx))
-            rows = np.unique(idx[~self.has_normal[f][idx]])
+            rows = unique_sorted(idx[~self.has_normal[f][idx]])
             if len(rows) and min(self.params.normal_neighbours, len(self.shapes[f])) < 3:
                 self.normals[f][rows] = _normals(self.shapes[f], self.params.normal_neighbours, rows=rows)
                 self.has_normal[f][rows] = True

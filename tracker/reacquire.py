@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from .geometry import Box, points_in_box
 from .shape import to_object_frame
@@ -76,6 +75,8 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     ij = np.floor((uv - uv.min(axis=0)) / cell).astype(np.int64)
     grid = np.zeros(tuple(ij.max(axis=0) + 1), dtype=bool)
     grid[ij[:, 0], ij[:, 1]] = True
+    from scipy import ndimage  # here, not at import: only a re-acquisition search labels clusters
+
     labels, count = ndimage.label(grid, structure=np.ones((3, 3), dtype=bool))
     if count == 0:
         return []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -38,6 +39,12 @@ def _normal_equations(blocks: list[ResidualBlock]) -> tuple[np.ndarray, np.ndarr
     return hessian, gradient
 
 
+def _usable(hessian: np.ndarray) -> bool:
+    """Finite and not all zero. A finite sum means every entry is finite (an inf or NaN entry makes the sum inf or
+    NaN), so the entry-wise check runs only when the sum is not finite (also when finite entries overflow it)."""
+    return (math.isfinite(hessian.sum()) or bool(np.isfinite(hessian).all())) and bool(hessian.any())
+
+
 def solve(blocks_at: BlockFunction, x0: np.ndarray, max_iterations: int = 10, tolerance: float = 1e-6,
           damping: float = 1e-6) -> SolverResult:
     """Minimise sum_b weight_b * ||r_b(x)||^2 from ``x0``.
@@ -53,9 +60,9 @@ def solve(blocks_at: BlockFunction, x0: np.ndarray, max_iterations: int = 10, to
     while iterations < max_iterations:
         iterations += 1
         hessian, gradient = _normal_equations(blocks)
-        if not np.isfinite(hessian).all() or not np.any(hessian):
+        if not _usable(hessian):
             break
-        diag = np.diag(hessian) + 1e-9
+        diag = hessian.diagonal() + 1e-9
         accepted = False
         step = np.zeros(4)
         for _ in range(8):
@@ -73,6 +80,6 @@ def solve(blocks_at: BlockFunction, x0: np.ndarray, max_iterations: int = 10, to
                 accepted = True
                 break
             lam *= 10.0
-        if not accepted or np.max(np.abs(step)) < tolerance:
+        if not accepted or np.abs(step).max() < tolerance:
             break
     return SolverResult(x, loss, iterations)

@@ -78,7 +78,7 @@ def measure(config, configs: list[tuple[str, int, str | None]], progress: bool =
     """One row per (executor kind, workers, Dask address) of ``configs``: ``config``'s tracking stage into a
     fresh temporary output."""
     from ..pipeline.executors import ExecutorSession, ExecutorSpec, Task
-    from ..pipeline.runner import run_pipeline
+    from ..pipeline.runner import WORKER_MODULES, run_pipeline
 
     _convert_sweeps(config)
     sequences = [s.path for s in config.sequences]
@@ -89,6 +89,7 @@ def measure(config, configs: list[tuple[str, int, str | None]], progress: bool =
             run_config = tracking_only(config, str(Path(tmp) / "out"))
             start = time.perf_counter()
             with ExecutorSession(spec) as session:
+                session.prestart(WORKER_MODULES)   # as sot-apps run: workers start with the toolkit loaded
                 if kind == "dask":
                     session.on_every_worker(_warm, sequences)
                 elif kind != "inline" and not (kind == "local" and workers <= 1):

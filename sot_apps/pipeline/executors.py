@@ -164,8 +164,48 @@ def _worker_init(stop_event=None) -> None:
     signal.signal(signal.SIGINT, _worker_sigint)
 
 
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
 @contextlib.contextmanager
-def _forkserver_method() -> Iterator[None]:
+def _single_threaded_children() -> Iterator[None]:
+    """Processes started in the block get the thread variables of :func:`_single_threaded_env` (unless this
+    process sets them): this process's own environment is left as it was afterwards."""
+    saved = {var: os.environ.get(var) for var in _THREAD_VARIABLES}
+    _single_threaded_env()
+    try:
+        yield
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
+
+
+def _start_forkserver(modules: Iterable[str] = ()) -> bool:
+    """Start multiprocessing's fork server (once per process) importing ``modules`` besides its own preload list,
+    with SIGINT ignored (inherited by every process it forks: a Ctrl-C while a worker starts prints nothing) and
+    single-threaded BLAS/OpenMP. Returns immediately: the server imports in the background, and the processes
+    forked from it start with those modules loaded (no interpreter start-up, no imports). False without fork
+    servers (Windows). A server already running keeps the preload list it was started with."""
+    import multiprocessing
+    import multiprocessing.forkserver
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return False
+    server = multiprocessing.forkserver._forkserver
+    if not getattr(server, "_forkserver_pid", None):
+        preload = list(getattr(server, "_preload_modules", None) or ["__main__"])
+        preload += [m for m in modules if m not in preload]
+        server.set_forkserver_preload(preload)
+        with sigint_ignored_in_children(), _single_threaded_children():
+            multiprocessing.forkserver.ensure_running()
+    return True
+
+
+@contextlib.contextmanager
+def _forkserver_method(modules: Iterable[str] = ()) -> Iterator[None]:
     """Dask's workers forked from multiprocessing's fork server, started with SIGINT ignored.
 
     Spawned workers (Dask's default) start a fresh interpreter that installs Python's KeyboardInterrupt handler:
@@ -175,7 +215,6 @@ def _forkserver_method() -> Iterator[None]:
     worker with SIGINT ignored from its first instruction. Without fork servers (Windows), Dask spawns as before;
     if this process already runs a fork server started otherwise, its workers keep its handler."""
     import multiprocessing
-    import multiprocessing.forkserver
 
     if "forkserver" not in multiprocessing.get_all_start_methods():
         yield
@@ -185,8 +224,7 @@ def _forkserver_method() -> Iterator[None]:
 
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
         get_mp_context()   # Dask's preload list for the server (distributed, numpy, ...): workers start faster
-        with sigint_ignored_in_children():
-            multiprocessing.forkserver.ensure_running()
+        _start_forkserver(modules)   # and the toolkit's modules (the session's preload list)
         yield
 
 
@@ -205,6 +243,7 @@ class ExecutorSession:
     def __init__(self, spec: ExecutorSpec = ExecutorSpec()) -> None:
         self.spec = spec
         self._pool: ProcessPoolExecutor | None = None
+        self._preload: tuple[str, ...] = ()   # modules the workers import before their first task (prestart)
         self._stop_event = None
         self._client = None
         self._cluster = None
@@ -265,12 +304,20 @@ class ExecutorSession:
         raise ValueError(f"unknown executor kind {spec.kind!r}")
 
     def prestart(self, modules: Iterable[str] = ()) -> None:
-        """Start the local worker processes now, each importing ``modules``, without waiting for them: their
-        start-up (a spawned interpreter imports the toolkit, ~0.6-1 s of CPU each) then overlaps with what this
-        process does before its first batch (planning). Nothing for the other executors."""
+        """Prepare the workers now, without waiting for them, so that their start-up overlaps with what this
+        process does before its first batch (planning). Local processes: where the platform has fork servers,
+        start multiprocessing's fork server importing ``modules`` (once; every worker is then forked from it with
+        them loaded, in milliseconds, instead of a fresh interpreter importing the toolkit, ~0.6-1 s of CPU
+        each); else start the spawned workers now, each importing ``modules``. A Dask LocalCluster started later
+        forks its workers from the same server (``modules`` preloaded). Nothing for inline runs."""
         spec = self.spec
+        self._preload = tuple(modules)
+        if spec.kind == "dask" and not spec.address:
+            return   # the cluster starts with the session's first batch (_dask_client), with these modules
         if spec.kind != "local" or spec.workers <= 1 or self._pool is not None:
             return
+        if _start_forkserver(self._preload):
+            return   # the pool forks its workers from the server at the first batch
         with sigint_ignored_in_children():   # submit() starts the worker processes
             pool = self._process_pool()
             for _ in range(spec.workers):
@@ -299,7 +346,9 @@ class ExecutorSession:
         if self._pool is None:
             import multiprocessing
 
-            context = multiprocessing.get_context("spawn")
+            # forked from the fork server (started by prestart, else here) with the toolkit loaded; else spawned
+            method = "forkserver" if _start_forkserver(self._preload) else "spawn"
+            context = multiprocessing.get_context(method)
             self._stop_event = context.Event()
             self._pool = ProcessPoolExecutor(max_workers=self.spec.workers, mp_context=context,
                                              initializer=_worker_init, initargs=(self._stop_event,))
@@ -351,7 +400,7 @@ class ExecutorSession:
                 # then stops it; ignoring it lost the Ctrl-C for seconds); the workers ignore SIGINT from their
                 # first instruction on (_forkserver_method) and keep it so (asyncio installs no handler over an
                 # ignored signal), so they print nothing of their own
-                with deferred_interrupt(), _forkserver_method():
+                with deferred_interrupt(), _forkserver_method(self._preload):
                     self._cluster = LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1,
                                                  processes=True, dashboard_address=None,
                                                  worker_dashboard_address=None,

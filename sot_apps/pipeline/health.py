@@ -16,10 +16,16 @@ __all__ = ["run_track_health", "health_lines"]
 
 
 def run_track_health(out: Path, records) -> list[dict]:
-    """``[{sequence, object, status, measured, frames, ...}]`` for every finished tracking unit of ``records``."""
+    """``[{sequence, object, status, measured, frames, ...}]`` for every finished tracking unit of ``records``: the
+    verdict the tracking task recorded with the track (its summary, or its completion marker for a cached unit),
+    else read from its ``track.json``."""
     rows = []
     for r in records:
         if r.stage != "track" or r.status not in ("done", "cached"):
+            continue
+        recorded = (r.result or {}).get("health")
+        if recorded is not None:
+            rows.append({"sequence": r.sequence, **recorded})
             continue
         directory = track_dir(out, r.sequence, r.object)
         if (directory / "track.json").is_file():

@@ -58,22 +58,47 @@ def test_dask_workers_open_each_sequence_once(tiny_worlds, tmp_path):
     assert sum(info["reused"] for info in infos) >= 3   # every tracking task reused it
 
 
-def test_prestart_starts_the_local_workers_before_any_task():
-    """``ExecutorSession.prestart``: the worker processes exist (and import the named modules) before the first
-    batch; the batch then runs on them."""
+def test_prestart_workers_start_with_the_named_modules_loaded():
+    """``ExecutorSession.prestart``: the local workers (forked from multiprocessing's fork server, which prestart
+    starts importing the named modules) have those modules loaded before their first task, without importing
+    them; the batch runs on them. In a fresh process: the fork server is one per process."""
+    import json
     import multiprocessing
     import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        pytest.skip("no fork server on this platform (workers are spawned)")
+    script = """
+import json, os, sys
+from sot_apps.pipeline.executors import ExecutorSession, ExecutorSpec, Task
+from tests.pipeline.preload_probe import loaded
+with ExecutorSession(ExecutorSpec("local", workers=2)) as session:
+    session.prestart(("colorsys",))
+    outcomes = session.run([Task(f"probe/{i}", loaded, ("colorsys",)) for i in range(4)], progress=False)
+print(json.dumps({"main": os.getpid(), "main_loaded": "colorsys" in sys.modules,
+                  "results": [o.result for o in outcomes]}))
+"""
+    root = Path(__file__).resolve().parents[2]
+    run = subprocess.run([sys.executable, "-c", script], cwd=root, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONPATH": str(root)})
+    assert run.returncode == 0, run.stderr
+    doc = json.loads(run.stdout.strip().splitlines()[-1])
+    assert not doc["main_loaded"]                                  # the run itself never imported it
+    results = doc["results"]
+    assert len(results) == 4 and all(r[0] for r in results)      # every worker had it before its task
+    assert 1 <= len({r[1] for r in results}) <= 2                  # at most the 2 workers ran the batch
+    assert all(r[1] != doc["main"] and r[2] != doc["main"] for r in results)   # forked from the server
+
+
+def test_prestart_starts_nothing_inline():
+    import multiprocessing
 
     from sot_apps.pipeline.executors import ExecutorSession
 
     before = set(multiprocessing.active_children())
-    with ExecutorSession(ExecutorSpec("local", workers=2)) as session:
-        session.prestart(("json",))
-        started = set(multiprocessing.active_children()) - before
-        assert len(started) == 2
-        outcomes = session.run([Task(f"pid/{i}", os.getpid) for i in range(4)], progress=False)
-        assert all(o.ok for o in outcomes)
-        assert {o.result for o in outcomes} <= {p.pid for p in started}
     with ExecutorSession(ExecutorSpec("inline")) as session:
         session.prestart(("json",))   # nothing to start
         assert set(multiprocessing.active_children()) == before

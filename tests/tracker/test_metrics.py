@@ -355,3 +355,18 @@ def test_score_and_pool_tracklets():
     assert pooled.acc == pytest.approx((1.0 + 0.6 + 1.0) / 3.0)
     assert pooled.shape == pytest.approx(0.0)  # only t2 has shapes
     assert pooled.to_dict()["track_ids"] == ["t1", "t2"]
+
+
+def test_unique_sorted_is_numpy_unique():
+    """tracker.metrics.unique_sorted (voxel codes, matched rows): the same values, order and dtype as np.unique."""
+    import numpy as np
+
+    from tracker.metrics import unique_sorted
+
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 7, 1000):
+        for dtype in (np.int64, np.int32, np.intp):
+            values = rng.integers(-40, 40, n).astype(dtype)
+            got, want = unique_sorted(values), np.unique(values)
+            assert got.dtype == want.dtype and np.array_equal(got, want)
+    assert list(unique_sorted(np.array([5, 5, 5]))) == [5]
