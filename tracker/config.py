@@ -331,6 +331,12 @@ class OfflineParams:
     anchor_sigma_z: float = 0.0         # > 0: the pull of z to the online z (the tracker's ground-based height)
                                         # instead of anchor_sigma_xyz
     anchor_sigma_heading: float = 0.3
+    z_trend_sigma: float = 0.0          # > 0: z follows the online z's trend (the road under the box): each frame's
+                                        # change of z - online z (smoothed over z_trend_frames each side) costs
+                                        # (change / this)^2 (m per frame); the level is left to the points
+    z_trend_frames: int = 5
+    z_trend_points: float = 0.0         # > 0: each change's weight x this / (this + the two frames' mean points in
+                                        # their online boxes) (dense frames pin z by their points)
     voxel: float = 0.05
     shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
     min_shape_points: int = 10
