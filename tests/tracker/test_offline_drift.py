@@ -89,8 +89,9 @@ def test_offline_z_follows_the_road_where_a_few_rings_leave_it_free(seed):
     the whole-sequence solve is at least as good as the 10-frame window."""
     source, truth, online = _ring_scene(seed)
     config = TrackerConfig()
-    plain = _states(refine_offline(source, _result(online), config, dataclasses.replace(OFFLINE_PARAMS, z_trend_sigma=0.0)))
-    with_trend = refine_offline(source, _result(online), config, dataclasses.replace(OFFLINE_PARAMS, z_trend_sigma=0.002))
+    params = dataclasses.replace(OFFLINE_PARAMS, travel_sigma_heading=0.0)  # z alone
+    plain = _states(refine_offline(source, _result(online), config, dataclasses.replace(params, z_trend_sigma=0.0)))
+    with_trend = refine_offline(source, _result(online), config, dataclasses.replace(params, z_trend_sigma=0.002))
     lagged = refine_fixed_lag(source, _result(online), 10, config)
     z_plain, z_trend, z_lag = (np.abs(s[:, 2] - truth[:, 2]).mean() for s in (plain, _states(with_trend),
                                                                               _states(lagged)))
@@ -120,7 +121,7 @@ def test_offline_heading_follows_the_travel_where_a_rear_view_leaves_it_free():
                         size, start.shape, start.config)
     config = get_preset("full", seed=0)  # its ground remover and refinement settings
     plain = refine_offline(seq, start, config, dataclasses.replace(OFFLINE_PARAMS, travel_sigma_heading=0.0))
-    travel = refine_offline(seq, start, config, dataclasses.replace(OFFLINE_PARAMS, travel_sigma_heading=0.05))
+    travel = refine_offline(seq, start, config)  # the default: heading from travel on
     lagged = refine_fixed_lag(seq, start, 10, config)
     last = {name: np.degrees(wrap_angle(_states(r)[-1, 3] - truth[-1, 3]))
             for name, r in (("plain", plain), ("travel", travel))}
@@ -130,3 +131,4 @@ def test_offline_heading_follows_the_travel_where_a_rear_view_leaves_it_free():
     iou = {name: iou_3d_batch(np.array([b.to_array() for b in r.boxes]), gt)[1:].mean()
            for name, r in (("travel", travel), ("plain", plain), ("lag", lagged))}
     assert iou["travel"] >= max(iou["lag"], iou["plain"])
+    assert config.refinement.offline.travel_sigma_heading > 0 and OFFLINE_PARAMS.travel_sigma_heading > 0
