@@ -332,8 +332,8 @@ class _Solver:
         sigma_z = params.anchor_sigma_z if params.anchor_sigma_z > 0 else params.anchor_sigma_xyz
         anchor = np.array([params.anchor_sigma_xyz] * 2 + [sigma_z, params.anchor_sigma_heading])
         self.h_prior = _prior_band(self.k, sig, anchor)  # variable order: 4 * frame + component
-        self.z_trend = _z_trend(online[:, 2], params.z_trend_frames) if params.z_trend_sigma > 0 else None
-        if self.z_trend is not None and self.k >= 2:  # D1' W D1 on z / sigma^2, D1 first differences
+        self.z_trend = _z_trend(online[:, 2], params.z_trend_frames) if params.z_trend_sigma > 0 and self.k >= 2 else None
+        if self.z_trend is not None:  # D1' W D1 on z / sigma^2, D1 first differences
             self.z_weight = np.full(self.k - 1, 1.0 / params.z_trend_sigma**2)
             if params.z_trend_points > 0:
                 local = _to_object_per_point(self.stacked[0], online, self.stacked[1])

@@ -132,3 +132,29 @@ def test_offline_heading_follows_the_travel_where_a_rear_view_leaves_it_free():
            for name, r in (("travel", travel), ("plain", plain), ("lag", lagged))}
     assert iou["travel"] >= max(iou["lag"], iou["plain"])
     assert config.refinement.offline.travel_sigma_heading > 0 and OFFLINE_PARAMS.travel_sigma_heading > 0
+
+
+def test_z_trend_term_gradient_and_band_match_finite_differences():
+    """The z-trend term's gradient (half the cost's, as the solver's convention) and its band in the normal
+    equations are those of its cost, with and without the per-point weighting."""
+    from tracker.offline import _BANDS, _Solver
+
+    rng = np.random.default_rng(0)
+    k = 9
+    online = rng.normal(size=(k, 4)) * 0.1
+    points = [rng.normal(size=(int(rng.integers(0, 40)), 3)) for _ in range(k)]
+    for extra in ({}, {"z_trend_points": 20.0}):
+        params = dataclasses.replace(OFFLINE_PARAMS, z_trend_sigma=0.01, **extra)
+        solver = _Solver(points, online, np.array([4.0, 2.0, 1.5]), params, rng)
+        x = (online + rng.normal(size=(k, 4)) * 0.05).ravel()
+        cost, grad = solver._prior(x.reshape(k, 4))
+        eps = 1e-6
+        num_grad = np.array([(solver._prior((x + eps * e).reshape(k, 4))[0] - cost) / eps / 2 for e in np.eye(4 * k)])
+        np.testing.assert_allclose(num_grad, grad.ravel(), rtol=1e-4, atol=1e-3 * np.abs(grad).max())
+        dense = np.zeros((4 * k, 4 * k))
+        for d in range(_BANDS + 1):
+            idx = np.arange(d, 4 * k)
+            dense[idx - d, idx] = dense[idx, idx - d] = solver.h_prior[_BANDS - d, idx]
+        num_h = np.array([(solver._prior((x + eps * e).reshape(k, 4))[1].ravel() - grad.ravel()) / eps
+                          for e in np.eye(4 * k)])
+        np.testing.assert_allclose(num_h, dense, atol=1e-6 * np.abs(dense).max())
