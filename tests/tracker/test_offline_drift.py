@@ -7,29 +7,18 @@ import dataclasses
 
 import numpy as np
 import pytest
+from test_offline import H, L, W, _result, _Source
 from test_reacquire_clusters import _scene, _straight
 
 from tracker import get_preset, refine_fixed_lag, refine_offline
 from tracker.config import OFFLINE_PARAMS, TrackerConfig
 from tracker.frames import LidarFrame
-from tracker.geometry import Box, State, wrap_angle
+from tracker.geometry import Box, wrap_angle
 from tracker.metrics import iou_3d_batch
-from tracker.sotracker import FrameEstimate, TrackResult
+from tracker.sotracker import TrackResult
 
-L, W, H = 4.5, 1.9, 1.5
 SENSOR_Z = 1.8
 RINGS = np.radians(np.arange(-15.0, 2.0, 0.33))  # elevation of each beam (a 52-beam sensor at the origin)
-
-
-class _Source:
-    def __init__(self, frames: list[LidarFrame]) -> None:
-        self.frames = frames
-
-    def __len__(self) -> int:
-        return len(self.frames)
-
-    def lidar_frame(self, index: int) -> LidarFrame:
-        return self.frames[index]
 
 
 def _ring_points(rng: np.random.Generator, state: np.ndarray, per_ring: int) -> np.ndarray:
@@ -69,12 +58,6 @@ def _ring_scene(seed: int, n_frames: int = 40):
     online[1:, 2] += rng.normal(0.0, 0.02, n_frames - 1)
     online[1:, 3] += rng.normal(0.0, 0.03, n_frames - 1)
     return _Source(frames), truth, online
-
-
-def _result(states: np.ndarray) -> TrackResult:
-    estimates = [FrameEstimate(k, State.from_array(s), Box(*s, L, W, H), 0, 1.0, (), 1.0, np.zeros((0, 3)))
-                 for k, s in enumerate(states)]
-    return TrackResult(estimates, np.array([L, W, H]), np.zeros((0, 3)), TrackerConfig())
 
 
 def _states(result: TrackResult) -> np.ndarray:
