@@ -17,13 +17,20 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
      + Σ_k Σ_c (S_{k+1,c} − 2 S_{k,c} + S_{k−1,c})² / σ_c²                (smoothness: 2nd differences
                                                                           of x, y, z, heading)
      + Σ_k Σ_c (S_{k,c} − S^online_{k,c})² / σ_anchor,c²                   (weak pull to the online states)
+     + Σ_k w_k (θ_k − θ^travel_k)²                                        (heading from travel, ``travel_*``)
+     + Σ_k v_k ((z_{k+1} − z_k) − (z̄_{k+1} − z̄_k))²                      (z trend, ``z_trend_*``; off by default)
 
    with m the nearest shape point of the moved p (pairs farther than ``max_pair_distance`` dropped),
    A = (1 − β) n nᵀ + β I (β = 0: point-to-plane, β = 1: point-to-point; default 0.3), and
    c_k = min(1, ``effective_points`` / N_k), so a dense frame counts as at most that many independent
    points (LiDAR residuals are strongly correlated). It is solved by Gauss–Newton with iteratively
    re-weighted Huber weights on one banded 4K × 4K normal-equation system
-   (Cholesky of its band), with a cost check and step halving; correspondences are recomputed at every step;
+   (Cholesky of its band), with a cost check and step halving; correspondences are recomputed at every step.
+   θ^travel_k is the direction of the chord from state k − m to state k + m (the refined centres; held through
+   a step), w_k = 1/σ_travel² × a speed factor: the smoothness penalises curvature, not a steady drift, so where
+   the points pin the heading weakly the travel holds it. z̄ is the online z smoothed over ``z_trend_frames``
+   each side (the road under the box, for the tracker's road-based height); v_k = 1/σ_z_trend² (× n0 / (n0 +
+   points) with ``z_trend_points``): z changes as the road does, its level is the points';
 4. gauge: the joint problem fixes the trajectory only up to where the shape sits in the object frame.
    With ``gauge="regauge"`` (default) all states are free and afterwards every pose is composed with the
    one object-frame correction that maps the refined S_0 onto the given start box (so S_0 is exact and
@@ -299,6 +306,16 @@ def _prior_band(k: int, sig: np.ndarray, anchor: np.ndarray) -> np.ndarray:
     return band
 
 
+def _z_trend(online_z: np.ndarray, frames: int) -> np.ndarray:
+    """Frame-to-frame changes (K - 1,) of the online z smoothed by a moving mean over ``frames`` each side (the
+    window shrinks at the ends, so a constant slope stays exact)."""
+    k, m = len(online_z), max(int(frames), 0)
+    m_at = np.minimum(np.minimum(np.arange(k), k - 1 - np.arange(k)), m)  # symmetric window inside the track
+    cum = np.r_[0.0, np.cumsum(online_z)]
+    smooth = (cum[np.arange(k) + m_at + 1] - cum[np.arange(k) - m_at]) / (2 * m_at + 1)
+    return np.diff(smooth)
+
+
 class _Solver:
     """Gauss–Newton over all states with the shape (and its normals) held fixed."""
 
@@ -315,6 +332,16 @@ class _Solver:
         sigma_z = params.anchor_sigma_z if params.anchor_sigma_z > 0 else params.anchor_sigma_xyz
         anchor = np.array([params.anchor_sigma_xyz] * 2 + [sigma_z, params.anchor_sigma_heading])
         self.h_prior = _prior_band(self.k, sig, anchor)  # variable order: 4 * frame + component
+        self.z_trend = _z_trend(online[:, 2], params.z_trend_frames) if params.z_trend_sigma > 0 and self.k >= 2 else None
+        if self.z_trend is not None:  # D1' W D1 on z / sigma^2, D1 first differences
+            self.z_weight = np.full(self.k - 1, 1.0 / params.z_trend_sigma**2)
+            if params.z_trend_points > 0:
+                local = _to_object_per_point(self.stacked[0], online, self.stacked[1])
+                inside = np.all(np.abs(local) <= size / 2.0, axis=1)
+                n = np.bincount(self.stacked[1][inside], minlength=self.k).astype(np.float64)
+                self.z_weight *= params.z_trend_points / (params.z_trend_points + 0.5 * (n[1:] + n[:-1]))
+            self.h_prior[_BANDS, 2::4] += np.r_[self.z_weight, 0.0] + np.r_[0.0, self.z_weight]
+            self.h_prior[_BANDS - 4, 6::4] -= self.z_weight
         self.sig = sig
         self.anchor = anchor
         self.anchors = anchors
@@ -478,6 +505,11 @@ class _Solver:
         dev = states - self.online
         cost = float(np.sum(diff2**2 / self.sig**2) + np.sum(dev**2 / self.anchor**2))
         grad = _second_difference_transpose(diff2 / self.sig**2, self.k) + dev / self.anchor**2
+        if self.z_trend is not None:  # z's changes follow the online z's (smoothed) changes
+            r = (np.diff(states[:, 2]) - self.z_trend) * self.z_weight
+            cost += float(np.sum(r * (np.diff(states[:, 2]) - self.z_trend)))
+            grad[:-1, 2] -= r
+            grad[1:, 2] += r
         if self.anchors is not None and self.anchors.sigma is not None:  # soft anchors: a pull toward them
             pull = (states[self.anchors.frames] - self.anchors.states) / np.asarray(self.anchors.sigma) ** 2
             cost += float(np.sum(pull * (states[self.anchors.frames] - self.anchors.states)))
