@@ -332,6 +332,8 @@ class OfflineParams:
                                         # instead of anchor_sigma_xyz
     anchor_sigma_heading: float = 0.3
     voxel: float = 0.05
+    shape_voxel: str = "centres"        # a fold shape's point per voxel: "centres" the voxel's centre; "means" its
+                                        # points' mean (no pull of the frames onto the grid's half-voxel layers)
     shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
     min_shape_points: int = 10
     folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
@@ -352,6 +354,7 @@ class OfflineParams:
         _choice("refinement.*.ground", self.ground, ("local", "tracker"))
         _choice("refinement.*.trial_pairs", self.trial_pairs, ("rematch", "fixed"))
         _choice("refinement.*.gauge", self.gauge, ("regauge", "fix_first"))
+        _choice("refinement.*.shape_voxel", self.shape_voxel, ("centres", "means"))
 
 
 # the fixed-lag window's solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started);
