@@ -13,9 +13,10 @@ Given boxes at keyframes k_0 < k_1 < ... (world frame):
    unless another one's box explains clearly more of the frame's points (points within ``_INLIER_M`` of the
    shape the keyframes see in their exact boxes);
 3. the offline solve (:func:`tracker.offline.refine_states`, ``refine``) re-estimates all states jointly against
-   the shape aggregated from every frame, with the chosen states as its weak online pull and the keyframes as
-   :class:`~tracker.offline.Anchors`: held exactly (default) or, with ``sigma_xyz`` > 0, pulled with weight
-   1 / sigma^2;
+   the shape aggregated from every frame (voxel means, in the box grown by ``solve_margin``), pulled toward the
+   chosen states, with the keyframes as :class:`~tracker.offline.Anchors`: held exactly (default) or, with
+   ``sigma_xyz`` > 0, pulled with weight 1 / sigma^2. The pull (:func:`_arc_pull`) is firm on the frames where the
+   arc was kept and few points pin the frame, weak where many do and where a tracked state was chosen;
 4. the size comes from the keyframes: a frame between two keyframes gets their sizes (and roll, pitch)
    interpolated linearly; the solve uses the median keyframe size. A keyframe's own box is returned unchanged
    (bit for bit).
