@@ -348,6 +348,8 @@ class OfflineParams:
     z_trend_points: float = 0.0         # > 0: each change's weight x this / (this + the two frames' mean points in
                                         # their online boxes) (dense frames pin z by their points)
     voxel: float = 0.05
+    shape_voxel: str = "centres"        # a fold shape's point per voxel: "centres" the voxel's centre; "means" its
+                                        # points' mean (no pull of the frames onto the grid's half-voxel layers)
     shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
     min_shape_points: int = 10
     folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
@@ -368,6 +370,7 @@ class OfflineParams:
         _choice("refinement.*.ground", self.ground, ("local", "tracker"))
         _choice("refinement.*.trial_pairs", self.trial_pairs, ("rematch", "fixed"))
         _choice("refinement.*.gauge", self.gauge, ("regauge", "fix_first"))
+        _choice("refinement.*.shape_voxel", self.shape_voxel, ("centres", "means"))
 
 
 # the fixed-lag window's solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started);

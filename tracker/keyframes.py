@@ -13,9 +13,10 @@ Given boxes at keyframes k_0 < k_1 < ... (world frame):
    unless another one's box explains clearly more of the frame's points (points within ``_INLIER_M`` of the
    shape the keyframes see in their exact boxes);
 3. the offline solve (:func:`tracker.offline.refine_states`, ``refine``) re-estimates all states jointly against
-   the shape aggregated from every frame, with the chosen states as its weak online pull and the keyframes as
-   :class:`~tracker.offline.Anchors`: held exactly (default) or, with ``sigma_xyz`` > 0, pulled with weight
-   1 / sigma^2;
+   the shape aggregated from every frame (voxel means, in the box grown by ``solve_margin``), pulled toward the
+   chosen states, with the keyframes as :class:`~tracker.offline.Anchors`: held exactly (default) or, with
+   ``sigma_xyz`` > 0, pulled with weight 1 / sigma^2. The pull (:func:`_arc_pull`) is firm on the frames where the
+   arc was kept and few points pin the frame, weak where many do and where a tracked state was chosen;
 4. the size comes from the keyframes: a frame between two keyframes gets their sizes (and roll, pitch)
    interpolated linearly; the solve uses the median keyframe size. A keyframe's own box is returned unchanged
    (bit for bit).
@@ -35,7 +36,7 @@ from typing import Mapping
 
 import numpy as np
 
-from .config import TrackerConfig
+from .config import OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, wrap_angle
 from .offline import Anchors, _rebuild_shape, frame_region_points, refine_states
@@ -54,6 +55,15 @@ class KeyframeParams:
     sigma_heading: float = 0.0  # the heading's sigma of a soft keyframe (0 with sigma_xyz > 0: 0.02 rad)
     interpolation: bool = True  # the CTRV interpolation is the default candidate between keyframes: a tracked
                                 # state replaces it only where it explains clearly more points (see _select)
+    arc_sigma_xyz: float = 0.02       # the solve's pull toward the arc where the choice kept it, on a frame with
+    arc_sigma_heading: float = 0.005  # at most arc_points points in its box; the sigmas grow in proportion to the
+    arc_points: int = 50              # points beyond (the points pin the frame), up to refinement.offline's
+                                      # anchor_sigma_* (the weak pull toward a tracked state); arc_sigma_xyz 0: none
+    shape_voxel: str = "means"        # the solve's fold shapes (refinement.offline.shape_voxel): a voxel's points'
+                                      # mean, not its centre (centres pull the frames between the keyframes, which
+                                      # are held, by up to half a voxel onto the grid's layers)
+    solve_margin: float = 0.05        # m: the solve's box grown by this on every side (a face's points that lie
+                                      # just outside a tight box would be cut off the shape, moving its face inward)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.sigma_xyz) and np.isfinite(self.sigma_heading)) or min(self.sigma_xyz,
@@ -257,7 +267,7 @@ def _object_frame(points: np.ndarray, state: np.ndarray) -> np.ndarray:
 
 
 def _select(source: FrameSource, keyframes: Mapping[int, Box], candidates: dict[int, np.ndarray],
-            config: TrackerConfig, size: np.ndarray) -> dict[int, np.ndarray]:
+            config: TrackerConfig, size: np.ndarray) -> tuple[dict[int, np.ndarray], set[int]]:
     """Per frame, the candidate whose box explains the most of the frame's points: points inside it (x 1.1) within
     ``_INLIER_M`` of the shape seen at the keyframes (their points in their exact boxes, object frame). The default
     (first) candidate is kept unless another explains ``_SELECT_MARGIN`` times as many points."""
@@ -272,8 +282,9 @@ def _select(source: FrameSource, keyframes: Mapping[int, Box], candidates: dict[
         seen.append(_object_frame(pts[points_in_box(pts, box, 1.0)], box.state.to_array()))
     shape = voxel_downsample_centres(np.vstack(seen), offline.voxel) if seen else np.zeros((0, 3))
     chosen = {k: c[0] for k, c in candidates.items()}
+    replaced: set[int] = set()
     if len(shape) < _MIN_SHAPE_POINTS:
-        return chosen
+        return chosen, replaced
     tree = cKDTree(shape)
     half = 0.55 * np.asarray(size, dtype=np.float64)
     for k, cands in candidates.items():
@@ -293,13 +304,28 @@ def _select(source: FrameSource, keyframes: Mapping[int, Box], candidates: dict[
         best = int(np.argmax(counts))
         if counts[best] >= max(_SELECT_MARGIN * counts[0], counts[0] + _SELECT_MIN_GAIN):
             chosen[k] = cands[best]
-    return chosen
+            replaced.add(k)
+    return chosen, replaced
 
 
 _INLIER_M = 0.1            # a frame point within this of the keyframes' shape is explained by the box
 _SELECT_MARGIN = 1.1       # another candidate replaces the default when it explains this many times the points ...
 _SELECT_MIN_GAIN = 5       # ... and at least this many more
 _MIN_SHAPE_POINTS = 30     # fewer keyframe shape points: no selection (the default candidates)
+
+
+def _arc_pull(arc: np.ndarray, counts: np.ndarray, params: KeyframeParams, offline: OfflineParams) -> np.ndarray:
+    """Each frame's sigma (K, 4) of the solve's pull toward its chosen state: on the arc (``arc``, where the choice
+    kept the CTRV interpolation) ``arc_sigma_*`` times max(1, points in its box / ``arc_points``), at most the weak
+    pull of ``offline.anchor_sigma_*``, which every other frame gets (a tracked state is the points' already). Few
+    points pin no frame (a sparse or oblique view: the solve would turn and shift it by the shape's errors), many
+    do (a lane change the choice did not see: the solve follows them)."""
+    weak = np.array([offline.anchor_sigma_xyz] * 3 + [offline.anchor_sigma_heading])
+    if offline.anchor_sigma_z > 0:
+        weak[2] = offline.anchor_sigma_z
+    firm = np.array([params.arc_sigma_xyz] * 3 + [params.arc_sigma_heading])
+    scale = np.maximum(1.0, np.asarray(counts, dtype=np.float64) / max(params.arc_points, 1))
+    return np.where(np.asarray(arc)[:, None], np.minimum(firm[None] * scale[:, None], weak[None]), weak[None])
 
 
 def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: int | None = None,
@@ -328,7 +354,7 @@ def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: in
         arcs = interpolate_ctrv(sorted(candidates), keyframes)
         inside = [k for k in candidates if keys[0] < k < keys[-1]]
         candidates.update({k: np.vstack([arcs[k].state.to_array()[None], candidates[k]]) for k in inside})
-    states = _select(source, keyframes, candidates, config, size)
+    states, replaced = _select(source, keyframes, candidates, config, size)
     estimates = {k: e if k not in passes.backward or not params.backward
                  else dataclasses.replace(e, time_ms=e.time_ms + passes.backward[k].time_ms)
                  for k, e in passes.forward.items()}
@@ -339,15 +365,22 @@ def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: in
     points: list[np.ndarray] | None = None
     if params.refine and len(frames) > 2:
         t0 = time.perf_counter()
-        offline = config.refinement.offline
+        offline = dataclasses.replace(config.refinement.offline, shape_voxel=params.shape_voxel)
         points, previous = [], None
         for k, state in zip(frames, online, strict=True):
             frame = source.lidar_frame(k)
             points.append(frame_region_points(frame, Box(*state, *size), config, offline, previous))
             previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+        pull = None
+        if params.interpolation and params.arc_sigma_xyz > 0:
+            arc = np.array([keys[0] < k < keys[-1] and k not in replaced for k in frames])
+            counts = np.array([points_in_box(p, Box(*state, *size), 1.0).sum() if len(p) else 0
+                               for p, state in zip(points, online, strict=True)])
+            pull = _arc_pull(arc, counts, params, offline)
         anchors = Anchors(np.array([frames.index(k) for k in keys]), np.array([online[frames.index(k)] for k in keys]),
-                          params.anchor_sigma())
-        online, shape = refine_states(points, online, size, offline, seed=config.seed, anchors=anchors)
+                          params.anchor_sigma(), pull)
+        online, shape = refine_states(points, online, size + 2.0 * params.solve_margin, offline, seed=config.seed,
+                                      anchors=anchors)
         flags = {k: f if k in keyframes else f + ("offline",) for k, f in flags.items()}
         extra_ms = (time.perf_counter() - t0) * 1e3 / len(frames)
     out: list[FrameEstimate] = []

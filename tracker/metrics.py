@@ -67,6 +67,7 @@ __all__ = [
     "precision_curve",
     "precision",
     "voxel_downsample_centres",
+    "voxel_downsample_means",
     "chamfer_distance",
     "difficulty",
     "TrackletScores",
@@ -400,6 +401,20 @@ def voxel_downsample_centres(points: np.ndarray, voxel: float = 0.05) -> np.ndar
     else:
         keys = np.unique(keys, axis=0)
     return (keys.astype(np.float64) + 0.5) * voxel
+
+
+def voxel_downsample_means(points: np.ndarray, voxel: float) -> np.ndarray:
+    """One point per occupied voxel of size ``voxel`` (the mean of the points in it), in a deterministic order
+    (voxels sorted); ``voxel`` <= 0: the points as given."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) == 0 or voxel <= 0:
+        return points
+    keys = np.floor(points / voxel).astype(np.int64)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    sums = np.zeros((len(counts), 3))
+    np.add.at(sums, inverse, points)
+    return sums / counts[:, None]
 
 
 def chamfer_distance(shape: np.ndarray, reference: np.ndarray, voxel: float | None = 0.05,

@@ -55,7 +55,7 @@ from .config import OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
-from .metrics import unique_sorted, voxel_downsample_centres
+from .metrics import unique_sorted, voxel_downsample_centres, voxel_downsample_means
 from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
 
@@ -76,11 +76,13 @@ class OfflineProblem:
 class Anchors:
     """Given states at some frames (keyframes) for :func:`refine_states`: ``frames`` (n,) indices into the
     trajectory, ``states`` (n, 4) their x, y, z, heading. ``sigma`` None: held exactly (hard constraints; the
-    gauge is theirs, no re-gauging); else (4,) the sigma of a pull toward them (x, y, z, heading)."""
+    gauge is theirs, no re-gauging); else (4,) the sigma of a pull toward them (x, y, z, heading). ``pull``: (K, 4)
+    every frame's sigma of its pull toward its online state, instead of the params' ``anchor_sigma_*``."""
 
     frames: np.ndarray
     states: np.ndarray
     sigma: np.ndarray | None = None
+    pull: np.ndarray | None = None
 
 
 def _box(state: np.ndarray, size: np.ndarray) -> Box:
@@ -293,7 +295,8 @@ def _second_difference_transpose(v: np.ndarray, k: int) -> np.ndarray:
 
 def _prior_band(k: int, sig: np.ndarray, anchor: np.ndarray) -> np.ndarray:
     """Upper band storage (``scipy.linalg.solveh_banded``, 8 super-diagonals) of the prior's 4K x 4K Hessian
-    kron(D'D, diag(1/sig^2)) + kron(I, diag(1/anchor^2)), variables ordered 4 * frame + component."""
+    kron(D'D, diag(1/sig^2)) + kron(I, diag(1/anchor^2)), variables ordered 4 * frame + component (``anchor``: (4,)
+    or per frame (k, 4))."""
     band = np.zeros((_BANDS + 1, 4 * k))
     dtd = np.zeros((3, k))  # dtd[q, j]: (D'D)[j - q, j], the q-th super-diagonal at column j
     for q in range(3):
@@ -302,7 +305,7 @@ def _prior_band(k: int, sig: np.ndarray, anchor: np.ndarray) -> np.ndarray:
     inv_sig, inv_anchor = 1.0 / sig**2, 1.0 / anchor**2
     for q in range(3):
         band[_BANDS - 4 * q] = (dtd[q][:, None] * inv_sig[None, :]).ravel()
-    band[_BANDS] += np.tile(inv_anchor, k)
+    band[_BANDS] += np.broadcast_to(inv_anchor, (k, 4)).ravel()
     return band
 
 
@@ -331,6 +334,8 @@ class _Solver:
         sig = np.array([params.smooth_sigma_xy, params.smooth_sigma_xy, params.smooth_sigma_z, params.smooth_sigma_heading])
         sigma_z = params.anchor_sigma_z if params.anchor_sigma_z > 0 else params.anchor_sigma_xyz
         anchor = np.array([params.anchor_sigma_xyz] * 2 + [sigma_z, params.anchor_sigma_heading])
+        if anchors is not None and anchors.pull is not None:   # per-frame pulls toward the online states
+            anchor = np.asarray(anchors.pull, dtype=np.float64)
         self.h_prior = _prior_band(self.k, sig, anchor)  # variable order: 4 * frame + component
         self.z_trend = _z_trend(online[:, 2], params.z_trend_frames) if params.z_trend_sigma > 0 and self.k >= 2 else None
         if self.z_trend is not None:  # D1' W D1 on z / sigma^2, D1 first differences
@@ -365,8 +370,9 @@ class _Solver:
         self.shapes, self.trees, self.normals, self.has_normal = [], [], [], []
         local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame,
                                       self._object_frame(states))
+        downsample = voxel_downsample_means if p.shape_voxel == "means" else voxel_downsample_centres
         for f in range(folds):
-            shape = voxel_downsample_centres(local[frame % folds != f], p.voxel)
+            shape = downsample(local[frame % folds != f], p.voxel)
             if len(shape) < p.min_shape_points:
                 return False
             self.shapes.append(shape)

@@ -8,20 +8,23 @@ keyframes, e.g. 0 and 39 on the benchmark's 40-frame tracklets at N = 40). Rows:
 
 - ``linear``, ``ctrv``: interpolation between the keyframes (:func:`tracker.keyframes.interpolate_linear`,
   :func:`~tracker.keyframes.interpolate_ctrv`);
-- ``keyframes fwd``: the online tracker restarted at every keyframe (forward passes only);
-- ``keyframes fwd+bwd``: + the backward pass from each next keyframe, blended (closure-corrected, a per-frame
-  choice among the passes by the points they explain);
-- ``keyframes no-ctrv``: + the offline solve with the keyframes held;
-- ``keyframes no-solve``: fwd+bwd with the CTRV interpolation as the default candidate (a tracked state replaces
-  it only where it explains clearly more points);
-- ``keyframes``: both, then the solve (:func:`tracker.keyframes.track_keyframes`, what ``sot-apps track
+- ``keyframes no-solve``: the CTRV interpolation as the default candidate, a tracked state (the passes forward
+  and backward between keyframes, closure-corrected and blended) replacing it only where it explains clearly
+  more points;
+- ``keyframes``: then the solve (:func:`tracker.keyframes.track_keyframes`, what ``sot-apps track
   --keyframes`` runs);
 - ``single box``, ``single box + offline``: the tracker from the first box only (no keyframe), online and
   refined offline; the same in every column.
 
+With ``--ablations`` also: ``keyframes fwd`` (the online tracker restarted at every keyframe, forward passes
+only), ``keyframes fwd+bwd`` (+ the backward passes, blended, chosen per frame by the points they explain, no
+CTRV candidate) and ``keyframes no-ctrv`` (fwd+bwd, then the solve).
+
 Acc = mean 3D IoU pooled over the frames 1..n-1 of all tracks (the eval protocol; keyframes count, with IoU 1 for
-every keyframe row); in brackets the Acc over the frames that are not keyframes. One table per SOURCE, one for all
-SOURCEs pooled, and, for benchmark lists with motion profiles, the Acc of linear / CTRV / keyframes per profile.
+every keyframe row); in brackets the Acc over the frames that are not keyframes. With ``--seeds N`` (tracker seeds
+``--seed`` .. ``--seed`` + N - 1) every figure is the mean over seeds and Acc ± its standard deviation over seeds.
+One table per SOURCE, one for all SOURCEs pooled, and, for benchmark lists with motion profiles, the Acc of
+linear / CTRV / keyframes per profile.
 """
 
 from __future__ import annotations
@@ -36,10 +39,11 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:   # numpy loads when a benchmark runs (`sot-apps --help` imports this module)
     import numpy as np
 
-__all__ = ["register", "add_arguments", "run", "KeyframeBenchTrack", "KEYFRAME_ROWS"]
+__all__ = ["register", "add_arguments", "run", "KeyframeBenchTrack", "KEYFRAME_ROWS", "ABLATION_ROWS"]
 
 KEYFRAME_ROWS = ("linear", "ctrv", "keyframes fwd", "keyframes fwd+bwd", "keyframes no-ctrv", "keyframes no-solve",
                  "keyframes")
+ABLATION_ROWS = ("keyframes fwd", "keyframes fwd+bwd", "keyframes no-ctrv")
 SINGLE_ROWS = ("single box", "single box + offline")
 
 
@@ -62,6 +66,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="keyframe intervals (default: 5 10 20 40)")
     parser.add_argument("--preset", default="full", help="tracker preset (default: full)")
     parser.add_argument("--seed", type=int, default=0, help="tracker seed (default 0)")
+    parser.add_argument("--seeds", type=int, default=1, metavar="N",
+                        help="tracker seeds SEED..SEED+N-1: means and Acc ± std over seeds (default 1)")
+    parser.add_argument("--ablations", action="store_true",
+                        help="also the rows keyframes fwd, keyframes fwd+bwd, keyframes no-ctrv")
     parser.add_argument("--first", type=int, metavar="N", help="only each list's first N tracklets")
     parser.add_argument("--tracks", metavar="ID,...", help="sequences: these track ids instead of the moving vehicles")
     parser.add_argument("--json", metavar="FILE", help="also write the per-track IoUs and the tables as JSON")
@@ -117,8 +125,10 @@ def _ious(result_boxes: dict[int, Any], track: KeyframeBenchTrack) -> np.ndarray
     return score_tracklet(track.key, predicted, list(track.boxes)).ious
 
 
-def evaluate_track(track: KeyframeBenchTrack, source, every: list[int], config) -> dict[str, Any]:
-    """IoUs (frames 1..n-1) of every row and interval, and which scored frames are keyframes."""
+def evaluate_track(track: KeyframeBenchTrack, source, every: list[int], config, ablations: bool = False
+                   ) -> dict[str, Any]:
+    """IoUs (frames 1..n-1) of every row and interval, and which scored frames are keyframes (``ablations``: also
+    the rows of ``ABLATION_ROWS``)."""
     import numpy as np
 
     from tracker import (
@@ -140,20 +150,25 @@ def evaluate_track(track: KeyframeBenchTrack, source, every: list[int], config) 
                                          "single box + offline": _ious({e.frame: e.box for e in refined.estimates},
                                                                        track)},
                               "every": {}}
+    variants = (("keyframes fwd", KeyframeParams(backward=False, refine=False, interpolation=False)),
+                ("keyframes fwd+bwd", KeyframeParams(refine=False, interpolation=False)),
+                ("keyframes no-ctrv", KeyframeParams(interpolation=False)),
+                ("keyframes no-solve", KeyframeParams(refine=False)), ("keyframes", KeyframeParams()))
     for n in every:
         keys = keyframe_schedule(frames[0], frames[-1], n)
         keyframes = {k: boxes[k] for k in keys}
         passes = keyframe_passes(source, keyframes, frames[0], frames[-1], config)
         rows = {"linear": interpolate_linear(frames, keyframes), "ctrv": interpolate_ctrv(frames, keyframes)}
-        for name, params in (("keyframes fwd", KeyframeParams(backward=False, refine=False, interpolation=False)),
-                             ("keyframes fwd+bwd", KeyframeParams(refine=False, interpolation=False)),
-                             ("keyframes no-ctrv", KeyframeParams(interpolation=False)),
-                             ("keyframes no-solve", KeyframeParams(refine=False)), ("keyframes", KeyframeParams())):
-            result = track_keyframes(source, keyframes, frames[0], frames[-1], config, params, passes)
-            rows[name] = {e.frame: e.box for e in result.estimates}
+        for name, params in variants:
+            if ablations or name not in ABLATION_ROWS:
+                result = track_keyframes(source, keyframes, frames[0], frames[-1], config, params, passes)
+                rows[name] = {e.frame: e.box for e in result.estimates}
         record["every"][n] = {"keys": keys, "ious": {name: _ious(b, track) for name, b in rows.items()},
                               "is_key": np.isin(frames[1:], keys)}
     return record
+
+
+Records = list[tuple[KeyframeBenchTrack, int, dict[str, Any]]]   # (track, tracker seed, evaluate_track's record)
 
 
 def _acc(parts: list[np.ndarray], masks: list[np.ndarray] | None = None) -> float:
@@ -165,50 +180,64 @@ def _acc(parts: list[np.ndarray], masks: list[np.ndarray] | None = None) -> floa
     return float(100.0 * values.mean()) if values.size else float("nan")
 
 
-def summarise(records: list[tuple[KeyframeBenchTrack, dict[str, Any]]], every: list[int]) -> dict[str, dict]:
-    """{row: {N: (Acc, Acc between keyframes)}} pooled over ``records``."""
+def _rows(records: Records) -> tuple[str, ...]:
+    present = set(records[0][2]["every"][next(iter(records[0][2]["every"]))]["ious"]) if records else set()
+    return tuple(r for r in KEYFRAME_ROWS if r in present) + SINGLE_ROWS
+
+
+def summarise(records: Records, every: list[int]) -> dict[str, dict]:
+    """{row: {N: (Acc, Acc's std over seeds, Acc between keyframes)}} pooled over ``records`` per seed, then the
+    mean over seeds (std 0 with one seed)."""
+    import numpy as np
+
+    seeds = sorted({seed for _, seed, _ in records})
     out: dict[str, dict] = {}
-    for name in KEYFRAME_ROWS + SINGLE_ROWS:
+    for name in _rows(records):
         out[name] = {}
         for n in every:
-            if name in SINGLE_ROWS:
-                parts = [r["single"][name] for _, r in records]
-            else:
-                parts = [r["every"][n]["ious"][name] for _, r in records]
-            between = [~r["every"][n]["is_key"] for _, r in records]
-            out[name][n] = (_acc(parts), _acc(parts, between))
+            per_seed = []
+            for seed in seeds:
+                mine = [r for _, s, r in records if s == seed]
+                if name in SINGLE_ROWS:
+                    parts = [r["single"][name] for r in mine]
+                else:
+                    parts = [r["every"][n]["ious"][name] for r in mine]
+                per_seed.append((_acc(parts), _acc(parts, [~r["every"][n]["is_key"] for r in mine])))
+            values = np.array(per_seed)
+            out[name][n] = (float(values[:, 0].mean()), float(values[:, 0].std()), float(values[:, 1].mean()))
     return out
 
 
-def format_table(title: str, summary: dict[str, dict], every: list[int], n_tracks: int, n_frames: int) -> str:
+def format_summary(title: str, summary: dict[str, dict], every: list[int], n_tracks: int, n_frames: int,
+                 n_seeds: int = 1) -> str:
+    from ..text_table import format_table
+
     header = ["row"] + [f"every {n}" for n in every]
-    rows = [[name] + [f"{summary[name][n][0]:.1f} ({summary[name][n][1]:.1f})" for n in every]
-            for name in KEYFRAME_ROWS + SINGLE_ROWS]
-    return "\n".join([f"{title}: {n_tracks} tracks, {n_frames} scored frames; Acc (Acc between keyframes)",
-                      _table(header, rows)])
+    spread = (lambda c: f" ± {c[1]:.1f}") if n_seeds > 1 else (lambda c: "")  # noqa: E731
+    rows = [[name] + [f"{summary[name][n][0]:.1f}{spread(summary[name][n])} ({summary[name][n][2]:.1f})"
+                      for n in every] for name in summary]
+    seeds = f", mean over {n_seeds} seeds, Acc ± std over seeds" if n_seeds > 1 else ""
+    return "\n".join([f"{title}: {n_tracks} tracks, {n_frames} scored frames; Acc (Acc between keyframes){seeds}",
+                      format_table(header, rows)])
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-    line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
-                                   for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
-    return "\n".join([line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows])
-
-
-def format_profiles(records: list[tuple[KeyframeBenchTrack, dict[str, Any]]], every: list[int]) -> str:
-    by_profile: dict[str, list] = defaultdict(list)
-    for track, record in records:
+def format_profiles(records: Records, every: list[int]) -> str:
+    by_profile: dict[str, Records] = defaultdict(list)
+    for track, seed, record in records:
         if track.profile:
-            by_profile[track.profile].append((track, record))
+            by_profile[track.profile].append((track, seed, record))
     if not by_profile:
         return ""
+    from ..text_table import format_table
+
     header = ["profile", "n"] + [f"every {n}: lin/ctrv/kf" for n in every]
     rows = []
     for profile in sorted(by_profile):
         summary = summarise(by_profile[profile], every)
-        rows.append([profile, str(len(by_profile[profile]))]
+        n_tracks = len({id(t) for t, _, _ in by_profile[profile]})
+        rows.append([profile, str(n_tracks)]
                     + ["/".join(f"{summary[r][n][0]:.1f}" for r in ("linear", "ctrv", "keyframes")) for n in every])
-    return "\n".join(["Acc by motion profile (all SOURCEs)", _table(header, rows)])
+    return "\n".join(["Acc by motion profile (all SOURCEs, mean over seeds)", format_table(header, rows)])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -224,38 +253,46 @@ def run(args: argparse.Namespace) -> int:
     every = sorted(set(args.every))
     if min(every) < 1:
         raise InputError(None, f"--every: intervals must be at least 1, not {min(every)}")
-    config = get_preset(args.preset, seed=args.seed)
+    if args.seeds < 1:
+        raise InputError(None, f"--seeds: at least 1, not {args.seeds}")
+    seeds = list(range(args.seed, args.seed + args.seeds))
     ids = [t.strip() for t in args.tracks.split(",") if t.strip()] if args.tracks else None
     tracks = [t for source in args.sources for t in _tracks(source, args.first, ids)]
-    records: list[tuple[KeyframeBenchTrack, dict[str, Any]]] = []
+    records: Records = []
     sources: dict[int, CachedSource] = {}
-    for track in (tracks if args.quiet else tqdm(tracks, desc="keyframes", unit="track", file=sys.stderr)):
+    jobs = [(track, seed) for track in tracks for seed in seeds]   # a track's seeds together: one sweep cache
+    for track, seed in (jobs if args.quiet else tqdm(jobs, desc="keyframes", unit="run", file=sys.stderr)):
         source = sources.setdefault(id(track.sequence), CachedSource(track.sequence))
-        records.append((track, evaluate_track(track, source, every, config)))
+        config = get_preset(args.preset, seed=seed)
+        records.append((track, seed, evaluate_track(track, source, every, config, args.ablations)))
         if len(sources) > 1:   # one sweep cache at a time: the tracks of a sequence come together
             sources = {id(track.sequence): source}
-    out = [f"sot-apps bench keyframes, preset {args.preset}, seed {args.seed}; keyframes every N frames and at each "
+    seed_text = f"seed {args.seed}" if len(seeds) == 1 else f"seeds {seeds[0]}..{seeds[-1]}"
+    out = [f"sot-apps bench keyframes, preset {args.preset}, {seed_text}; keyframes every N frames and at each "
            "track's last frame"]
     tables: dict[str, Any] = {}
-    groups = [(s, [(t, r) for t, r in records if t.source == s]) for s in args.sources]
+    groups = [(s, [(t, seed, r) for t, seed, r in records if t.source == s]) for s in args.sources]
     if len(groups) > 1:
         groups.append(("all sources pooled", records))
     for name, group in groups:
         summary = summarise(group, every)
         tables[name] = {row: {str(n): list(v) for n, v in cells.items()} for row, cells in summary.items()}
-        n_frames = sum(len(t.frames) - 1 for t, _ in group)
-        out += ["", format_table(name, summary, every, len(group), n_frames)]
+        n_tracks = len({id(t) for t, _, _ in group})
+        n_frames = sum(len(t.frames) - 1 for t in {id(t): t for t, _, _ in group}.values())
+        out += ["", format_summary(name, summary, every, n_tracks, n_frames, len(seeds))]
     profiles = format_profiles(records, every)
     if profiles:
         out += ["", profiles]
     print("\n".join(out))
     if args.json:
         write_json(args.json, json_safe({
-            "preset": args.preset, "seed": args.seed, "every": every, "tables": tables,
-            "tracks": [{"source": t.source, "key": t.key, "profile": t.profile, "frames": [t.frames[0], t.frames[-1]],
+            "preset": args.preset, "seeds": seeds, "every": every, "tables": tables,
+            "table_columns": ["acc", "acc_std_over_seeds", "acc_between_keyframes"],
+            "tracks": [{"source": t.source, "key": t.key, "profile": t.profile, "seed": seed,
+                        "frames": [t.frames[0], t.frames[-1]],
                         "single": {k: v.tolist() for k, v in r["single"].items()},
                         "every": {str(n): {"keys": e["keys"], "ious": {k: v.tolist() for k, v in e["ious"].items()}}
-                                  for n, e in r["every"].items()}} for t, r in records]}))
+                                  for n, e in r["every"].items()}} for t, seed, r in records]}))
     return 0
 
 

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
+from tracker import voxel_downsample_means
+
 __all__ = ["Mesh", "mesh_from_points", "box_mesh", "voxel_downsample_means", "SurfelParams", "mirror_complete",
            "estimate_normals", "surfel_mesh"]
 
@@ -34,19 +36,6 @@ class Mesh:
     def transformed(self, target_from_source: np.ndarray) -> "Mesh":
         v = self.vertices @ np.ascontiguousarray(target_from_source[:3, :3].T) + target_from_source[:3, 3]
         return Mesh(v, self.faces)
-
-
-def voxel_downsample_means(points: np.ndarray, voxel: float) -> np.ndarray:
-    """One point per occupied voxel of size ``voxel`` (the mean of the points in it), in a deterministic order."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(points) == 0 or voxel <= 0:
-        return points
-    keys = np.floor(points / voxel).astype(np.int64)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.reshape(-1)
-    sums = np.zeros((len(counts), 3))
-    np.add.at(sums, inverse, points)
-    return sums / counts[:, None]
 
 
 def box_mesh(length: float, width: float, height: float) -> Mesh:
