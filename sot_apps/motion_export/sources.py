@@ -1,6 +1,6 @@
 """Inputs of the motion export: tracker outputs (track directories) or ground-truth annotations.
 
-Both become :class:`~sot_apps.objects.smoother.ObjectTrack` (per-frame WORLD states with a
+Both become :class:`~sot_apps.io.object_track.ObjectTrack` (per-frame WORLD states with a
 validity mask). A tracker frame whose ``flags`` contain one of ``invalid_flags`` (default
 "no_points", "prior_only", "lost": the state was predicted, not measured) is invalid: it is not used
 as a measurement and is exported with ``valid = False``. Advisory flags ("init", "low_points",
@@ -19,10 +19,10 @@ import numpy as np
 from tracker import Box, voxel_downsample_centres
 
 from ..errors import InputError
+from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
 from ..io.tracks import DEFAULT_INVALID_FLAGS, frame_is_valid
 from ..objects.shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
-from ..objects.smoother import ObjectTrack
 
 __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
            "aggregate_shape"]
@@ -44,7 +44,7 @@ def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
     valid = np.array([frame_is_valid(f, invalid_flags) for f in flags], dtype=bool)
     states = np.array([[r.state.x, r.state.y, r.state.z, r.state.heading] for r in records], dtype=np.float64)
     try:
-        return ObjectTrack(object_id=track.object_id, label=track.label or "", size=(track.size.length,
+        return ObjectTrack.from_states(object_id=track.object_id, label=track.label or "", size=(track.size.length,
                            track.size.width, track.size.height), frames=[r.frame for r in records],
                            timestamps_ns=[r.timestamp_ns for r in records], states=states, valid=valid,
                            flags=flags, source=str(json_path), shape_points=shape,
@@ -96,7 +96,7 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
             flags.append([])
         sizes = np.array([[b.length, b.width, b.height] for b in ann.boxes])
         size = tuple(float(v) for v in np.median(sizes, axis=0))
-        out.append(ObjectTrack(object_id=tid, label=ann.label, size=size, frames=frames,
+        out.append(ObjectTrack.from_states(object_id=tid, label=ann.label, size=size, frames=frames,
                                timestamps_ns=sequence.timestamps_ns[frames], states=states, valid=valid,
                                flags=flags, source=f"annotations of {sequence.id}",
                                config={"source": "annotations"}, tilts=tilts if tilts.any() else None))
