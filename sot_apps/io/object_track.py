@@ -89,7 +89,7 @@ class ObjectTrack:
         frame (a frame missing from ``num_points`` is unknown: -1); ``timestamps_ns`` the SEQUENCE's timestamps
         (indexed by frame)."""
         frames = sorted(int(k) for k in boxes)
-        tilted = any(not boxes[k].is_level() for k in frames)
+        tilted = any(not boxes[k].is_level for k in frames)
         rows = np.array([_box_row(boxes[k], tilted) for k in frames], dtype=np.float64) if frames else np.zeros((0, 7))
         return cls(object_id, label, np.array(frames, dtype=np.int64), rows,
                    timestamps_ns=None if timestamps_ns is None else np.asarray(timestamps_ns)[frames],

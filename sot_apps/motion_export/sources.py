@@ -16,13 +16,13 @@ from typing import Sequence as Seq
 
 import numpy as np
 
-from tracker import Box, voxel_downsample_centres
+from tracker import voxel_downsample_centres
 
 from ..errors import InputError
 from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
 from ..io.tracks import DEFAULT_INVALID_FLAGS, frame_is_valid
-from ..objects.shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
+from ..objects.shapes import BoxMargin, ShapeParams, object_points_by_frame
 
 __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
            "aggregate_shape"]
@@ -112,8 +112,8 @@ def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20
     if len(idx) == 0:
         return np.zeros((0, 3))
     pick = idx[np.unique(np.linspace(0, len(idx) - 1, min(max_frames, len(idx))).round().astype(int))]
-    boxes = TrackBoxes(tuple(int(track.frames[i]) for i in pick),
-                       tuple(Box(*(float(v) for v in track.states[i]), *track.size) for i in pick))
+    boxes = ObjectTrack.from_states(track.object_id, track.label, track.size, track.frames[pick], None,
+                                    track.states[pick], None)
     margin = BoxMargin(scale=(scale, scale, scale))
     params = ShapeParams(near=margin, stamp=margin, keep=margin, ground_clearance=None, capture_time=False,
                          per_point_time=False)
