@@ -37,7 +37,8 @@ class AutoLabelsApp(AppBase):
 
         from ..errors import InputError
         from ..io.label_export import export_labels, label_paths
-        from ..io.labels import LabelTrack, kitti_camera
+        from ..io.labels import kitti_camera
+        from ..io.object_track import ObjectTrack
         from ..io.opened import open_cached
         from ..io.tracks import read_track
 
@@ -54,8 +55,9 @@ class AutoLabelsApp(AppBase):
             size = track.size
             boxes = {r.frame: Box(r.state.x, r.state.y, r.state.z, r.state.heading, size.length, size.width,
                                   size.height) for r in kept}
-            labels.append(LabelTrack(object_id, config.category, boxes, float(np.mean([r.quality for r in kept])),
-                                     {r.frame: r.num_points for r in kept}))
+            score = float(np.mean([r.quality for r in kept]))
+            labels.append(ObjectTrack.from_boxes(object_id, config.category, boxes, scores=dict.fromkeys(boxes, score),
+                                                 num_points={r.frame: r.num_points for r in kept}))
         root = Path(out) / sequence / "labels"
         files: list[Path] = []
         notes = []

@@ -543,11 +543,13 @@ def write_autolabels(out_dir, sequence, labels: list[AutoLabel], category: str =
 
     from ..io.canonical import write_sequence
     from ..io.label_export import export_labels
-    from ..io.labels import LabelTrack, kitti_camera
+    from ..io.labels import kitti_camera
+    from ..io.object_track import ObjectTrack
     from ..io.sequence import BoxAnnotation
 
     out_dir = Path(out_dir)
-    tracks = [LabelTrack(label.track_id, category, label.boxes, label.score) for label in labels]
+    tracks = [ObjectTrack.from_boxes(label.track_id, category, label.boxes, scores=dict.fromkeys(label.boxes, label.score))
+              for label in labels]
     lines = []
     if kitti_camera(sequence) is not None:
         lines += export_labels(sequence, "kitti", out_dir / "kitti", tracks)
