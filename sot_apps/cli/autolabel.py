@@ -119,10 +119,11 @@ def _run_keyframes(args: argparse.Namespace, sequence, progress) -> int:
 
     from tracker import get_preset, track_keyframes
 
-    from ..detection.autolabel import AutoLabel, DetectionTrack, labels_as_detections, write_autolabels
+    from ..detection.autolabel import AutoLabel, labels_as_detections, write_autolabels
     from ..io.atomic import write_json
     from ..io.cached_source import CachedSource
     from ..io.keyframes import read_keyframes
+    from ..io.object_track import ObjectTrack
     from .track import keyframe_params
 
     if args.detections or args.simulate:
@@ -133,7 +134,8 @@ def _run_keyframes(args: argparse.Namespace, sequence, progress) -> int:
     labels = []
     for track_id, keyframes in progress(list(tracks.items()), "keyframe tracks"):
         result = track_keyframes(source, keyframes, config=config, params=params)
-        given = DetectionTrack(track_id, {k: b.to_array() for k, b in keyframes.items()}, {k: 1.0 for k in keyframes})
+        frames = sorted(keyframes)
+        given = ObjectTrack(track_id, "", frames, [keyframes[k].to_array() for k in frames], scores=[1.0] * len(frames))
         labels.append(AutoLabel(track_id, {e.frame: e.box for e in result.estimates}, 1.0, result.shape, given))
     for line in write_autolabels(args.out, sequence, labels, with_sequence=not args.no_sequence):
         print(line)
