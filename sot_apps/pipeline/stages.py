@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..apps import track_dir
-from ..tracking import ObjectRequest, ObjectTrack, TrackingFailed, write_shape_growth, write_track_result
+from ..tracking import ObjectRequest, TrackingFailed, TrackOutcome, write_shape_growth, write_track_result
 from ..tracking import track_objects as track_objects_pass
 from .config import TrackStage
 from .manifest import DoneMarker
@@ -50,7 +50,7 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     written: dict[str, dict] = {}
     write_seconds = [0.0]
 
-    def write(track: ObjectTrack) -> None:
+    def write(track: TrackOutcome) -> None:
         if track.error is None:
             cpu = time.thread_time()
             written[track.object_id] = write_object(out, by_id[track.object_id], track, digests[track.object_id])
@@ -74,7 +74,7 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     return {"sequence": first.sequence, "objects": objects, "times": breakdown}
 
 
-def write_object(out: str, plan: ObjectPlan, track: ObjectTrack, digest: str) -> dict:
+def write_object(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -> dict:
     """One tracked object's outputs and completion marker; returns its summary for the manifest."""
     result = track.result
     directory = track_dir(out, plan.sequence, plan.object_id)
