@@ -14,12 +14,12 @@ associated over time. Its columns, one row per frame:
 
 Per object: ``object_id``, ``label``, ``size`` (length, width, height; default the per-dimension median of the
 boxes), ``source`` (where it came from), ``shape_points`` (M, 3) object frame and ``config`` (how it was made).
-:func:`sot_apps.io.tracks.object_track` reads a track file into one.
+:func:`sot_apps.io.tracks.object_track` turns a track file into one (its per-frame quality as ``scores``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Iterable, Mapping
 
 import numpy as np
@@ -138,6 +138,17 @@ class ObjectTrack:
     def boxes_by_frame(self) -> dict[int, Box]:
         """``{frame: Box}`` of every row, in frame order."""
         return {int(k): self.box(i) for i, k in enumerate(self.frames)}
+
+    def select(self, rows: np.ndarray) -> "ObjectTrack":
+        """The track at the rows a boolean mask (or index array) picks, every column with them."""
+        pick = np.arange(len(self.frames))[rows]
+
+        def cut(column: np.ndarray | None) -> np.ndarray | None:
+            return None if column is None else column[pick]
+
+        return replace(self, frames=self.frames[pick], boxes=self.boxes[pick], timestamps_ns=cut(self.timestamps_ns),
+                       valid=cut(self.valid), flags=tuple(self.flags[i] for i in pick), scores=cut(self.scores),
+                       num_points=cut(self.num_points))
 
     @property
     def mean_score(self) -> float:

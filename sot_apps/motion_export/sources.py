@@ -30,25 +30,17 @@ __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_
 def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
                    invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> ObjectTrack:
     """Read ``directory/track.json`` + ``shape.ply`` into an ObjectTrack."""
-    from ..io.tracks import check_track_belongs, read_track
+    from ..io.tracks import check_track_belongs, object_track, read_track
 
     directory = Path(directory)
     track, shape = read_track(directory)
     json_path = directory if directory.suffix == ".json" else directory / "track.json"
     if sequence is not None:
         check_track_belongs(track, sequence, json_path)
-    records = sorted(track.frames, key=lambda r: r.frame)
-    if not records:
+    if not track.frames:
         raise InputError(json_path, "frames: the track has no frames")
-    flags = [list(r.flags) for r in records]
-    valid = np.array([frame_is_valid(f, invalid_flags) for f in flags], dtype=bool)
-    states = np.array([[r.state.x, r.state.y, r.state.z, r.state.heading] for r in records], dtype=np.float64)
     try:
-        return ObjectTrack.from_states(object_id=track.object_id, label=track.label or "", size=(track.size.length,
-                           track.size.width, track.size.height), frames=[r.frame for r in records],
-                           timestamps_ns=[r.timestamp_ns for r in records], states=states, valid=valid,
-                           flags=flags, source=str(json_path), shape_points=shape,
-                           config={"tracker": track.config})
+        return object_track(track, shape, str(json_path), invalid_flags)
     except ValueError as exc:
         raise InputError(json_path, str(exc)) from exc
 
