@@ -102,7 +102,9 @@ def run(args: argparse.Namespace) -> int:
         truth = ground_truth_frames(sequence, DEFAULT_SELECTION.vehicle_labels(sequence))
         rows = autolabel_quality(
             {"raw detections": (detections, None),
-             "detection tracks (CV Kalman)": (tracks_as_detections(det_tracks), {t.track_id: t.boxes for t in det_tracks}),
+             "detection tracks (CV Kalman)": (tracks_as_detections(det_tracks),
+                                              {t.object_id: dict(zip(t.frames.tolist(), t.boxes, strict=True))
+                                               for t in det_tracks}),
              "auto-labels": (labels_as_detections(labels),
                              {lbl.track_id: {k: b.to_array() for k, b in lbl.boxes.items()} for lbl in labels})},
             truth, moving=DEFAULT_SELECTION.moving_vehicles(sequence))
