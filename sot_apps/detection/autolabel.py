@@ -91,7 +91,8 @@ class AutoLabel:
 
 def associate_tracks(detections: dict[int, FrameDetections], n_frames: int,
                      config: AssociationConfig = AssociationConfig()) -> list[ObjectTrack]:
-    """Detection tracks (see the module docstring; ObjectTracks with a ``scores`` column), ids ``t0000``, ``t0001``, ... in order of birth."""
+    """Detection tracks (see the module docstring; ObjectTracks with a ``scores`` column), ids ``t0000``,
+    ``t0001``, ... in order of birth."""
     live: list[dict] = []
     finished: list[dict] = []
     next_id = 0
@@ -346,7 +347,8 @@ def _seed(detection_track: ObjectTrack) -> _Seed:
 
 def _own_detections(detection_track: ObjectTrack) -> dict[int, FrameDetections]:
     scores = _scores_by_frame(detection_track)
-    return {k: FrameDetections(b[None], np.array([scores[k]])) for k, b in _detections_by_frame(detection_track).items()}
+    return {k: FrameDetections(b[None], np.array([scores[k]]))
+            for k, b in _detections_by_frame(detection_track).items()}
 
 
 def track_both_ways(source: FrameSource, tracks: list[ObjectTrack], config: TrackerConfig,

@@ -173,7 +173,8 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
         if len(traj.times_ns) < 3:
             out.append(obj)
             continue
-        track = ObjectTrack.from_states(obj.object_id, obj.label, tuple(float(v) for v in obj.size), np.arange(len(traj.times_ns)),
+        track = ObjectTrack.from_states(obj.object_id, obj.label, tuple(float(v) for v in obj.size),
+                                        np.arange(len(traj.times_ns)),
                             traj.times_ns, traj.states, np.ones(len(traj.times_ns), bool))
         kin = smooth_track(track, config)
         states = np.stack([kin.x, kin.y, kin.z, kin.heading], axis=1)

@@ -24,7 +24,8 @@ from .ply import read_ply_points, write_ply_points
 if TYPE_CHECKING:
     from .sequence import Sequence
 
-__all__ = ["object_track", "DEFAULT_INVALID_FLAGS", "TRACKER_FLAGS", "frame_is_valid", "Size", "FrameRecord", "TrackFile", "read_track", "write_track", "check_track_belongs", "SCHEMA_VERSION"]
+__all__ = ["DEFAULT_INVALID_FLAGS", "TRACKER_FLAGS", "frame_is_valid", "Size", "FrameRecord", "TrackFile", "read_track",
+           "write_track", "check_track_belongs", "object_track", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 1
 
@@ -161,7 +162,7 @@ def object_track(track: TrackFile, shape_points: np.ndarray | None = None, sourc
     return ObjectTrack.from_states(
         track.object_id, track.label or "", (track.size.length, track.size.width, track.size.height),
         [r.frame for r in records], [r.timestamp_ns for r in records],
-        np.array([[r.state.x, r.state.y, r.state.z, r.state.heading] for r in records], dtype=np.float64).reshape(-1, 4),
+        np.array([r.state.to_array() for r in records], dtype=np.float64).reshape(-1, 4),
         [frame_is_valid(f, invalid_flags) for f in flags], flags, scores=[r.quality for r in records],
         num_points=[r.num_points for r in records], source=source, shape_points=shape_points,
         config={"tracker": track.config})

@@ -205,7 +205,8 @@ def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: I
     if missing:
         raise InputError(seq.root, f"no annotated track {missing[0]!r}")
     excluded = set(int(k) for k in exclude_frames)
-    boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label, dict(zip(tracks[tid].frames, tracks[tid].boxes, strict=True)))
+    boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label,
+                                         dict(zip(tracks[tid].frames, tracks[tid].boxes, strict=True)))
              for tid in track_ids}
     params = ShapeParams(near=BoxMargin(scale=(1.3, 1.3, 1.05)), stamp=BoxMargin(), min_stamp_points=1,
                          keep=BoxMargin(scale=(1.02, 1.02, 1.02)), ground_clearance=ground_clearance, end="hold")

@@ -70,7 +70,8 @@ class ShapeParams:
 def object_points_by_frame(seq, tracks: dict[str, ObjectTrack], params: ShapeParams = ShapeParams(),
                            point_frames: Iterable[int] | None = None, progress: bool = False
                            ) -> tuple[dict[str, dict[int, np.ndarray]], dict[str, Trajectory]]:
-    """Per track and frame, the object-frame points of its box (``tracks``: boxes at frames); and each track's box trajectory (the boxes at
+    """Per track (an ObjectTrack: boxes at frames) and frame, the object-frame points of its box; and each track's
+    box trajectory (the boxes at
     their capture times). ``point_frames`` (default: all) limits the frames whose points are returned; every
     box is stamped. Each sweep is read once."""
     from tqdm import tqdm

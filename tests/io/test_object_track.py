@@ -42,8 +42,9 @@ def test_a_written_track_file_becomes_an_object_track(tmp_path):
                FrameRecord(6, 1_100, State(1.5, 2.0, 0.0, 0.2), 0, 0.0, ["no_points", "prior_only"]),
                FrameRecord(7, 1_200, State(2.0, 2.0, 0.0, 0.2), 250, 0.8, ["low_points"])]
     init = Box(1.0, 2.0, 0.0, 0.2, 4.0, 1.8, 1.5)
-    write_track(tmp_path, TrackFile("seq", "car-1", Size(4.0, 1.8, 1.5), 5, 7, init, {"preset": "full", "mode": "online"}, records,
-                                    label="Car"), np.zeros((4, 3)))
+    config = {"preset": "full", "mode": "online"}
+    write_track(tmp_path, TrackFile("seq", "car-1", Size(4.0, 1.8, 1.5), 5, 7, init, config, records, label="Car"),
+                np.zeros((4, 3)))
     track = object_track(*read_track(tmp_path), source="here")
     assert track.object_id == "car-1" and track.label == "Car" and track.source == "here"
     assert track.frames.tolist() == [5, 6, 7] and track.timestamps_ns.tolist() == [1_000, 1_100, 1_200]
