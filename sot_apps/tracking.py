@@ -42,7 +42,7 @@ __all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read
            "refine_track_fixed_lag", "refine_track_offline", "track_result_to_trackfile",
            "write_track_result", "first_box_with_points", "TrackStart", "annotated_track_start",
            "TrackingFailed", "MIN_INIT_POINTS", "StartSearch",
-           "ShapeRecorder", "ObjectRequest", "ObjectTrack", "PassTimes", "track_objects", "sweep_ground_once"]
+           "ShapeRecorder", "ObjectRequest", "TrackOutcome", "PassTimes", "track_objects", "sweep_ground_once"]
 
 MIN_INIT_POINTS = 5   # non-ground LiDAR points the tracker needs in its initial box
 
@@ -356,7 +356,7 @@ class ObjectRequest:
 
 
 @dataclass
-class ObjectTrack:
+class TrackOutcome:
     """One object's outcome of the pass: its result (in the pass's mode) or the reason it failed (``error``;
     ``lacks_points``: a :class:`TrackingFailed`, the object had too few LiDAR points to start or follow)."""
 
@@ -395,7 +395,7 @@ class _Live:
 
     def __init__(self, request: ObjectRequest, seq: Sequence, config: TrackerConfig, min_points: int | None) -> None:
         self.request = request
-        self.out = ObjectTrack(request.object_id)
+        self.out = TrackOutcome(request.object_id)
         self.search = (StartSearch(seq, request.annotated, config, min_points or 0) if request.annotated
                        else None)
         self.first = min(self.search.candidates, default=None) if self.search else request.start
@@ -420,7 +420,7 @@ def _pose(seq: Sequence, k: int) -> tuple[int, np.ndarray]:
 
 def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerConfig, mode: str = "online",
                   lag: int = 10, detections: Detections | None = None, min_points: int | None = MIN_INIT_POINTS,
-                  shape_growth: bool = False, on_done=None, progress=None) -> tuple[list[ObjectTrack], PassTimes]:
+                  shape_growth: bool = False, on_done=None, progress=None) -> tuple[list[TrackOutcome], PassTimes]:
     """Track many objects of ``seq`` in ONE pass over its sweeps: each sweep is read once and its whole-sweep
     ground computed once (the tracker's per-sweep cache, shared by every tracker on the sweep), every live
     object is stepped (objects start and end at different frames). The result of each object is the one
@@ -431,9 +431,9 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
 
     An object whose start box (or every annotated box, see :class:`ObjectRequest`) holds fewer than
     ``min_points`` points, that is lost after its start (no points in any later frame), or whose tracking raises,
-    fails alone (``ObjectTrack.error``). ``min_points=None`` drops the two point checks (evaluation scores every
+    fails alone (``TrackOutcome.error``). ``min_points=None`` drops the two point checks (evaluation scores every
     track as :func:`tracker.track` returns it; annotated objects then start at their first annotated box). ``shape_growth``: also record :class:`ShapeGrowth`. ``on_done``:
-    callable(ObjectTrack) as each object finishes (then its result is not kept in the returned list, so a long
+    callable(TrackOutcome) as each object finishes (then its result is not kept in the returned list, so a long
     pass holds only live objects). ``progress``: callable(iterable) -> iterable over the frames.
     Returns the objects' outcomes in request order and where the time went."""
     if mode not in MODES:
@@ -450,7 +450,7 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
     ground_args = config.ground.sweep_args() if sweep_ground else ()
     last = max([o.request.end for o in live if o.first is not None], default=-1)
     first = min([o.first for o in live if o.first is not None], default=last + 1)
-    results: list[ObjectTrack] = [o.out for o in live]
+    results: list[TrackOutcome] = [o.out for o in live]
     frames = range(first, last + 1)
     for k in (progress(frames) if progress else frames):
         starting = [o for o in live if o.waiting and (k in o.search.candidates if o.search else k == o.first)]
@@ -639,11 +639,11 @@ def lacking_points(result: TrackResult, min_points: int) -> str | None:
 
 
 def _track_alone(seq: Sequence, requests: list[ObjectRequest], config: TrackerConfig, detections, min_points: int | None,
-                 shape_growth: bool, on_done, times: PassTimes) -> tuple[list[ObjectTrack], PassTimes]:
+                 shape_growth: bool, on_done, times: PassTimes) -> tuple[list[TrackOutcome], PassTimes]:
     """Methods other than SOTracker's (the Det baseline): each object tracked alone through :func:`tracker.track`."""
     outs = []
     for r in requests:
-        out = ObjectTrack(r.object_id)
+        out = TrackOutcome(r.object_id)
         t = time.thread_time()
         try:
             start, box = (first_box_with_points(seq, r.annotated, config, min_points or 0) if r.annotated

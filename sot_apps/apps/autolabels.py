@@ -7,6 +7,7 @@ track's size), its score the mean frame quality. The writers are those of ``sot-
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,13 +34,11 @@ class AutoLabelsApp(AppBase):
             object_ids: list[str]) -> UnitOutput:
         import numpy as np
 
-        from tracker import Box
-
         from ..errors import InputError
         from ..io.label_export import export_labels, label_paths
-        from ..io.labels import LabelTrack, kitti_camera
+        from ..io.labels import kitti_camera
         from ..io.opened import open_cached
-        from ..io.tracks import read_track
+        from ..io.tracks import object_track, read_track
 
         unknown = sorted(set(config.formats) - {"av2", "kitti"})
         if unknown:
@@ -47,15 +46,12 @@ class AutoLabelsApp(AppBase):
         seq = open_cached(path, format)
         labels = []
         for object_id in object_ids:
-            track, _ = read_track(track_dir(out, sequence, object_id))
-            kept = [r for r in track.frames if r.quality >= config.min_quality]
-            if not kept:
+            track = object_track(read_track(track_dir(out, sequence, object_id))[0])
+            kept = track.select(np.asarray(track.scores) >= config.min_quality)   # scores: the tracker's quality
+            if not len(kept):
                 continue
-            size = track.size
-            boxes = {r.frame: Box(r.state.x, r.state.y, r.state.z, r.state.heading, size.length, size.width,
-                                  size.height) for r in kept}
-            labels.append(LabelTrack(object_id, config.category, boxes, float(np.mean([r.quality for r in kept])),
-                                     {r.frame: r.num_points for r in kept}))
+            labels.append(dataclasses.replace(kept, object_id=object_id, label=config.category,
+                                              scores=np.full(len(kept), float(np.mean(np.asarray(kept.scores))))))
         root = Path(out) / sequence / "labels"
         files: list[Path] = []
         notes = []

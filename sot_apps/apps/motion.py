@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,8 +35,8 @@ class MotionApp(AppBase):
         seq = open_cached(path, format)
         root = out / sequence
         tracks = tracks_from_dirs([track_dir(out, sequence, o) for o in object_ids], seq)
-        for t in tracks:   # relative sources keep the MCAP independent of where OUT lives
-            t.source = str(Path(t.source).relative_to(out))
+        # relative sources keep the MCAP independent of where OUT lives
+        tracks = [dataclasses.replace(t, source=str(Path(t.source).relative_to(out))) for t in tracks]
         files = {"mcap": root / "motion.mcap"}
         if config.parquet:
             files["parquet"] = root / "motion.parquet"

@@ -102,7 +102,9 @@ def run(args: argparse.Namespace) -> int:
         truth = ground_truth_frames(sequence, DEFAULT_SELECTION.vehicle_labels(sequence))
         rows = autolabel_quality(
             {"raw detections": (detections, None),
-             "detection tracks (CV Kalman)": (tracks_as_detections(det_tracks), {t.track_id: t.boxes for t in det_tracks}),
+             "detection tracks (CV Kalman)": (tracks_as_detections(det_tracks),
+                                              {t.object_id: dict(zip(t.frames.tolist(), t.boxes, strict=True))
+                                               for t in det_tracks}),
              "auto-labels": (labels_as_detections(labels),
                              {lbl.track_id: {k: b.to_array() for k, b in lbl.boxes.items()} for lbl in labels})},
             truth, moving=DEFAULT_SELECTION.moving_vehicles(sequence))
@@ -119,10 +121,11 @@ def _run_keyframes(args: argparse.Namespace, sequence, progress) -> int:
 
     from tracker import get_preset, track_keyframes
 
-    from ..detection.autolabel import AutoLabel, DetectionTrack, labels_as_detections, write_autolabels
+    from ..detection.autolabel import AutoLabel, labels_as_detections, write_autolabels
     from ..io.atomic import write_json
     from ..io.cached_source import CachedSource
     from ..io.keyframes import read_keyframes
+    from ..io.object_track import ObjectTrack
     from .track import keyframe_params
 
     if args.detections or args.simulate:
@@ -133,7 +136,8 @@ def _run_keyframes(args: argparse.Namespace, sequence, progress) -> int:
     labels = []
     for track_id, keyframes in progress(list(tracks.items()), "keyframe tracks"):
         result = track_keyframes(source, keyframes, config=config, params=params)
-        given = DetectionTrack(track_id, {k: b.to_array() for k, b in keyframes.items()}, {k: 1.0 for k in keyframes})
+        frames = sorted(keyframes)
+        given = ObjectTrack(track_id, "", frames, [keyframes[k].to_array() for k in frames], scores=[1.0] * len(frames))
         labels.append(AutoLabel(track_id, {e.frame: e.box for e in result.estimates}, 1.0, result.shape, given))
     for line in write_autolabels(args.out, sequence, labels, with_sequence=not args.no_sequence):
         print(line)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
 from .common import add_sequence_argument, add_subcommand, declare_outputs, load_sequence, nonnegative_int
@@ -75,8 +76,7 @@ def run(args: argparse.Namespace) -> int:
         tracks = tracks_from_annotations(sequence, args.track_id)
         source = "annotations"
         if args.with_points:
-            for t in tracks:
-                t.shape_points = aggregate_shape(sequence, t)
+            tracks = [dataclasses.replace(t, shape_points=aggregate_shape(sequence, t)) for t in tracks]
     else:
         invalid_flags = DEFAULT_INVALID_FLAGS if args.invalid_flags is None else args.invalid_flags
         tracks = tracks_from_dirs(args.tracks, sequence, invalid_flags=invalid_flags)

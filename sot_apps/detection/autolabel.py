@@ -50,7 +50,9 @@ from tracker import (
     wrap_angle,
 )
 
-__all__ = ["AssociationConfig", "DetectionTrack", "AutoLabel", "associate_tracks", "LabelConfig", "track_both_ways",
+from ..io.object_track import ObjectTrack
+
+__all__ = ["AssociationConfig", "AutoLabel", "associate_tracks", "LabelConfig", "track_both_ways",
            "merge_duplicates", "label_from_result", "label_config_tracker", "anchor_to_detections",
            "PointFit", "fit_to_points", "detection_sigma", "autolabel", "per_frame_detections", "labels_as_detections", "tracks_as_detections",
            "write_autolabels"]
@@ -67,21 +69,13 @@ class AssociationConfig:
     confirm_detections: int = 2    # detections scored >= birth_score a track needs (a confirmed birth)
 
 
-@dataclass(frozen=True)
-class DetectionTrack:
-    """Detections associated over time: frame -> (7,) box and score."""
+def _detections_by_frame(detection_track: ObjectTrack) -> dict[int, np.ndarray]:
+    """A detection track's (7,) boxes by frame (a detection track: an ObjectTrack with a ``scores`` column)."""
+    return dict(zip(detection_track.frames.tolist(), detection_track.boxes, strict=True))
 
-    track_id: str
-    boxes: dict[int, np.ndarray]
-    scores: dict[int, float]
 
-    @property
-    def frames(self) -> list[int]:
-        return sorted(self.boxes)
-
-    @property
-    def mean_score(self) -> float:
-        return float(np.mean(list(self.scores.values())))
+def _scores_by_frame(detection_track: ObjectTrack) -> dict[int, float]:
+    return dict(zip(detection_track.frames.tolist(), np.asarray(detection_track.scores).tolist(), strict=True))
 
 
 @dataclass(frozen=True)
@@ -92,12 +86,13 @@ class AutoLabel:
     boxes: dict[int, Box]
     score: float
     shape: np.ndarray
-    detections: DetectionTrack
+    detections: ObjectTrack    # the detections associated over time (boxes and their scores)
 
 
 def associate_tracks(detections: dict[int, FrameDetections], n_frames: int,
-                     config: AssociationConfig = AssociationConfig()) -> list[DetectionTrack]:
-    """Detection tracks (see the module docstring), ids ``t0000``, ``t0001``, ... in order of birth."""
+                     config: AssociationConfig = AssociationConfig()) -> list[ObjectTrack]:
+    """Detection tracks (see the module docstring; ObjectTracks with a ``scores`` column), ids ``t0000``,
+    ``t0001``, ... in order of birth."""
     live: list[dict] = []
     finished: list[dict] = []
     next_id = 0
@@ -140,7 +135,8 @@ def associate_tracks(detections: dict[int, FrameDetections], n_frames: int,
                 next_id += 1
     finished += live
     finished.sort(key=lambda t: t["id"])
-    return [DetectionTrack(f"t{t['id']:04d}", t["boxes"], t["scores"]) for t in finished
+    return [ObjectTrack(f"t{t['id']:04d}", "", list(t["boxes"]), list(t["boxes"].values()),
+                        scores=list(t["scores"].values())) for t in finished
             if len(t["boxes"]) >= config.min_detections
             and sum(v >= config.birth_score for v in t["scores"].values()) >= config.confirm_detections]
 
@@ -171,14 +167,15 @@ def _merge(backward: TrackResult | None, forward: TrackResult) -> TrackResult:
     return TrackResult(estimates, forward.size, forward.shape, forward.config)
 
 
-def _detection_velocity(detection_track: DetectionTrack, frame: int, window: int = 5) -> np.ndarray:
+def _detection_velocity(detection_track: ObjectTrack, frame: int, window: int = 5) -> np.ndarray:
     """Per-frame motion [dx, dy, dz, 0] near ``frame`` from the track's detections: a least-squares line through
     the detection centres of the ``window`` frames either side (zero with fewer than 2 detections)."""
-    near = [k for k in detection_track.frames if abs(k - frame) <= window]
+    near = [k for k in detection_track.frames.tolist() if abs(k - frame) <= window]
     if len(near) < 2:
         return np.zeros(4)
     t = np.array(near, dtype=np.float64)
-    centres = np.array([detection_track.boxes[k][:3] for k in near])
+    by_frame = _detections_by_frame(detection_track)
+    centres = np.array([by_frame[k][:3] for k in near])
     slope = np.polyfit(t - t.mean(), centres, 1)[0]
     return np.array([slope[0], slope[1], slope[2], 0.0])
 
@@ -199,7 +196,7 @@ class PointFit:
 
 
 def fit_to_points(source: FrameSource, boxes: dict[int, Box], fit: PointFit = PointFit(),
-                  detection_track: DetectionTrack | None = None) -> dict[int, Box]:
+                  detection_track: ObjectTrack | None = None) -> dict[int, Box]:
     """The track's boxes moved and resized by one object-frame correction read from the points of all its frames.
 
     Each frame's points in the box footprint grown by ``margin`` and above that frame's ground (median height
@@ -263,16 +260,17 @@ def _weight(sigma_det: np.ndarray, sigma_points: float) -> np.ndarray:
     return np.where(np.isfinite(sigma_det), w, 1.0)
 
 
-def detection_sigma(boxes: dict[int, Box], detection_track: DetectionTrack) -> tuple[np.ndarray, np.ndarray]:
+def detection_sigma(boxes: dict[int, Box], detection_track: ObjectTrack) -> tuple[np.ndarray, np.ndarray]:
     """Errors (3,) of the median centre offset (length, width, up; object frame) and of the median size of the
     track's detections relative to ``boxes``: robust spread (1.4826 MAD) / sqrt(effective count), the count
     shrunk by the lag-1 autocorrelation rho of the series, n (1 - rho) / (1 + rho). Inf with < 3 detections."""
-    frames = sorted(k for k in detection_track.boxes if k in boxes)
+    detections = _detections_by_frame(detection_track)
+    frames = sorted(k for k in detections if k in boxes)
     if len(frames) < 3:
         return np.full(3, np.inf), np.full(3, np.inf)
     offsets, sizes = [], []
     for k in frames:
-        det, box = detection_track.boxes[k], boxes[k]
+        det, box = detections[k], boxes[k]
         offsets.append(_object_frame(det[None, :3], box)[0])
         sizes.append(det[4:7])
     return _median_sigma(np.array(offsets)), _median_sigma(np.array(sizes))
@@ -338,20 +336,22 @@ class _Seed:
     velocity: np.ndarray
 
 
-def _seed(detection_track: DetectionTrack) -> _Seed:
-    frames = detection_track.frames
-    frame = max(frames, key=lambda k: (detection_track.scores[k], -abs(k - frames[len(frames) // 2])))
-    sizes = np.array([detection_track.boxes[k][4:7] for k in frames])
-    box = Box(*detection_track.boxes[frame][:4], *np.median(sizes, axis=0))
+def _seed(detection_track: ObjectTrack) -> _Seed:
+    frames = detection_track.frames.tolist()
+    scores, detections = _scores_by_frame(detection_track), _detections_by_frame(detection_track)
+    frame = max(frames, key=lambda k: (scores[k], -abs(k - frames[len(frames) // 2])))
+    sizes = np.array([detections[k][4:7] for k in frames])
+    box = Box(*detections[frame][:4], *np.median(sizes, axis=0))
     return _Seed(frame, box, _detection_velocity(detection_track, frame))
 
 
-def _own_detections(detection_track: DetectionTrack) -> dict[int, FrameDetections]:
-    return {k: FrameDetections(b[None], np.array([detection_track.scores[k]]))
-            for k, b in detection_track.boxes.items()}
+def _own_detections(detection_track: ObjectTrack) -> dict[int, FrameDetections]:
+    scores = _scores_by_frame(detection_track)
+    return {k: FrameDetections(b[None], np.array([scores[k]]))
+            for k, b in _detections_by_frame(detection_track).items()}
 
 
-def track_both_ways(source: FrameSource, tracks: list[DetectionTrack], config: TrackerConfig,
+def track_both_ways(source: FrameSource, tracks: list[ObjectTrack], config: TrackerConfig,
                     label_config: LabelConfig = LabelConfig(), progress=None) -> list[TrackResult]:
     """SOT of every detection track from its seed (:func:`_seed`) forward to ``extend`` frames past its last
     detection and backward (on the box turned by pi, in reversed time: the vehicle drives forward, as the motion
@@ -371,12 +371,12 @@ def track_both_ways(source: FrameSource, tracks: list[DetectionTrack], config: T
         forward, backward = [], []
         for t, seed in zip(part, seeds, strict=True):
             own = _own_detections(t)
-            forward.append(ObjectRequest(t.track_id, seed.box, seed.frame,
-                                         min(t.frames[-1] + label_config.extend, last),
+            forward.append(ObjectRequest(t.object_id, seed.box, seed.frame,
+                                         min(int(t.frames[-1]) + label_config.extend, last),
                                          detections=own, initial_motion=seed.velocity))
-            first = max(t.frames[0] - label_config.extend, 0)
+            first = max(int(t.frames[0]) - label_config.extend, 0)
             if seed.frame > first:
-                backward.append(ObjectRequest(t.track_id, _turned(seed.box), last - seed.frame, last - first,
+                backward.append(ObjectRequest(t.object_id, _turned(seed.box), last - seed.frame, last - first,
                                               detections={last - k: d for k, d in own.items() if k <= seed.frame},
                                               initial_motion=-seed.velocity))
         ahead, _ = track_objects(source, forward, config, detections=None, min_points=None,
@@ -394,10 +394,10 @@ def track_both_ways(source: FrameSource, tracks: list[DetectionTrack], config: T
     return results
 
 
-def _trimmed(result: TrackResult, detection_track: DetectionTrack, config: LabelConfig) -> TrackResult:
+def _trimmed(result: TrackResult, detection_track: ObjectTrack, config: LabelConfig) -> TrackResult:
     """``result`` without the frames past the detections beyond the first unsupported one (either way)."""
     frames = [e.frame for e in result.estimates]
-    first, last = detection_track.frames[0], detection_track.frames[-1]
+    first, last = int(detection_track.frames[0]), int(detection_track.frames[-1])
     keep = np.array([first <= k <= last for k in frames])
     ok = np.array([_supported(e, config) for e in result.estimates])
     i = frames.index(last) if last in frames else len(frames) - 1
@@ -412,14 +412,14 @@ def _trimmed(result: TrackResult, detection_track: DetectionTrack, config: Label
     return dataclasses.replace(result, estimates=estimates)
 
 
-def merge_duplicates(results: list[TrackResult], tracks: list[DetectionTrack], config: LabelConfig = LabelConfig()
-                     ) -> tuple[list[TrackResult], list[DetectionTrack]]:
+def merge_duplicates(results: list[TrackResult], tracks: list[ObjectTrack], config: LabelConfig = LabelConfig()
+                     ) -> tuple[list[TrackResult], list[ObjectTrack]]:
     """One track per object: a track whose boxes overlap a kept track's (BEV IoU >= ``duplicate_iou``) on >=
     ``duplicate_share`` of their (>= ``min_shared_frames``) shared frames is folded into it (its detections
     join the kept track's on the frames that have none). Tracks are kept in order of supported frames, then
     detections; the survivors come back in their original order."""
     support = [sum(_supported(e, config) for e in r.estimates) for r in results]
-    order = sorted(range(len(results)), key=lambda i: (-support[i], -len(tracks[i].boxes), i))
+    order = sorted(range(len(results)), key=lambda i: (-support[i], -len(tracks[i]), i))
     boxes = [{e.frame: e.box.to_array() for e in r.estimates} for r in results]
     kept: list[int] = []
     folded: dict[int, list[int]] = {}
@@ -441,15 +441,19 @@ def merge_duplicates(results: list[TrackResult], tracks: list[DetectionTrack], c
     for i in sorted(kept):
         joined = tracks[i]
         for j in folded.get(i, []):
-            extra = {k: b for k, b in tracks[j].boxes.items() if k not in joined.boxes}
-            joined = DetectionTrack(joined.track_id, {**joined.boxes, **extra},
-                                    {**joined.scores, **{k: tracks[j].scores[k] for k in extra}})
+            boxes_j, scores_j = _detections_by_frame(tracks[j]), _scores_by_frame(tracks[j])
+            extra = [k for k in boxes_j if joined.box_at(k) is None]
+            detections = {**_detections_by_frame(joined), **{k: boxes_j[k] for k in extra}}
+            scores = {**_scores_by_frame(joined), **{k: scores_j[k] for k in extra}}
+            frames = sorted(detections)
+            joined = ObjectTrack(joined.object_id, joined.label, frames, [detections[k] for k in frames],
+                                 scores=[scores[k] for k in frames])
         out_results.append(results[i])
         out_tracks.append(joined)
     return out_results, out_tracks
 
 
-def label_from_result(source: FrameSource, result: TrackResult, detection_track: DetectionTrack,
+def label_from_result(source: FrameSource, result: TrackResult, detection_track: ObjectTrack,
                       config: TrackerConfig, offline: bool = True, fit: PointFit | None = PointFit()) -> AutoLabel:
     """The offline refinement of a track's online result, anchored on its detections and fitted to its points."""
     if offline and len(result.estimates) > 2:
@@ -459,7 +463,7 @@ def label_from_result(source: FrameSource, result: TrackResult, detection_track:
     boxes = anchor_to_detections({e.frame: e.box for e in result.estimates}, detection_track)
     if fit is not None:
         boxes = fit_to_points(source, boxes, fit, detection_track)
-    return AutoLabel(detection_track.track_id, boxes, detection_track.mean_score, result.shape, detection_track)
+    return AutoLabel(detection_track.object_id, boxes, detection_track.mean_score, result.shape, detection_track)
 
 
 def label_config_tracker(config: TrackerConfig, label_config: LabelConfig) -> TrackerConfig:
@@ -469,19 +473,20 @@ def label_config_tracker(config: TrackerConfig, label_config: LabelConfig) -> Tr
     return dataclasses.replace(config, reacquire=dataclasses.replace(config.reacquire, mode="clusters"))
 
 
-def anchor_to_detections(boxes: dict[int, Box], detection_track: DetectionTrack) -> dict[int, Box]:
+def anchor_to_detections(boxes: dict[int, Box], detection_track: ObjectTrack) -> dict[int, Box]:
     """The track moved by one constant correction in the object frame (heading, then centre): the median,
     over the track's detections, of how the detection sits relative to the tracked box (headings modulo
     pi). SOT fixes the motion relative to the seed box, so the seed detection's error would otherwise stay
     in every frame; the median over all detections averages the detector's errors and ignores outliers."""
-    frames = [k for k in detection_track.boxes if k in boxes]
+    detections = _detections_by_frame(detection_track)
+    frames = [k for k in detections if k in boxes]
     if not frames:
         return boxes
-    turn = float(np.median([wrap_angle(align_heading(detection_track.boxes[k][3], boxes[k].heading)
+    turn = float(np.median([wrap_angle(align_heading(detections[k][3], boxes[k].heading)
                                        - boxes[k].heading) for k in frames]))
     offsets = []
     for k in frames:
-        det, box = detection_track.boxes[k], boxes[k]
+        det, box = detections[k], boxes[k]
         c, s = np.cos(box.heading + turn), np.sin(box.heading + turn)
         d = det[:3] - box.center
         offsets.append([c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]])
@@ -497,7 +502,7 @@ def anchor_to_detections(boxes: dict[int, Box], detection_track: DetectionTrack)
 
 def autolabel(source: FrameSource, detections: dict[int, FrameDetections], config: TrackerConfig | None = None,
               association: AssociationConfig = AssociationConfig(), offline: bool = True,
-              progress=None, label_config: LabelConfig = LabelConfig()) -> tuple[list[AutoLabel], list[DetectionTrack]]:
+              progress=None, label_config: LabelConfig = LabelConfig()) -> tuple[list[AutoLabel], list[ObjectTrack]]:
     """Auto-labels of every vehicle of ``source`` (and the detection tracks they came from): detection tracks
     (:func:`associate_tracks`), SOT both ways in one pass each (:func:`track_both_ways`), extensions cut where
     support ends, duplicates merged (:func:`merge_duplicates`), tracks with fewer than ``min_supported_frames``
@@ -528,9 +533,10 @@ def labels_as_detections(labels: list[AutoLabel]) -> dict[int, FrameDetections]:
     return per_frame_detections((k, box.to_array(), label.score) for label in labels for k, box in label.boxes.items())
 
 
-def tracks_as_detections(tracks: list[DetectionTrack]) -> dict[int, FrameDetections]:
+def tracks_as_detections(tracks: list[ObjectTrack]) -> dict[int, FrameDetections]:
     """The detections kept in detection tracks, per frame, with their own scores."""
-    return per_frame_detections((k, box, t.scores[k]) for t in tracks for k, box in t.boxes.items())
+    return per_frame_detections((k, box, score) for t in tracks
+                                for k, box, score in zip(t.frames.tolist(), t.boxes, t.scores, strict=True))
 
 
 def write_autolabels(out_dir, sequence, labels: list[AutoLabel], category: str = "Car",
@@ -543,11 +549,12 @@ def write_autolabels(out_dir, sequence, labels: list[AutoLabel], category: str =
 
     from ..io.canonical import write_sequence
     from ..io.label_export import export_labels
-    from ..io.labels import LabelTrack, kitti_camera
+    from ..io.labels import kitti_camera
     from ..io.sequence import BoxAnnotation
 
     out_dir = Path(out_dir)
-    tracks = [LabelTrack(label.track_id, category, label.boxes, label.score) for label in labels]
+    tracks = [ObjectTrack.from_boxes(label.track_id, category, label.boxes,
+                                     scores=dict.fromkeys(label.boxes, label.score)) for label in labels]
     lines = []
     if kitti_camera(sequence) is not None:
         lines += export_labels(sequence, "kitti", out_dir / "kitti", tracks)

@@ -23,12 +23,12 @@ from typing import Sequence as Seq
 import numpy as np
 
 from ..errors import InputError
+from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
 from ..objects.smoother import (
     ANNOTATION_SMOOTHER,
     TRACKER_SMOOTHER,
     Kinematics,
-    ObjectTrack,
     SmootherConfig,
     central_difference_kinematics,
     smooth_track,
@@ -122,7 +122,7 @@ def _gt_track(sequence: Sequence, object_id: str, frames: np.ndarray) -> ObjectT
         if box is not None:
             states[i] = [box.x, box.y, box.z, box.heading]
             valid[i] = True
-    return ObjectTrack(object_id=object_id, label=gt.label, size=(1.0, 1.0, 1.0), frames=frames,
+    return ObjectTrack.from_states(object_id=object_id, label=gt.label, size=(1.0, 1.0, 1.0), frames=frames,
                        timestamps_ns=sequence.timestamps_ns[frames], states=states, valid=valid)
 
 

@@ -19,10 +19,11 @@ import numpy as np
 from tracker import Box, invert_transform, points_in_box, transform_points
 
 from ..errors import InputError
+from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
 from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample_means
 from ..objects.selection import DEFAULT_SELECTION
-from ..objects.shapes import ShapeParams, TrackBoxes, box_capture_time, object_points_by_frame
+from ..objects.shapes import ShapeParams, box_capture_time, object_points_by_frame
 from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 
 __all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]
@@ -145,11 +146,11 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
         raise InputError(seq.root, "the sequence has no annotations (needed by --from-annotations)")
     ids = [seq.resolve_track_id(t) for t in track_ids] if track_ids else sorted(tracks)
     frame_list = set(range(len(seq.frames)) if frames is None else frames)
-    boxes = {tid: TrackBoxes(tuple(k for k in tracks[tid].frames if k in frame_list),
-                             tuple(b for k, b in zip(tracks[tid].frames, tracks[tid].boxes, strict=True)
-                                   if k in frame_list))
+    boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label, {k: b for k, b in zip(tracks[tid].frames,
+                                                                                    tracks[tid].boxes, strict=True)
+                                                                 if k in frame_list})
              for tid in ids}
-    boxes = {tid: tb for tid, tb in boxes.items() if tb.frames}
+    boxes = {tid: tb for tid, tb in boxes.items() if len(tb)}
     if moving_only:
         boxes = {tid: tb for tid, tb in boxes.items()
                  if DEFAULT_SELECTION.track_motion(tracks[tid], seq.timestamps_ns).moving}
@@ -158,7 +159,7 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
     points, trajectories = object_points_by_frame(seq, boxes, params, progress=progress)
     out = []
     for tid, tb in boxes.items():
-        size = np.median(np.array([b.size for b in tb.boxes]), axis=0)
+        size = np.median(tb.boxes[:, 4:7], axis=0)
         parts = [points[tid][k] for k in sorted(points[tid])]
         shape = voxel_downsample_means(np.concatenate(parts) if parts else np.zeros((0, 3)), voxel)
         out.append(TrackedObject(tid, tracks[tid].label, trajectories[tid], shape,
@@ -175,7 +176,7 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
     """
     from dataclasses import replace
 
-    from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, ObjectTrack, smooth_track
+    from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, smooth_track
 
     config = ANNOTATION_SMOOTHER if source == "annotations" else TRACKER_SMOOTHER
     out = []
@@ -184,7 +185,8 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
         if len(traj.times_ns) < 3:
             out.append(obj)
             continue
-        track = ObjectTrack(obj.object_id, obj.label, tuple(float(v) for v in obj.size), np.arange(len(traj.times_ns)),
+        track = ObjectTrack.from_states(obj.object_id, obj.label, tuple(float(v) for v in obj.size),
+                                        np.arange(len(traj.times_ns)),
                             traj.times_ns, traj.states, np.ones(len(traj.times_ns), bool))
         kin = smooth_track(track, config)
         states = np.stack([kin.x, kin.y, kin.z, kin.heading], axis=1)

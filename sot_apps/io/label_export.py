@@ -14,13 +14,13 @@ from pathlib import Path
 from ..errors import InputError
 from .labels import (
     LabelsWritten,
-    LabelTrack,
     annotation_tracks,
     kitti_camera,
     write_av2_annotations,
     write_av2_submission,
     write_kitti_tracking,
 )
+from .object_track import ObjectTrack
 from .sequence import Sequence
 
 __all__ = ["LABEL_FORMATS", "kitti_sequence_number", "label_paths", "export_labels"]
@@ -62,7 +62,7 @@ def _report(fmt: str, written: LabelsWritten) -> str:
     return line + ")"
 
 
-def export_labels(seq: Sequence, fmt: str, out_dir: str | Path, tracks: list[LabelTrack] | None = None,
+def export_labels(seq: Sequence, fmt: str, out_dir: str | Path, tracks: list[ObjectTrack] | None = None,
                   submission: bool = False) -> list[str]:
     """Write ``tracks`` (default: the sequence's annotations) as ``fmt`` label files under ``out_dir``; with
     ``submission`` (AV2) also the submission table. Returns one report line per file. InputError when there is

@@ -27,9 +27,9 @@ Boxes whose label has no name in the target format are left out; the writers ret
 from __future__ import annotations
 
 import uuid
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -37,9 +37,10 @@ from tracker.geometry import Box, invert_transform, points_in_box, wrap_angle
 
 from .atomic import atomic_path, write_text
 from .categories import av2_category, kitti_type
+from .object_track import ObjectTrack
 from .sequence import Camera, Sequence
 
-__all__ = ["LabelTrack", "LabelsWritten", "annotation_tracks", "kitti_camera", "kitti_label_box",
+__all__ = ["LabelsWritten", "annotation_tracks", "kitti_camera", "kitti_label_box",
            "kitti_box_corners", "image_box", "KITTI_CAMERA_NAMES", "write_kitti_tracking", "write_av2_annotations", "write_av2_submission",
            "AV2_ANNOTATION_COLUMNS", "AV2_SUBMISSION_COLUMNS"]
 
@@ -51,18 +52,6 @@ NEAR_M = 0.1   # the part of a box nearer the camera plane than this is cut off 
 
 
 @dataclass(frozen=True)
-class LabelTrack:
-    """One object's boxes (WORLD frame) by frame index, its label (the source's name), optional score, and the
-    source's own point counts by frame (used at frames without a sweep)."""
-
-    track_id: str
-    label: str
-    boxes: Mapping[int, Box]
-    score: float | None = None
-    num_points: Mapping[int, int] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
 class LabelsWritten:
     path: Path
     boxes: int                       # rows written
@@ -70,8 +59,8 @@ class LabelsWritten:
     outside_camera: int = 0          # KITTI: boxes the camera does not see
 
 
-def annotation_tracks(seq: Sequence) -> list[LabelTrack]:
-    """The sequence's annotations as label tracks (no score)."""
+def annotation_tracks(seq: Sequence) -> list[ObjectTrack]:
+    """The sequence's annotations as label tracks: no score, the source's point counts (``num_points``)."""
     boxes: dict[str, dict[int, Box]] = {}
     counts: dict[str, dict[int, int]] = {}
     labels: dict[str, str] = {}
@@ -81,7 +70,7 @@ def annotation_tracks(seq: Sequence) -> list[LabelTrack]:
             labels.setdefault(ann.track_id, ann.label)
             if ann.num_points is not None:
                 counts.setdefault(ann.track_id, {})[k] = int(ann.num_points)
-    return [LabelTrack(tid, labels[tid], boxes[tid], None, counts.get(tid, {})) for tid in boxes]
+    return [ObjectTrack.from_boxes(tid, labels[tid], boxes[tid], num_points=counts.get(tid, {})) for tid in boxes]
 
 
 # ------------------------------------------------------------------------------------------ KITTI
@@ -166,19 +155,20 @@ def _truncation(clipped: np.ndarray, raw: np.ndarray) -> int:
     return 2 if inside < 0.5 * area else 1
 
 
-def _kitti_rows(seq: Sequence, tracks: list[LabelTrack], cam: Camera, camera_from_ego: np.ndarray
+def _kitti_rows(seq: Sequence, tracks: list[ObjectTrack], cam: Camera, camera_from_ego: np.ndarray
                 ) -> tuple[list[tuple[int, int, str]], dict[str, int], int]:
     rows, unmapped, outside = [], {}, 0
     K = np.asarray(cam.K, dtype=np.float64)
     camera_from_world = [camera_from_ego @ invert_transform(f.world_from_ego) for f in seq.frames]
-    numeric = all(t.track_id.isdigit() for t in tracks)   # KITTI's own ids are kept, others are numbered
+    numeric = all(t.object_id.isdigit() for t in tracks)   # KITTI's own ids are kept, others are numbered
     for n, track in enumerate(tracks):
-        number = int(track.track_id) if numeric else n
+        number = int(track.object_id) if numeric else n
         kind = kitti_type(track.label)
         if kind is None:
             unmapped[track.label] = unmapped.get(track.label, 0) + len(track.boxes)
             continue
-        for k, box in sorted(track.boxes.items()):
+        for i, k in enumerate(track.frames.tolist()):
+            box = track.box(i)
             h, w, length, x, y, z, ry = kitti_label_box(box.transformed(camera_from_world[k], keep_tilt=True))
             projected = image_box(kitti_box_corners(h, w, length, x, y, z, ry), K, cam.width, cam.height)
             if projected is None:
@@ -188,14 +178,14 @@ def _kitti_rows(seq: Sequence, tracks: list[LabelTrack], cam: Camera, camera_fro
             alpha = wrap_angle(ry - np.arctan2(x, z))
             line = (f"{k} {number} {kind} {_truncation(projected[0], raw)} 0 {alpha:.6f} {left:.6f} {top:.6f} "
                     f"{right:.6f} {bottom:.6f} {h:.6f} {w:.6f} {length:.6f} {x:.6f} {y:.6f} {z:.6f} {ry:.6f}")
-            if track.score is not None:
-                line += f" {track.score:.6f}"
+            if track.scores is not None:
+                line += f" {track.scores[i]:.6f}"
             rows.append((k, number, line))
     rows.sort(key=lambda r: (r[0], r[1]))
     return rows, unmapped, outside
 
 
-def write_kitti_tracking(out_dir: str | Path, seq: Sequence, tracks: list[LabelTrack], sequence_number: int = 0,
+def write_kitti_tracking(out_dir: str | Path, seq: Sequence, tracks: list[ObjectTrack], sequence_number: int = 0,
                          camera: Camera | None = None) -> LabelsWritten:
     """``out_dir/label_02/NNNN.txt`` and ``out_dir/calib/NNNN.txt`` (see the module docstring).
 
@@ -241,7 +231,7 @@ def _quaternion_wxyz(rotation: np.ndarray) -> np.ndarray:
     return -q if w < 0 else q
 
 
-def _av2_rows(seq: Sequence, tracks: list[LabelTrack], count_points: bool) -> tuple[dict[str, list], dict[str, int]]:
+def _av2_rows(seq: Sequence, tracks: list[ObjectTrack], count_points: bool) -> tuple[dict[str, list], dict[str, int]]:
     """Columns of the AV2 rows (ego-frame boxes), sorted by time then track; ``num_interior_pts`` when asked."""
     entries, unmapped = [], {}
     for track in tracks:
@@ -249,27 +239,28 @@ def _av2_rows(seq: Sequence, tracks: list[LabelTrack], count_points: bool) -> tu
         if category is None:
             unmapped[track.label] = unmapped.get(track.label, 0) + len(track.boxes)
             continue
-        for k, box in track.boxes.items():
-            entries.append((k, _track_uuid(seq.id, track.track_id), category, box, track))
+        for i, k in enumerate(track.frames.tolist()):
+            entries.append((k, _track_uuid(seq.id, track.object_id), category, track, i))
     entries.sort(key=lambda e: (e[0], e[1]))
     cols: dict[str, list] = {name: [] for name in AV2_ANNOTATION_COLUMNS + ("score",)}
     sweep_frame, sweep_xyz = None, None
-    for k, track_uuid, category, box, track in entries:
-        ego = box.transformed(invert_transform(seq.frames[k].world_from_ego), keep_tilt=True)
+    for k, track_uuid, category, track, i in entries:
+        ego = track.box(i).transformed(invert_transform(seq.frames[k].world_from_ego), keep_tilt=True)
         q = _quaternion_wxyz(ego.rotation())
         for name, value in zip(("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "height_m", "qw", "qx",
                                 "qy", "qz", "tx_m", "ty_m", "tz_m"),
                                (int(seq.frames[k].timestamp_ns), track_uuid, category, ego.length, ego.width, ego.height,
                                 *q, ego.x, ego.y, ego.z), strict=True):
             cols[name].append(value)
-        cols["score"].append(float(track.score) if track.score is not None else 1.0)
+        cols["score"].append(float(track.scores[i]) if track.scores is not None else 1.0)
         if count_points:
             if seq.frames[k].has_sweep:
                 if sweep_frame != k:
                     sweep_frame, sweep_xyz = k, seq.sweep(k).xyz
                 cols["num_interior_pts"].append(int(points_in_box(sweep_xyz, ego).sum()))
             else:
-                cols["num_interior_pts"].append(int(track.num_points.get(k, 0)))
+                count = -1 if track.num_points is None else int(track.num_points[i])
+                cols["num_interior_pts"].append(max(count, 0))   # -1: the source has no count
     return cols, unmapped
 
 
@@ -281,7 +272,7 @@ def _write_feather(path: Path, columns: dict[str, Any]) -> None:
         feather.write_feather(pa.table(columns), str(tmp))
 
 
-def write_av2_annotations(path: str | Path, seq: Sequence, tracks: list[LabelTrack]) -> LabelsWritten:
+def write_av2_annotations(path: str | Path, seq: Sequence, tracks: list[ObjectTrack]) -> LabelsWritten:
     """An AV2 ``annotations.feather`` of ``tracks`` (see the module docstring)."""
     import pyarrow as pa
 
@@ -294,7 +285,7 @@ def write_av2_annotations(path: str | Path, seq: Sequence, tracks: list[LabelTra
     return LabelsWritten(path, len(cols["timestamp_ns"]), unmapped)
 
 
-def write_av2_submission(path: str | Path, seq: Sequence, tracks: list[LabelTrack]) -> LabelsWritten:
+def write_av2_submission(path: str | Path, seq: Sequence, tracks: list[ObjectTrack]) -> LabelsWritten:
     """The AV2 detection submission table of ``tracks`` (``score`` = the track's score, 1 without one)."""
     import pyarrow as pa
 

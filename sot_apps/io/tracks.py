@@ -18,12 +18,14 @@ from ..errors import InputError
 from ..schemas import load_json_validated, validate
 from .atomic import write_json
 from .jsonable import json_safe
+from .object_track import ObjectTrack
 from .ply import read_ply_points, write_ply_points
 
 if TYPE_CHECKING:
     from .sequence import Sequence
 
-__all__ = ["DEFAULT_INVALID_FLAGS", "TRACKER_FLAGS", "frame_is_valid", "Size", "FrameRecord", "TrackFile", "read_track", "write_track", "check_track_belongs", "SCHEMA_VERSION"]
+__all__ = ["DEFAULT_INVALID_FLAGS", "TRACKER_FLAGS", "frame_is_valid", "Size", "FrameRecord", "TrackFile", "read_track",
+           "write_track", "check_track_belongs", "object_track", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 1
 
@@ -146,6 +148,24 @@ class TrackFile:
                    init_box=Box(*(float(b[k]) for k in ("x", "y", "z", "heading", "length", "width", "height"))),
                    config=dict(data["config"]), frames=[FrameRecord.from_json(f) for f in data["frames"]],
                    label=data.get("label"), shape=data.get("shape", "shape.ply"))
+
+
+def object_track(track: TrackFile, shape_points: np.ndarray | None = None, source: str = "",
+                 invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> ObjectTrack:
+    """A track file as an :class:`ObjectTrack` (the one conversion): its records in frame order, the track's size,
+    ``valid`` where :func:`frame_is_valid` (``invalid_flags``), the tracker's quality as ``scores``, its
+    ``num_points``, and the tracker's config as ``config["tracker"]``. ValueError on frames or timestamps that do
+    not increase."""
+    records = sorted(track.frames, key=lambda r: r.frame)
+    flags = [list(r.flags) for r in records]
+    invalid_flags = set(invalid_flags)
+    return ObjectTrack.from_states(
+        track.object_id, track.label or "", (track.size.length, track.size.width, track.size.height),
+        [r.frame for r in records], [r.timestamp_ns for r in records],
+        np.array([r.state.to_array() for r in records], dtype=np.float64).reshape(-1, 4),
+        [frame_is_valid(f, invalid_flags) for f in flags], flags, scores=[r.quality for r in records],
+        num_points=[r.num_points for r in records], source=source, shape_points=shape_points,
+        config={"tracker": track.config})
 
 
 def _check_frames(doc: dict[str, Any], path: Path) -> None:

@@ -6,12 +6,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import __version__
+from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
 from ..objects.smoother import (
     ANNOTATION_SMOOTHER,
     TRACKER_SMOOTHER,
     Kinematics,
-    ObjectTrack,
     SmootherConfig,
     smooth_track,
 )

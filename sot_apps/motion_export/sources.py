@@ -1,6 +1,6 @@
 """Inputs of the motion export: tracker outputs (track directories) or ground-truth annotations.
 
-Both become :class:`~sot_apps.objects.smoother.ObjectTrack` (per-frame WORLD states with a
+Both become :class:`~sot_apps.io.object_track.ObjectTrack` (per-frame WORLD states with a
 validity mask). A tracker frame whose ``flags`` contain one of ``invalid_flags`` (default
 "no_points", "prior_only", "lost": the state was predicted, not measured) is invalid: it is not used
 as a measurement and is exported with ``valid = False``. Advisory flags ("init", "low_points",
@@ -16,13 +16,13 @@ from typing import Sequence as Seq
 
 import numpy as np
 
-from tracker import Box, voxel_downsample_centres
+from tracker import voxel_downsample_centres
 
 from ..errors import InputError
+from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
 from ..io.tracks import DEFAULT_INVALID_FLAGS, frame_is_valid
-from ..objects.shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
-from ..objects.smoother import ObjectTrack
+from ..objects.shapes import BoxMargin, ShapeParams, object_points_by_frame
 
 __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_from_dirs", "tracks_from_annotations",
            "aggregate_shape"]
@@ -30,25 +30,17 @@ __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_
 def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
                    invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> ObjectTrack:
     """Read ``directory/track.json`` + ``shape.ply`` into an ObjectTrack."""
-    from ..io.tracks import check_track_belongs, read_track
+    from ..io.tracks import check_track_belongs, object_track, read_track
 
     directory = Path(directory)
     track, shape = read_track(directory)
     json_path = directory if directory.suffix == ".json" else directory / "track.json"
     if sequence is not None:
         check_track_belongs(track, sequence, json_path)
-    records = sorted(track.frames, key=lambda r: r.frame)
-    if not records:
+    if not track.frames:
         raise InputError(json_path, "frames: the track has no frames")
-    flags = [list(r.flags) for r in records]
-    valid = np.array([frame_is_valid(f, invalid_flags) for f in flags], dtype=bool)
-    states = np.array([[r.state.x, r.state.y, r.state.z, r.state.heading] for r in records], dtype=np.float64)
     try:
-        return ObjectTrack(object_id=track.object_id, label=track.label or "", size=(track.size.length,
-                           track.size.width, track.size.height), frames=[r.frame for r in records],
-                           timestamps_ns=[r.timestamp_ns for r in records], states=states, valid=valid,
-                           flags=flags, source=str(json_path), shape_points=shape,
-                           config={"tracker": track.config})
+        return object_track(track, shape, str(json_path), invalid_flags)
     except ValueError as exc:
         raise InputError(json_path, str(exc)) from exc
 
@@ -96,7 +88,7 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
             flags.append([])
         sizes = np.array([[b.length, b.width, b.height] for b in ann.boxes])
         size = tuple(float(v) for v in np.median(sizes, axis=0))
-        out.append(ObjectTrack(object_id=tid, label=ann.label, size=size, frames=frames,
+        out.append(ObjectTrack.from_states(object_id=tid, label=ann.label, size=size, frames=frames,
                                timestamps_ns=sequence.timestamps_ns[frames], states=states, valid=valid,
                                flags=flags, source=f"annotations of {sequence.id}",
                                config={"source": "annotations"}, tilts=tilts if tilts.any() else None))
@@ -112,8 +104,8 @@ def aggregate_shape(sequence: Sequence, track: ObjectTrack, max_frames: int = 20
     if len(idx) == 0:
         return np.zeros((0, 3))
     pick = idx[np.unique(np.linspace(0, len(idx) - 1, min(max_frames, len(idx))).round().astype(int))]
-    boxes = TrackBoxes(tuple(int(track.frames[i]) for i in pick),
-                       tuple(Box(*(float(v) for v in track.states[i]), *track.size) for i in pick))
+    boxes = ObjectTrack.from_states(track.object_id, track.label, track.size, track.frames[pick], None,
+                                    track.states[pick], None)
     margin = BoxMargin(scale=(scale, scale, scale))
     params = ShapeParams(near=margin, stamp=margin, keep=margin, ground_clearance=None, capture_time=False,
                          per_point_time=False)

@@ -43,11 +43,12 @@ from tracker import Box
 from ..errors import InputError
 from ..interrupts import import_trimesh
 from ..io.atomic import write_json
+from ..io.object_track import ObjectTrack
 from ..io.ply import read_ply_mesh, write_ply_mesh, write_ply_points
 from ..io.sequence import Sequence
 from ..schemas import load_json_validated, validate
 from .meshes import SurfelParams, surfel_mesh
-from .shapes import BoxMargin, ShapeParams, TrackBoxes, object_points_by_frame
+from .shapes import BoxMargin, ShapeParams, object_points_by_frame
 
 __all__ = ["BankEntry", "Bank", "SPLITS", "bank_split", "split_entries", "read_bank", "write_bank_index",
            "entry_from_points", "entry_from_track_dir",
@@ -204,7 +205,9 @@ def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: I
     if missing:
         raise InputError(seq.root, f"no annotated track {missing[0]!r}")
     excluded = set(int(k) for k in exclude_frames)
-    boxes = {tid: TrackBoxes(tuple(tracks[tid].frames), tuple(tracks[tid].boxes)) for tid in track_ids}
+    boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label,
+                                         dict(zip(tracks[tid].frames, tracks[tid].boxes, strict=True)))
+             for tid in track_ids}
     params = ShapeParams(near=BoxMargin(scale=(1.3, 1.3, 1.05)), stamp=BoxMargin(), min_stamp_points=1,
                          keep=BoxMargin(scale=(1.02, 1.02, 1.02)), ground_clearance=ground_clearance, end="hold")
     points, _ = object_points_by_frame(seq, boxes, params, [k for k in range(len(seq.frames)) if k not in excluded],

@@ -20,9 +20,10 @@ import numpy as np
 
 from tracker import Box, points_in_box
 
+from ..io.object_track import ObjectTrack
 from .trajectory import EndMode, Trajectory
 
-__all__ = ["BoxMargin", "ShapeParams", "TrackBoxes", "box_capture_time", "in_box", "object_points_by_frame"]
+__all__ = ["BoxMargin", "ShapeParams", "box_capture_time", "in_box", "object_points_by_frame"]
 
 
 @dataclass(frozen=True)
@@ -66,21 +67,11 @@ class ShapeParams:
     max_extrapolation_ns: int | None = None
 
 
-@dataclass(frozen=True)
-class TrackBoxes:
-    """The boxes of one object at frames (world frame)."""
-
-    frames: tuple[int, ...]
-    boxes: tuple[Box, ...]
-
-    def box_at(self, frame: int) -> Box:
-        return self.boxes[self.frames.index(frame)]
-
-
-def object_points_by_frame(seq, tracks: dict[str, TrackBoxes], params: ShapeParams = ShapeParams(),
+def object_points_by_frame(seq, tracks: dict[str, ObjectTrack], params: ShapeParams = ShapeParams(),
                            point_frames: Iterable[int] | None = None, progress: bool = False
                            ) -> tuple[dict[str, dict[int, np.ndarray]], dict[str, Trajectory]]:
-    """Per track and frame, the object-frame points of its box; and each track's box trajectory (the boxes at
+    """Per track (an ObjectTrack: boxes at frames) and frame, the object-frame points of its box; and each track's
+    box trajectory (the boxes at
     their capture times). ``point_frames`` (default: all) limits the frames whose points are returned; every
     box is stamped. Each sweep is read once."""
     from tqdm import tqdm
@@ -112,9 +103,8 @@ def object_points_by_frame(seq, tracks: dict[str, TrackBoxes], params: ShapePara
     out: dict[str, dict[int, np.ndarray]] = {tid: {} for tid in tracks}
     trajectories: dict[str, Trajectory] = {}
     for tid, track in tracks.items():
-        trajectory = Trajectory.from_samples([stamps[tid][int(k)] for k in track.frames],
-                                             [b.state.to_array() for b in track.boxes], params.end,
-                                             params.max_extrapolation_ns, [(b.roll, b.pitch) for b in track.boxes])
+        trajectory = Trajectory.from_samples([stamps[tid][int(k)] for k in track.frames], track.states, params.end,
+                                             params.max_extrapolation_ns, track.tilts)
         trajectories[tid] = trajectory
         for k, (pts, t) in near_points[tid].items():
             box = track.box_at(k)

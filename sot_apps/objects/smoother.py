@@ -46,7 +46,9 @@ import numpy as np
 
 from tracker import ctrv_arc, wrap_angle
 
-__all__ = ["SmootherConfig", "ObjectTrack", "Kinematics", "smooth_track", "ctrv_transition",
+from ..io.object_track import ObjectTrack
+
+__all__ = ["SmootherConfig", "Kinematics", "smooth_track", "ctrv_transition",
            "central_difference_kinematics"]
 
 _NX = 8  # x, y, theta, v, omega, z, vz, beta
@@ -78,50 +80,6 @@ class SmootherConfig:
 # Presets: tracker outputs are noisier than human annotations.
 TRACKER_SMOOTHER = SmootherConfig()
 ANNOTATION_SMOOTHER = SmootherConfig(sigma_position=0.05, sigma_heading=0.02, sigma_z=0.05)
-
-
-@dataclass
-class ObjectTrack:
-    """Per-frame box states of one object (the smoother's input).
-
-    ``states`` (N, 4) WORLD [x, y, z, heading]; ``valid`` (N,) False where the measurement must not
-    be used (``flags[i]`` says why). ``size`` is (length, width, height). ``tilts`` (N, 2) ``[roll, pitch]``
-    of boxes that are not level in the world (None: level); they are carried through, not smoothed.
-    """
-
-    object_id: str
-    label: str
-    size: tuple[float, float, float]
-    frames: np.ndarray          # (N,) int64 sequence frame indices, strictly increasing
-    timestamps_ns: np.ndarray   # (N,) int64
-    states: np.ndarray          # (N, 4) float64
-    valid: np.ndarray           # (N,) bool
-    flags: list[list[str]] = field(default_factory=list)
-    source: str = ""
-    shape_points: np.ndarray | None = None  # (M, 3) object-frame points, optional
-    config: dict = field(default_factory=dict)
-    tilts: np.ndarray | None = None         # (N, 2) [roll, pitch]; None: level
-
-    def __post_init__(self) -> None:
-        self.frames = np.asarray(self.frames, dtype=np.int64).reshape(-1)
-        self.timestamps_ns = np.asarray(self.timestamps_ns, dtype=np.int64).reshape(-1)
-        self.states = np.asarray(self.states, dtype=np.float64).reshape(-1, 4)
-        self.valid = np.asarray(self.valid, dtype=bool).reshape(-1)
-        n = len(self.frames)
-        if not (len(self.timestamps_ns) == len(self.states) == len(self.valid) == n):
-            raise ValueError(f"{self.object_id}: frames, timestamps, states and valid differ in length")
-        if not self.flags:
-            self.flags = [[] for _ in range(n)]
-        if len(self.flags) != n:
-            raise ValueError(f"{self.object_id}: flags has {len(self.flags)} entries for {n} frames")
-        if n > 1 and (np.any(np.diff(self.frames) <= 0) or np.any(np.diff(self.timestamps_ns) <= 0)):
-            raise ValueError(f"{self.object_id}: frames and timestamps must be strictly increasing")
-        self.valid = self.valid & np.isfinite(self.states).all(axis=1)
-        if self.tilts is not None:
-            self.tilts = np.asarray(self.tilts, dtype=np.float64).reshape(-1, 2)
-            if len(self.tilts) != n:
-                raise ValueError(f"{self.object_id}: tilts has {len(self.tilts)} rows for {n} frames")
-            self.valid = self.valid & np.isfinite(self.tilts).all(axis=1)
 
 
 @dataclass

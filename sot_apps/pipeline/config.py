@@ -11,6 +11,7 @@ from typing import Any
 
 from ..apps import V1_APPS, build_config, get_app
 from ..errors import InputError
+from ..io.jsonable import json_safe
 
 __all__ = ["ObjectSource", "SequenceConfig", "TrackStage", "Stages", "PipelineConfig", "load_config", "V1_APPS"]
 
@@ -205,15 +206,7 @@ def _section_json(config: Any) -> dict:
     """A stage's section as the pipeline file writes it: a field left at its default None is left out (the file
     has no null)."""
     defaults = {f.name: f.default for f in dataclasses.fields(config)}
-    return {k: _plain(v) for k, v in dataclasses.asdict(config).items() if not (v is None and defaults[k] is None)}
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    return value
+    return {k: json_safe(v) for k, v in dataclasses.asdict(config).items() if not (v is None and defaults[k] is None)}
 
 
 def _check_objects(objects: ObjectSource, path) -> None:

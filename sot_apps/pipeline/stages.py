@@ -19,8 +19,8 @@ from ..apps import track_dir
 from ..evaluation.track_health import track_health
 from ..tracking import (
     ObjectRequest,
-    ObjectTrack,
     TrackingFailed,
+    TrackOutcome,
     track_result_to_trackfile,
     write_shape_growth,
     write_track_result,
@@ -64,7 +64,7 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     writes: dict[str, Future] = {}
     writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="track-writer")
 
-    def write(track: ObjectTrack) -> None:
+    def write(track: TrackOutcome) -> None:
         if track.error is None:   # a copy: the pass releases the object's result once this returns
             writes[track.object_id] = writer.submit(_write_timed, out, by_id[track.object_id], copy.copy(track),
                                                     digests[track.object_id])
@@ -93,13 +93,13 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     return {"sequence": first.sequence, "objects": objects, "times": breakdown}
 
 
-def _write_timed(out: str, plan: ObjectPlan, track: ObjectTrack, digest: str) -> tuple[dict, float]:
+def _write_timed(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -> tuple[dict, float]:
     """:func:`write_object` and the CPU seconds it took (of the thread running it)."""
     cpu = time.thread_time()
     return write_object(out, plan, track, digest), time.thread_time() - cpu
 
 
-def write_object(out: str, plan: ObjectPlan, track: ObjectTrack, digest: str) -> dict:
+def write_object(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -> dict:
     """One tracked object's outputs and completion marker; returns its summary for the manifest."""
     result = track.result
     directory = track_dir(out, plan.sequence, plan.object_id)

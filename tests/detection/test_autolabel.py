@@ -147,7 +147,8 @@ def test_fit_to_points_reads_the_box_from_the_points_where_both_faces_show():
 
 
 def test_detection_sigma_grows_when_errors_repeat_from_frame_to_frame():
-    from sot_apps.detection.autolabel import DetectionTrack, detection_sigma
+    from sot_apps.detection.autolabel import detection_sigma
+    from sot_apps.io.object_track import ObjectTrack
     from tracker.geometry import Box
 
     rng = np.random.default_rng(0)
@@ -159,11 +160,11 @@ def test_detection_sigma_grows_when_errors_repeat_from_frame_to_frame():
     boxes = {k: Box(0.0, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5) for k in range(n)}
 
     def sigma(errors):
-        track = DetectionTrack("t", {k: np.array([e, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5]) for k, e in enumerate(errors)},
-                               {k: 0.9 for k in range(n)})
+        track = ObjectTrack("t", "", np.arange(n), [[e, 0.0, 0.0, 0.0, 4.0, 2.0, 1.5] for e in errors],
+                            scores=np.full(n, 0.9))
         return detection_sigma(boxes, track)[0][0]
 
     assert sigma(iid) == pytest.approx(0.2 / np.sqrt(n), rel=0.35)
     assert sigma(correlated) > 1.5 * sigma(iid)  # rho 0.9: n_eff ~ n / 19 (estimated rho from 60 samples is lower)
-    few = DetectionTrack("t", {0: np.zeros(7), 1: np.zeros(7)}, {0: 0.9, 1: 0.9})
+    few = ObjectTrack("t", "", [0, 1], np.zeros((2, 7)), scores=[0.9, 0.9])
     assert np.isinf(detection_sigma(boxes, few)[0]).all()

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sot_apps.io.object_track import ObjectTrack
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
-from sot_apps.objects.smoother import ObjectTrack
 from tracker.geometry import make_transform, rotation_z, wrap_angle
 
 T0_NS = 1_557_539_956_500_000_000
@@ -43,7 +43,7 @@ def make_track(object_id: str, times_ns: np.ndarray, states: np.ndarray, valid: 
     if shape:
         g = np.linspace(-1.0, 1.0, 5)
         shape_points = np.stack(np.meshgrid(2 * g, g, 0.7 * g), axis=-1).reshape(-1, 3)
-    return ObjectTrack(object_id=object_id, label=label, size=(4.5, 1.9, 1.6),
+    return ObjectTrack.from_states(object_id=object_id, label=label, size=(4.5, 1.9, 1.6),
                        frames=np.arange(n) if frames is None else frames, timestamps_ns=times_ns, states=states,
                        valid=valid, flags=flags, source="synthetic", shape_points=shape_points)
 

@@ -6,8 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sot_apps.io.object_track import ObjectTrack
 from sot_apps.io.sequence import Sweep
-from sot_apps.objects.shapes import BoxMargin, ShapeParams, TrackBoxes, box_capture_time, in_box, object_points_by_frame
+from sot_apps.objects.shapes import BoxMargin, ShapeParams, box_capture_time, in_box, object_points_by_frame
 from tracker import Box
 
 SPEED = 10.0                 # m/s along +x
@@ -61,7 +62,7 @@ def test_in_box_margins_scale_then_pad():
 def test_per_point_capture_time_undoes_the_rolling_scan_smear():
     world = _RollingWorld()
     frames = tuple(range(len(world.frames)))
-    tracks = {"car": TrackBoxes(frames, tuple(world.annotation(k) for k in frames))}
+    tracks = {"car": ObjectTrack.from_boxes("car", "Car", {k: world.annotation(k) for k in frames})}
     wide = BoxMargin(pad=(1.0, 0.3, 0.0))
     # extrapolate: the first sweep's early points were captured before the first box's capture time
     params = ShapeParams(near=wide, stamp=BoxMargin(pad=(0.6, 0.1, 0.0)), keep=wide, ground_clearance=None,

@@ -119,16 +119,18 @@ def test_tilted_points_in_box_is_exact_on_an_analytic_case():
 def test_trajectories_place_tilted_boxes_as_given(readers_root):
     """Flow places objects with objects.trajectory: its poses and object-frame points follow the boxes' roll and
     pitch (AV2 boxes on a tilted ego); a level trajectory is unchanged."""
-    from sot_apps.objects.shapes import ShapeParams, TrackBoxes, object_points_by_frame
+    from sot_apps.io.object_track import ObjectTrack
+    from sot_apps.objects.shapes import ShapeParams, object_points_by_frame
     from sot_apps.objects.trajectory import Trajectory
 
     seq = open_sequence(AV2_LOG_A)
     k = next(f.index for f in seq.frames if f.has_sweep)
-    tracks = {a.track_id: TrackBoxes((k,), (a.box,)) for a in seq.annotations[k] if a.num_points > 50}
+    tracks = {a.track_id: ObjectTrack.from_boxes(a.track_id, a.label, {k: a.box})
+              for a in seq.annotations[k] if a.num_points > 50}
     points, trajectories = object_points_by_frame(seq, tracks, ShapeParams(capture_time=False, ground_clearance=None))
     assert tracks and points
     for tid, trajectory in trajectories.items():
-        box = tracks[tid].boxes[0]
+        box = tracks[tid].box(0)
         np.testing.assert_allclose(trajectory.world_from_object_at(seq.frames[k].timestamp_ns), box.world_from_object(),
                                    atol=1e-12)
         corners = box.corners()
