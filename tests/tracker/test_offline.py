@@ -58,11 +58,18 @@ def _scene(seed: int = 0, n_frames: int = 30):
         ground = np.c_[rng.uniform(s[0] - 15, s[0] + 15, 3000), rng.uniform(s[1] - 15, s[1] + 15, 3000),
                        rng.normal(0.0, 0.02, 3000)]
         frames.append(LidarFrame(k, k * 100_000_000, np.vstack([world, ground]).astype(np.float32), np.eye(4)))
+    return _Source(frames), truth, _perturbed(rng, truth, 0.15, 0.05, 0.04)
+
+
+def _perturbed(rng: np.random.Generator, truth: np.ndarray, sigma_xy: float, sigma_z: float,
+               sigma_heading: float) -> np.ndarray:
+    """``truth`` (N, 4) with Gaussian noise on frames 1.. (frame 0 exact), drawn xy, z, heading in that order."""
     noisy = truth.copy()
-    noisy[1:, :2] += rng.normal(0.0, 0.15, (n_frames - 1, 2))
-    noisy[1:, 2] += rng.normal(0.0, 0.05, n_frames - 1)
-    noisy[1:, 3] += rng.normal(0.0, 0.04, n_frames - 1)
-    return _Source(frames), truth, noisy
+    n = len(truth) - 1
+    noisy[1:, :2] += rng.normal(0.0, sigma_xy, (n, 2))
+    noisy[1:, 2] += rng.normal(0.0, sigma_z, n)
+    noisy[1:, 3] += rng.normal(0.0, sigma_heading, n)
+    return noisy
 
 
 def _result(states: np.ndarray) -> TrackResult:

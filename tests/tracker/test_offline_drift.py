@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_offline import H, L, W, _result, _Source
+from test_offline import H, L, W, _perturbed, _result, _Source
 from test_reacquire_clusters import _scene, _straight
 
 from tracker import get_preset, refine_fixed_lag, refine_offline
@@ -53,11 +53,7 @@ def _ring_scene(seed: int, n_frames: int = 40):
         road = np.c_[rng.uniform(state[0] - 12, state[0] + 12, 2000), rng.uniform(state[1] - 12, state[1] + 12, 2000),
                      rng.normal(0.0, 0.02, 2000)]
         frames.append(LidarFrame(j, j * 100_000_000, np.vstack([car, road]).astype(np.float32), np.eye(4)))
-    online = truth.copy()
-    online[1:, :2] += rng.normal(0.0, 0.1, (n_frames - 1, 2))
-    online[1:, 2] += rng.normal(0.0, 0.02, n_frames - 1)
-    online[1:, 3] += rng.normal(0.0, 0.03, n_frames - 1)
-    return _Source(frames), truth, online
+    return _Source(frames), truth, _perturbed(rng, truth, 0.1, 0.02, 0.03)
 
 
 def _states(result: TrackResult) -> np.ndarray:
