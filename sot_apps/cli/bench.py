@@ -5,20 +5,22 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..bench import discover
 from .common import add_subcommand, declare_outputs
 
 
 def register(subparsers) -> argparse.ArgumentParser:
-    registry = discover()
-    broken = "\n".join(f"  {m}: {e}" for m, e in registry.errors.items())
-    description = ("Benchmarks that print tables (README figures quote them). Each is a module of sot_apps/bench "
-                   "with register(registry); see `sot-apps bench BENCHMARK --help`."
-                   + (f"\n\nNot available (import failed):\n{broken}" if broken else ""))
     parser = add_subcommand(subparsers, "bench", help="speed/accuracy benchmarks that print tables",
-                            description=description,
+                            description="Benchmarks that print tables (README figures quote them). Each is a module "
+                                        "of sot_apps/bench with register(registry); see `sot-apps bench BENCHMARK "
+                                        "--help`.",
                             examples=["sot-apps bench tracker ../shared/data/pandaset_002",
                                       "sot-apps bench tracker ../shared/data/pandaset_002 --preset full faithful"])
+    from ..bench import discover  # here: `sot-apps --help` lists the commands without importing the benchmarks
+
+    registry = discover()
+    broken = "\n".join(f"  {m}: {e}" for m, e in registry.errors.items())
+    if broken:
+        parser.description += f"\n\nNot available (import failed):\n{broken}"
     sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", parser_class=type(parser))
     for bench in registry.benchmarks.values():
         child = sub.add_parser(bench.name, help=bench.help, description=bench.description or bench.help,

@@ -34,9 +34,18 @@ def example_epilog(*examples: str) -> str:
     return "Examples:\n" + "\n".join(f"  {e}" for e in examples)
 
 
+class SubcommandListed(Exception):
+    """Raised by :func:`add_subcommand` when the CLI only lists the subcommands (``sot-apps --help``, ``sot-apps``
+    alone): the subcommand's name and help line are in place, the rest of its ``register`` (its options and the
+    imports they need) is skipped."""
+
+
 def add_subcommand(subparsers, name: str, help: str, description: str, examples: list[str]) -> argparse.ArgumentParser:
-    return subparsers.add_parser(name, help=help, description=description, epilog=example_epilog(*examples),
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = subparsers.add_parser(name, help=help, description=description, epilog=example_epilog(*examples),
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    if getattr(subparsers, "listing_only", False):
+        raise SubcommandListed(name)
+    return parser
 
 
 def add_action(subparsers, name: str, help: str, description: str, examples: list[str]) -> argparse.ArgumentParser:

@@ -122,7 +122,16 @@ def _subcommand_choices(parser: argparse.ArgumentParser) -> dict:
     return {}
 
 
-def _build_parser(modules: list[str]) -> argparse.ArgumentParser:
+def listing_parser() -> argparse.ArgumentParser:
+    """The parser of ``sot-apps`` without a subcommand (``--help``, ``--version``, nothing): every subcommand with
+    its help line only (``common.add_subcommand`` stops each ``register`` there), so listing them costs their
+    module imports, not their options."""
+    return _build_parser(_subcommand_modules(), listing_only=True)
+
+
+def _build_parser(modules: list[str], listing_only: bool = False) -> argparse.ArgumentParser:
+    from .common import SubcommandListed
+
     parser = OneLineParser(
         prog="sot-apps",
         description="Model-free vehicle tracking (SOTracker) and data generation from LiDAR sequences.",
@@ -132,11 +141,15 @@ def _build_parser(modules: list[str]) -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
     parser.add_argument("--version", action="version", version=f"sot-apps {_version()}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
+    subparsers.listing_only = listing_only
     for name in modules:
         module = importlib.import_module(f"sot_apps.cli.{name}")
         register = getattr(module, "register", None)
         if register is not None:
-            _add_debug(register(subparsers))
+            try:
+                _add_debug(register(subparsers))
+            except SubcommandListed:
+                continue
     return parser
 
 
@@ -178,7 +191,8 @@ def main(argv: Seq[str] | None = None) -> int:
     argv = _join_negative_values(list(sys.argv[1:] if argv is None else argv))
     debug = "--debug" in argv or os.environ.get("SOT_APPS_DEBUG") == "1"
     try:
-        parser = build_parser(_invoked_command(argv))
+        command = _invoked_command(argv)
+        parser = build_parser(command) if command is not None else listing_parser()
         args = parser.parse_args(argv)
         if not getattr(args, "command", None):
             parser.print_help()

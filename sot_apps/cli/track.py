@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tracker import DETECTION_PRESETS, get_preset, preset_names
-
 from ..errors import InputError
 from .common import (
     add_detections_arguments,
@@ -33,6 +31,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                   "sot-apps track ../shared/data/pandaset_002 --track-id 91aa5b5c --lag 10 --out out/tracks/91aa5b5c_lag10",
                   "sot-apps track ../shared/data/pandaset_002 --keyframes keyframes.json --track-id 91aa5b5c "
                   "--out out/tracks/91aa5b5c_keyframes"])
+    from tracker import preset_names  # here, not at import: `sot-apps --help` lists the commands without it
+
     add_sequence_argument(parser)
     who = parser.add_mutually_exclusive_group()
     who.add_argument("--track-id", metavar="ID", help="annotated track id (a unique prefix is enough); the start "
@@ -73,6 +73,8 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tracker import DETECTION_PRESETS, get_preset
+
     from ..io.bounds import check_box_values
     from ..tracking import (
         annotated_track_start,

@@ -67,3 +67,15 @@ def test_a_typo_still_lists_the_commands(capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "invalid choice: 'trak'" in err and "track" in err
+
+
+def test_the_command_list_is_the_full_parsers_help():
+    """``sot-apps --help`` builds each subcommand up to its help line only (``SubcommandListed``): the listing is
+    the full parser's, and the subcommands' own options are not built."""
+    from sot_apps.cli.main import _build_parser, _subcommand_modules, listing_parser
+
+    full = _build_parser(_subcommand_modules())
+    listed = listing_parser()
+    assert _probe("--help")["help"] == full.format_help() == listed.format_help()
+    track = listed._subparsers._group_actions[0].choices["track"]
+    assert "--preset" not in track.format_help()
