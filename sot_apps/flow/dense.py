@@ -27,20 +27,35 @@ __all__ = ["dense_flow", "RayCache"]
 
 
 class RayCache:
-    """Pixel rays of a camera, computed once per camera model (undistortion is the slow part)."""
+    """Pixel rays of a camera, set up once per camera model: with lens distortion a map of the whole image
+    (undistortion is the slow part); without, the x of each column and the y of each row (a pinhole ray is
+    ``((u - cx) / fx, (v - cy) / fy, 1)`` when the skew ``K[0, 1]`` is 0: the same values as :func:`pixel_rays`)."""
 
     def __init__(self) -> None:
-        self._maps: dict[tuple, np.ndarray] = {}
+        self._maps: dict[tuple, tuple[np.ndarray, ...]] = {}
 
     def rays(self, model: CameraModel, pixels: np.ndarray) -> np.ndarray:
-        if not model.has_distortion:
+        """(M, 3) float64 rays ``(x, y, 1)`` through the integer pixels ``pixels`` (M, 2) (u, v)."""
+        if not model.has_distortion and model.K[0, 1] != 0.0:
             return pixel_rays(pixels, model)
         key = (model.K.tobytes(), model.distortion.tobytes(), model.width, model.height)
         if key not in self._maps:
-            grid = grid_pixels(0, 0, model.width, model.height)
-            self._maps[key] = pixel_rays(grid, model)[:, :2].astype(np.float64).reshape(model.height, model.width, 2)
-        xy = self._maps[key][pixels[:, 1], pixels[:, 0]]
-        return np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
+            if model.has_distortion:
+                grid = grid_pixels(0, 0, model.width, model.height)
+                self._maps[key] = (pixel_rays(grid, model)[:, :2].astype(np.float64).reshape(model.height, model.width, 2),)
+            else:
+                K = model.K
+                self._maps[key] = ((np.arange(model.width, dtype=np.float64) - K[0, 2]) / K[0, 0],
+                                   (np.arange(model.height, dtype=np.float64) - K[1, 2]) / K[1, 1])
+        maps = self._maps[key]
+        out = np.empty((len(pixels), 3))
+        if len(maps) == 1:
+            out[:, :2] = maps[0][pixels[:, 1], pixels[:, 0]]
+        else:
+            np.take(maps[0], pixels[:, 0], out=out[:, 0])
+            np.take(maps[1], pixels[:, 1], out=out[:, 1])
+        out[:, 2] = 1.0
+        return out
 
 
 _DEFAULT_CACHE = RayCache()
@@ -75,22 +90,26 @@ def visible_in_k1(setup: PairSetup, objects: list[FlowObject], obj: FlowObject, 
     """Mask of points (camera k+1 frame) of ``obj`` that are the nearest surface in image k+1."""
     model, params = setup.model, setup.params
     z1 = points_k1[:, 2]
-    ok = (z1 > 0.05) & _in_image(uv1, model)   # a NaN coordinate (behind the camera) compares False: not in it
-    if scene_k1 is not None and ok.any():
-        dirs = points_k1[ok] / z1[ok, None]
-        geom, t = scene_k1.first_hit(np.zeros(3), dirs)
-        target = order_k1.index(obj.index)
+    # a NaN coordinate (behind the camera) compares False: not in the image
+    shown = np.flatnonzero((z1 > 0.05) & _in_image(uv1, model))   # the points still visible, narrowed below
+    if scene_k1 is not None and len(shown):
+        points, z = (points_k1, z1) if len(shown) == len(z1) else (points_k1[shown], z1[shown])
+        geom, t = scene_k1.first_hit(np.zeros(3), points / z[:, None])
         # Same object, and the hit is (within tolerance) the point itself, not a nearer part of it.
-        same = (geom == target) & (t >= z1[ok] - params.margin(z1[ok]))
-        ok[np.flatnonzero(ok)[~same]] = False
-    if setup.lidar_k1 is not None and ok.any():
-        roi = image_roi(uv1[ok], model, margin=params.dilate_px)
+        same = (geom == order_k1.index(obj.index)) & (t >= z - params.margin(z))
+        if not same.all():
+            shown = shown[same]
+    if setup.lidar_k1 is not None and len(shown):
+        uv, z = uv1[shown], z1[shown]
+        roi = image_roi(uv, model, margin=params.dilate_px)
         if roi is not None:
             bottom = obj.bottom_z(obj.world_from_object_k1) + params.ground_clearance
             dm = depth_map(setup.lidar_k1, roi, params.dilate_px, min_world_z=bottom)
-            lidar = lookup_depth(dm, roi, uv1[ok])
-            hidden = lidar < z1[ok] - params.margin(z1[ok])
-            ok[np.flatnonzero(ok)[hidden]] = False
+            hidden = lookup_depth(dm, roi, uv) < z - params.margin(z)
+            if hidden.any():
+                shown = shown[~hidden]
+    ok = np.zeros(len(z1), dtype=bool)
+    ok[shown] = True
     return ok
 
 
@@ -139,7 +158,7 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
             roi = rois[obj.index]
             bottom = obj.bottom_z(obj.world_from_object_k) + params.ground_clearance
             dm = depth_map(setup.lidar_k, roi, params.dilate_px, min_world_z=bottom)
-            hidden = lookup_depth(dm, roi, pix.astype(np.float64)) < z - params.margin(z)
+            hidden = lookup_depth(dm, roi, pix) < z - params.margin(z)
         if hidden.any():
             shown = np.flatnonzero(~hidden)
             pix, points_k = pix[shown], points_k[shown]

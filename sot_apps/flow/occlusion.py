@@ -67,10 +67,16 @@ def depth_map(points: ProjectedPoints, roi: tuple[int, int, int, int], dilate_px
 
 
 def lookup_depth(depth: np.ndarray, roi: tuple[int, int, int, int], uv: np.ndarray) -> np.ndarray:
-    """Depth-map values at pixel coordinates ``uv`` (rounded); NO_DEPTH outside the ROI."""
+    """Depth-map values at pixel coordinates ``uv`` (rounded; integer pixels are used as they are); NO_DEPTH
+    outside the ROI (and for NaN coordinates)."""
     x0, y0, x1, y1 = roi
-    pix = np.rint(np.nan_to_num(uv, nan=-1e6)).astype(np.int64)
-    inside = (pix[:, 0] >= x0) & (pix[:, 0] < x1) & (pix[:, 1] >= y0) & (pix[:, 1] < y1)
+    uv = np.asarray(uv)
+    pix = uv if uv.dtype.kind in "iu" else np.rint(uv)   # a NaN stays NaN and fails every comparison: outside
+    u, v = pix[:, 0], pix[:, 1]
+    inside = np.flatnonzero((u >= x0) & (u < x1) & (v >= y0) & (v < y1))
     out = np.full(len(uv), NO_DEPTH, dtype=np.float32)
-    out[inside] = depth[pix[inside, 1] - y0, pix[inside, 0] - x0]
+    if len(inside):
+        # u, v are whole numbers inside the ROI here: the integer conversion is exact
+        flat = (v[inside].astype(np.int64) - y0) * (x1 - x0) + (u[inside].astype(np.int64) - x0)
+        out[inside] = np.ascontiguousarray(depth).reshape(-1)[flat]
     return out

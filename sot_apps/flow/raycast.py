@@ -28,7 +28,9 @@ class MultiMeshScene:
     def first_hit(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For (N, 3) rays (any length): (object index or -1, ray parameter t in units of the given
         direction, inf on a miss). With directions (x, y, 1) in a camera frame, t is the depth z."""
-        directions = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 3)
+        directions = np.asarray(directions)   # float64 stays float64: the tracer rounds each ray to float32 itself
+        directions = np.ascontiguousarray(directions, dtype=np.float64 if directions.dtype == np.float64
+                                          else np.float32).reshape(-1, 3)
         n = len(directions)
         if n == 0 or self.count == 0:
             return np.full(n, -1, dtype=np.int32), np.full(n, np.inf)
