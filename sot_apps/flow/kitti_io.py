@@ -8,22 +8,32 @@ OpenCV reads and writes BGR, so the array handed to cv2 is ``[valid, v, u]``. Fl
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 import cv2
 import numpy as np
 
 from ..errors import InputError
 from ..io.atomic import write_bytes
-from .png import encode_rows_png
+from .png import Pieces, encode_rows_png
 
 __all__ = ["encode_kitti_flow", "decode_kitti_flow", "kitti_flow_png", "kitti_flow_pngs", "write_kitti_flow",
            "write_kitti_flows", "read_kitti_flow"]
 
 _INVALID_RGB = (2 ** 15, 2 ** 15, 0)   # an invalid pixel in PNG channel order (u, v, valid)
+_BE16 = np.dtype(">u2")                # the block is built in PNG's byte order: the encoder filters it as it is
 
 
 def _kitti_values(flow: np.ndarray) -> np.ndarray:
     """(..., 2) flow -> (..., 2) uint16 u, v as stored (1/64 px, offset 2**15, clipped)."""
+    if flow.dtype == np.float32:
+        # flow * 64 is exact in float32 (a power of two), so is its rounding; adding the even offset 2**15 after
+        # the rounding gives what rounding flow * 64 + 2**15 (float64, exact) gives, half-to-even ties included
+        scaled = flow * np.float32(64.0)
+        np.rint(scaled, out=scaled)
+        np.clip(scaled, -(2.0 ** 15), 2.0 ** 15 - 1, out=scaled)
+        scaled += np.float32(2.0 ** 15)
+        return scaled.astype(np.uint16)
     scaled = flow.astype(np.float64)      # float64: flow * 64 + 2**15 is exact before the rounding
     scaled *= 64.0
     scaled += 2.0 ** 15
@@ -70,8 +80,8 @@ def _both_finite(values: np.ndarray) -> np.ndarray:
 
 
 class _FlowBlock:
-    """The rows of a KITTI flow PNG that hold valid pixels, filled: ``pixels`` (len(rows), W, 3) uint16 in PNG
-    order, ``content`` their valid mask, ``candidates`` the valid pixels' flat indices into the block."""
+    """The rows of a KITTI flow PNG that hold valid pixels, filled: ``pixels`` (len(rows), W, 3) big-endian
+    uint16 in PNG order, ``candidates`` the valid pixels' flat indices into the block."""
 
     def __init__(self, flow: np.ndarray, valid: np.ndarray) -> None:
         height, width = valid.shape
@@ -82,34 +92,36 @@ class _FlowBlock:
         finite = _both_finite(values)
         if not finite.all():
             candidates, values = candidates[finite], values[finite]
-        row = np.empty((width, 3), dtype=np.uint16)
+        row = np.empty((width, 3), dtype=_BE16)
         row[:] = _INVALID_RGB                               # invalid pixels: u = v = 0 px, valid = 0
-        pixels = np.empty((len(rows), width, 3), dtype=np.uint16)
+        pixels = np.empty((len(rows), width, 3), dtype=_BE16)
         pixels[:] = row                                     # row by row: a plain copy, not a 3-value broadcast
-        stored = np.empty((len(candidates), 3), dtype=np.uint16)
+        stored = np.empty((len(candidates), 3), dtype=_BE16)
         stored[:, :2] = _kitti_values(values)
         stored[:, 2] = 1
         # one scatter of whole 6-byte pixels (as opaque items: ~2x faster than a (N, 3) row scatter)
         pixels.reshape(-1, 3).view("V6").reshape(-1)[candidates] = stored.view("V6").reshape(-1)
-        content = np.zeros((len(rows), width), dtype=bool)
-        content.reshape(-1)[candidates] = True
-        self.height, self.rows, self.pixels, self.content, self.candidates = height, rows, pixels, content, candidates
+        self.height, self.rows, self.pixels, self.candidates = height, rows, pixels, candidates
 
-    def png(self, reuse: dict | None = None, keep: dict | None = None) -> bytes:
-        """The PNG (``reuse``/``keep``: row segments, :func:`~sot_apps.flow.png.encode_rows_png`)."""
-        return encode_rows_png(self.pixels, self.rows, self.height, _INVALID_RGB, self.content, reuse, keep)
+    def png(self, cuts: Sequence[int] = (), reuse: Pieces | None = None, keep: Pieces | None = None) -> bytes:
+        """The PNG (``cuts``/``reuse``/``keep``: pieces of rows, :func:`~sot_apps.flow.png.encode_rows_png`)."""
+        return encode_rows_png(self.pixels, self.rows, self.height, _INVALID_RGB, cuts, reuse, keep)
 
-    def restricted(self, keep: np.ndarray) -> tuple["_FlowBlock", np.ndarray]:
-        """The block with only the pixels of ``keep`` (an (H, W) mask) still valid (a copy; this one unchanged), and
-        the block rows that changed."""
+    def changed_rows(self, keep: np.ndarray) -> np.ndarray:
+        """(len(rows),) bool: the block rows in which some valid pixel is not in ``keep`` (an (H, W) mask)."""
+        drop = self.candidates[~keep[self.rows].reshape(-1)[self.candidates]]
+        changed = np.zeros(len(self.rows), dtype=bool)
+        changed[drop // self.pixels.shape[1]] = True
+        return changed
+
+    def restricted(self, keep: np.ndarray) -> "_FlowBlock":
+        """The block with only the pixels of ``keep`` (an (H, W) mask) still valid (a copy; this one unchanged)."""
         out = object.__new__(_FlowBlock)
         kept = keep[self.rows].reshape(-1)[self.candidates]
-        drop = self.candidates[~kept]
         out.height, out.rows, out.candidates = self.height, self.rows, self.candidates[kept]
-        out.pixels, out.content = self.pixels.copy(), self.content.copy()
-        out.pixels.reshape(-1, 3)[drop] = _INVALID_RGB
-        out.content.reshape(-1)[drop] = False
-        return out, np.unique(drop // self.pixels.shape[1])
+        out.pixels = self.pixels.copy()
+        out.pixels.reshape(-1, 3)[self.candidates[~kept]] = _INVALID_RGB
+        return out
 
 
 def kitti_flow_png(flow: np.ndarray, valid: np.ndarray) -> bytes:
@@ -121,19 +133,25 @@ def kitti_flow_png(flow: np.ndarray, valid: np.ndarray) -> bytes:
 def kitti_flow_pngs(flow: np.ndarray, valid: np.ndarray, valid_subset: np.ndarray) -> tuple[bytes, bytes]:
     """The PNGs of :func:`kitti_flow_png` for ``valid`` and for ``valid_subset`` (e.g. flow_occ and flow_noc: the
     non-occluded pixels are some of all the valid ones), the flow values scaled once for both. A subset mask
-    that is not one is taken as it is (each PNG on its own)."""
+    that is not one is taken as it is (each PNG on its own).
+
+    The first PNG is compressed in pieces cut around the rows that the subset changes; the second copies every
+    other piece and compresses only those rows again."""
     flow = np.asarray(flow)
     valid = np.asarray(valid, dtype=bool)
     subset = np.asarray(valid_subset, dtype=bool)
     block = _FlowBlock(flow, valid)
     if (subset & ~valid).any():
         return block.png(), kitti_flow_png(flow, subset)
-    segments: dict[int, tuple[bytes, bytes]] = {}
-    data = block.png(keep=segments)
-    noc, changed = block.restricted(subset)
-    for row in changed.tolist():   # rows that lost pixels are compressed again; the others are the same rows
-        segments.pop(row, None)
-    return data, noc.png(reuse=segments)
+    changed = block.changed_rows(subset)
+    if not changed.any():
+        data = block.png()
+        return data, data
+    edges = np.flatnonzero(np.diff(changed.astype(np.int8))) + 1     # where runs of changed rows start and end
+    pieces: Pieces = {}
+    data = block.png(cuts=edges.tolist(), keep=pieces)
+    reusable = {span: piece for span, piece in pieces.items() if not changed[span[0]:span[1]].any()}
+    return data, block.restricted(subset).png(cuts=edges.tolist(), reuse=reusable)
 
 
 def write_kitti_flow(path: str | Path, flow: np.ndarray, valid: np.ndarray) -> None:
