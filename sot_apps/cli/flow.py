@@ -94,6 +94,11 @@ def run(args: argparse.Namespace) -> int:
                                            mesh_method=args.mesh, box_time=args.box_time, progress=not args.quiet)
         source = "annotations"
     else:
+        if args.box_time == "points":
+            # the states' re-stamping reads the sweeps of the pairs (+- 2 frames) just before the pairs read them
+            # again: keep them decoded when they are few (~2.5 MB each)
+            a, b = args.pairs or (0, len(seq.frames) - 1)
+            seq.cache_size = max(seq.cache_size, min(b - a + 5, 16))
         objects = objects_for_pairs(seq, args.tracks, args.pairs, mesh_method=args.mesh, box_time=args.box_time)
         source = "tracks"
     if not objects:
