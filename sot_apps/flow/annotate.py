@@ -38,7 +38,7 @@ from .kitti_io import write_kitti_flows
 from .objects import TrackedObject
 from .occlusion import ProjectedPoints, project_lidar
 from .png import encode_png
-from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup
+from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup, flow_magnitude
 from .sparse import sparse_flow
 from .visualize import flow_to_color, overlay
 
@@ -243,8 +243,13 @@ class PairWriter:
 
 def _pair_record(k: int, camera: Camera, result: PairFlow, elapsed_ms: float) -> dict:
     objects = [s.to_dict() for s in result.objects]
-    valid = np.flatnonzero(result.valid_occ)
-    mag = np.linalg.norm(result.flow.reshape(-1, 2)[valid], axis=1)
+    rows = np.flatnonzero(result.valid_occ.any(axis=1))
+    if len(rows):   # the valid pixels in image order, found within the rows that hold them
+        first, width = rows[0], result.valid_occ.shape[1]
+        valid = np.flatnonzero(result.valid_occ[first:rows[-1] + 1]) + first * width
+    else:
+        valid = np.zeros(0, dtype=np.int64)
+    mag = flow_magnitude(result.flow.reshape(-1, 2)[valid])
     pixels = len(valid)
     noc = int(np.count_nonzero(result.valid_noc))
     return {"frame": k, "frame_next": k + 1, "timestamp_ns": int(camera.frames[k].timestamp_ns),

@@ -21,7 +21,7 @@ import numpy as np
 from .camera import CameraModel, apply_transform, grid_pixels, pixel_rays, project
 from .occlusion import depth_map, lookup_depth
 from .raycast import MultiMeshScene
-from .scene import FlowObject, ObjectPairStats, PairFlow, PairSetup, image_roi, project_vertices
+from .scene import FlowObject, ObjectPairStats, PairFlow, PairSetup, flow_magnitude, image_roi, project_vertices
 
 __all__ = ["dense_flow", "RayCache"]
 
@@ -172,7 +172,7 @@ def dense_flow(setup: PairSetup, objects: list[FlowObject], ray_cache: RayCache 
             flow = uv1 - pix
             good = np.isfinite(flow).all(axis=1)
             noc = visible_in_k1(setup, objects, obj, points_k1, uv1, scene_k1, order_k1) & good
-            mag = np.linalg.norm(flow, axis=1)    # per pixel: the same values as the norm of any selection
+            mag = flow_magnitude(flow)    # per pixel: the same values as the norm of any selection
             mean_flow_noc = float(mag[noc].mean()) if noc.any() else 0.0
             if not good.all():
                 keep = np.flatnonzero(good)

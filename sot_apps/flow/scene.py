@@ -12,7 +12,7 @@ from ..objects.meshes import Mesh
 from .camera import CameraModel, apply_transform, project
 from .occlusion import ProjectedPoints
 
-__all__ = ["FlowObject", "OcclusionParams", "PairSetup", "ObjectPairStats", "PairFlow", "image_roi"]
+__all__ = ["FlowObject", "OcclusionParams", "PairSetup", "ObjectPairStats", "PairFlow", "image_roi", "flow_magnitude"]
 
 
 @dataclass(frozen=True)
@@ -122,6 +122,15 @@ class PairFlow:
     def empty(cls, width: int, height: int) -> "PairFlow":
         return cls(np.zeros((height, width, 2), np.float32), np.zeros((height, width), bool),
                    np.zeros((height, width), bool), np.zeros((height, width), np.uint16), [])
+
+
+def flow_magnitude(flow: np.ndarray) -> np.ndarray:
+    """(N,) length of each (N, 2) flow vector: ``np.linalg.norm(flow, axis=1)`` to the bit (the same squares,
+    their sum, its square root, in the flow's dtype), without the axis reduction's cost."""
+    u, v = flow[:, 0], flow[:, 1]
+    out = u * u
+    out += v * v
+    return np.sqrt(out, out=out)
 
 
 def image_roi(uv: np.ndarray, model: CameraModel, margin: int = 2) -> tuple[int, int, int, int] | None:
