@@ -23,7 +23,6 @@ from typing import Callable
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from tracker import interpolate_pose, invert_transform, transform_points
 
@@ -291,7 +290,13 @@ def annotate_camera(seq: Sequence, camera_name: str, objects: list[TrackedObject
     _check_instances(root, mapping)
     ray_cache, lidar_cache = RayCache(), {}
     with PairWriter(workers=options.writer_threads) as writer:
-        for k in tqdm(range(a, b), desc=f"flow {camera_name}", unit="pair", disable=not progress):
+        if progress:   # tqdm only when it shows something (its import costs ~45 ms of start-up)
+            from tqdm import tqdm
+
+            steps = tqdm(range(a, b), desc=f"flow {camera_name}", unit="pair")
+        else:
+            steps = range(a, b)
+        for k in steps:
             record_path = root / "pairs" / f"{k:06d}.json"
             if record_path.is_file():
                 continue
