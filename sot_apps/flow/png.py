@@ -50,9 +50,12 @@ def _adler_combine(adler: int, block_adler: int, length: int) -> int:
 
 
 def _adler_repeat(adler: int, block_adler: int, length: int, count: int) -> int:
-    """Adler-32 after ``count`` more copies of a block of ``length`` bytes whose own Adler-32 is ``block_adler``."""
-    for _ in range(count):                    # at most one iteration per background row
-        adler = _adler_combine(adler, block_adler, length)
+    """Adler-32 after ``count`` more copies of a block of ``length`` bytes whose own Adler-32 is ``block_adler``
+    (by doubling: the copies of 1, 2, 4, ... blocks that make up ``count``)."""
+    while count:
+        if count & 1:
+            adler = _adler_combine(adler, block_adler, length)
+        block_adler, length, count = _adler_combine(block_adler, block_adler, length), 2 * length, count >> 1
     return adler
 
 
