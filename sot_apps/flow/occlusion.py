@@ -71,8 +71,9 @@ def lookup_depth(depth: np.ndarray, roi: tuple[int, int, int, int], uv: np.ndarr
     outside the ROI (and for NaN coordinates)."""
     x0, y0, x1, y1 = roi
     uv = np.asarray(uv)
-    pix = uv if uv.dtype.kind in "iu" else np.rint(uv)   # a NaN stays NaN and fails every comparison: outside
-    u, v = pix[:, 0], pix[:, 1]
+    u, v = uv[:, 0], uv[:, 1]
+    if uv.dtype.kind not in "iu":   # each column rounded on its own (contiguous: faster comparisons below)
+        u, v = np.rint(u), np.rint(v)   # a NaN stays NaN and fails every comparison: outside
     inside = np.flatnonzero((u >= x0) & (u < x1) & (v >= y0) & (v < y1))
     out = np.full(len(uv), NO_DEPTH, dtype=np.float32)
     if len(inside):
