@@ -58,6 +58,7 @@ from .ground import ground_mask
 from .metrics import unique_sorted, voxel_downsample_centres, voxel_downsample_means
 from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
+from .voxel_nearest import VoxelNearest
 
 __all__ = ["Anchors", "OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states",
            "refine_offline"]
@@ -368,6 +369,7 @@ class _Solver:
         folds = max(2, int(p.folds))
         self.folds = folds
         self.shapes, self.trees, self.normals, self.has_normal = [], [], [], []
+        self.nearest: list[VoxelNearest] = []
         local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame,
                                       self._object_frame(states))
         downsample = voxel_downsample_means if p.shape_voxel == "means" else voxel_downsample_centres
@@ -377,6 +379,7 @@ class _Solver:
                 return False
             self.shapes.append(shape)
             self.trees.append(cKDTree(shape))
+            self.nearest.append(VoxelNearest(shape, p.voxel, self.trees[-1]))   # the tree's answers, most by look-up
             self.normals.append(np.zeros((len(shape), 3)))   # computed for the points matched (_match)
             self.has_normal.append(np.zeros(len(shape), dtype=bool))
         self._matched = None
@@ -403,7 +406,7 @@ class _Solver:
             sel = fold == f
             if not sel.any():
                 continue
-            d, idx = self.trees[f].query(local[sel], k=1)
+            d, idx = self.nearest[f].query(local[sel])
             matched.append((f, sel, d, idx))
             rows = unique_sorted(idx[~self.has_normal[f][idx]])
             if len(rows) and min(self.params.normal_neighbours, len(self.shapes[f])) < 3:
