@@ -401,11 +401,9 @@ class _Solver:
         dist = np.empty(len(local))
         m = np.empty_like(local)
         n = np.empty_like(local)
-        fold = self.frame_idx % self.folds
         matched, missing = [], []
-        for f in range(self.folds):
-            sel = fold == f
-            if not sel.any():
+        for f, sel in enumerate(self.fold_rows):
+            if not len(sel):
                 continue
             d, idx = self.nearest[f].query(local[sel])
             matched.append((f, sel, d, idx))
@@ -453,6 +451,7 @@ class _Solver:
         scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
         self.slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()  # (frame, block entry) of _data
+        self.fold_rows = [np.flatnonzero(self.frame_idx % self.folds == f) for f in range(self.folds)]
         self._matched = self._residual = None
 
     def _residuals(self, states: np.ndarray, pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):

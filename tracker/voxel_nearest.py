@@ -66,11 +66,15 @@ class VoxelNearest:
             return self.tree.query(points, k=1)
         scaled = points / self.cell
         keys = np.floor(scaled)
-        frac = scaled - keys
-        rel = keys - self.low
-        clear = np.all((rel >= 0) & (rel < self.dims) & (frac >= _BORDER) & (frac <= 1.0 - _BORDER), axis=1)  # NaN: no
+        scaled -= keys                                   # the position inside the cell, 0..1
+        scaled -= 0.5
+        np.abs(scaled, out=scaled)
+        keys -= self.low
+        # inside the grid and clear of the cell's borders (NaN: neither)
+        clear = np.all((scaled <= 0.5 - _BORDER) & (keys >= 0) & (keys < self.dims), axis=1)
         rows = np.flatnonzero(clear)
-        cand = self.table[rel[rows].astype(np.int64) @ self.strides]
+        cells = keys[rows] @ self.strides.astype(np.float64)    # exact: integers below 2**23
+        cand = self.table[cells.astype(np.int64)]
         hit = cand >= 0
         rows, cand = rows[hit], cand[hit]
         q, t = points[rows], self.target[cand]
