@@ -11,8 +11,6 @@ is bit for bit the kd-tree's.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -25,11 +23,10 @@ _BORDER = 1e-6           # a query point this close (in cells) to a cell border 
 class VoxelNearest:
     """The nearest of ``target`` (M, 3) points to each query point, as ``cKDTree(target).query(points, k=1)``
     gives it. ``cell``: the grid size of a voxel-centre shape (points (i + 0.5) * cell, at most one per cell);
-    other targets (or too large a grid) send every query to the kd-tree. ``tree``: a kd-tree of ``target``, or a
-    callable making one, when the caller has it (else one is built the first time a query needs it)."""
+    other targets (or too large a grid) send every query to the kd-tree. ``tree``: a kd-tree of ``target`` when the
+    caller has one (else one is built the first time a query needs it)."""
 
-    def __init__(self, target: np.ndarray, cell: float,
-                 tree: cKDTree | Callable[[], cKDTree] | None = None) -> None:
+    def __init__(self, target: np.ndarray, cell: float, tree: cKDTree | None = None) -> None:
         self.target = np.ascontiguousarray(target, dtype=np.float64).reshape(-1, 3)
         self.cell = float(cell)
         self._tree = tree
@@ -55,8 +52,6 @@ class VoxelNearest:
     def tree(self) -> cKDTree:
         if self._tree is None:
             self._tree = cKDTree(self.target)
-        elif not isinstance(self._tree, cKDTree):
-            self._tree = self._tree()
         return self._tree
 
     def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
