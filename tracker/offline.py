@@ -58,6 +58,7 @@ from .ground import ground_mask
 from .metrics import unique_sorted, voxel_downsample_centres, voxel_downsample_means
 from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
+from .voxel_nearest import VoxelNearest
 
 __all__ = ["Anchors", "OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states",
            "refine_offline"]
@@ -359,6 +360,7 @@ class _Solver:
         self._matched: tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._travel = (np.zeros(self.k), np.zeros(self.k))  # heading targets and weights (_travel_targets)
         self._object_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._residual: tuple[np.ndarray, tuple] | None = None   # the last states' residuals (_residuals)
 
     def set_shapes(self, states: np.ndarray) -> bool:
         """Build, for each fold f, the shape from the frames NOT in f (a frame never matches its own points).
@@ -368,6 +370,7 @@ class _Solver:
         folds = max(2, int(p.folds))
         self.folds = folds
         self.shapes, self.trees, self.normals, self.has_normal = [], [], [], []
+        self.nearest: list[VoxelNearest] = []
         local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame,
                                       self._object_frame(states))
         downsample = voxel_downsample_means if p.shape_voxel == "means" else voxel_downsample_centres
@@ -377,9 +380,10 @@ class _Solver:
                 return False
             self.shapes.append(shape)
             self.trees.append(cKDTree(shape))
+            self.nearest.append(VoxelNearest(shape, p.voxel, self.trees[-1]))   # the tree's answers, most by look-up
             self.normals.append(np.zeros((len(shape), 3)))   # computed for the points matched (_match)
             self.has_normal.append(np.zeros(len(shape), dtype=bool))
-        self._matched = None
+        self._matched = self._residual = None
         return True
 
     def _object_frame(self, states: np.ndarray) -> np.ndarray:
@@ -397,13 +401,11 @@ class _Solver:
         dist = np.empty(len(local))
         m = np.empty_like(local)
         n = np.empty_like(local)
-        fold = self.frame_idx % self.folds
         matched, missing = [], []
-        for f in range(self.folds):
-            sel = fold == f
-            if not sel.any():
+        for f, sel in enumerate(self.fold_rows):
+            if not len(sel):
                 continue
-            d, idx = self.trees[f].query(local[sel], k=1)
+            d, idx = self.nearest[f].query(local[sel])
             matched.append((f, sel, d, idx))
             rows = unique_sorted(idx[~self.has_normal[f][idx]])
             if len(rows) and min(self.params.normal_neighbours, len(self.shapes[f])) < 3:
@@ -449,16 +451,15 @@ class _Solver:
         scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
         self.slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()  # (frame, block entry) of _data
-        self._matched = None
+        self.fold_rows = [np.flatnonzero(self.frame_idx % self.folds == f) for f in range(self.folds)]
+        self._matched = self._residual = None
 
-    def _data(self, states: np.ndarray, with_jacobian: bool,
-              pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
-        """Data cost and, optionally, per-frame 4x4 Gauss-Newton blocks J'WJ and gradients J'Wr.
-
-        Residual r = A e with e = local - m and A = (1 - beta) n n' + beta I, i.e.
-        r = (1 - beta) n (n.e) + beta e. ``pairs``: (distance, shape point, normal) of each data point to
-        use instead of matching the points at ``states`` to the shape.
-        """
+    def _residuals(self, states: np.ndarray, pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
+        """(cos, sin of each point's heading, lx, ly, normals, ne, r, |r|, weight, cost) of :meth:`_data` at
+        ``states``. Without ``pairs`` the last result is kept: a step's accepted trial is where the next step
+        linearises (the same points, states and pairs give the same numbers)."""
+        if pairs is None and self._residual is not None and np.array_equal(self._residual[0], states):
+            return self._residual[1]
         p = self.params
         beta = p.tangent_weight
         c, si = np.cos(states[:, 3])[self.frame_idx], np.sin(states[:, 3])[self.frame_idx]
@@ -481,6 +482,21 @@ class _Solver:
         rho = np.where(norm <= delta, norm**2, 2 * delta * norm - delta**2)
         weight = self.point_scale * (dist <= p.max_pair_distance)
         cost = float(np.sum(weight * rho))
+        out = (c, si, lx, ly, n, ne, r, norm, weight, cost)
+        if pairs is None:
+            self._residual = (states.copy(), out)
+        return out
+
+    def _data(self, states: np.ndarray, with_jacobian: bool,
+              pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
+        """Data cost and, optionally, per-frame 4x4 Gauss-Newton blocks J'WJ and gradients J'Wr.
+
+        Residual r = A e with e = local - m and A = (1 - beta) n n' + beta I, i.e.
+        r = (1 - beta) n (n.e) + beta e. ``pairs``: (distance, shape point, normal) of each data point to
+        use instead of matching the points at ``states`` to the shape.
+        """
+        c, si, lx, ly, n, ne, r, norm, weight, cost = self._residuals(states, pairs)
+        beta, delta = self.params.tangent_weight, self.params.huber_delta
         if not with_jacobian:
             return cost, None, None
         w = weight * np.where(norm <= delta, 1.0, delta / np.maximum(norm, 1e-12))

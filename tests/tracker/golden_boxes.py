@@ -7,6 +7,11 @@ before the configuration was nested; tests/tracker/test_golden_boxes.py checks t
 boxes); ``python tests/tracker/golden_boxes.py full`` remakes only the named presets' entries (a preset that was
 changed on purpose) and keeps the others' as they are. The file holds, per (preset, seed, track): the (K, 7)
 float64 boxes x, y, z, heading, l, w, h, and the flags of each frame joined by ',' (a fixed-width unicode array).
+
+``python tests/tracker/golden_boxes.py offline`` writes tests/tracker/golden/dev_tracks_offline_boxes.npz: the same
+tracks with ``full``, seed 0, online and then refined offline (:func:`tracker.refine_offline`), the boxes as above
+(made with the code before the offline solve's matching became a voxel look-up; tests/tracker/test_golden_boxes.py
+checks today's offline solve gives them bit for bit).
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
 GOLDEN = REPO / "tests" / "tracker" / "golden" / "dev_tracks_boxes.npz"
+GOLDEN_OFFLINE = REPO / "tests" / "tracker" / "golden" / "dev_tracks_offline_boxes.npz"
 PRESETS = ("full", "faithful")
 SEEDS = (0, 1, 2)
 
@@ -55,6 +61,33 @@ def track_boxes(source, tracks, preset: str, seed: int, track_ids=None) -> dict[
     return out
 
 
+def offline_boxes(source, tracks, seed: int = 0) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{key("offline", seed, id): (boxes (K, 7), flags (K,))}: ``full`` online, then the offline refinement."""
+    from tracker import get_preset, refine_offline, track
+
+    out = {}
+    for tid, start, end, box in tracks:
+        config = get_preset("full", seed=seed)
+        result = refine_offline(source, track(source, box, start, end, config), config)
+        boxes = np.array([e.box.to_array()[:7] for e in result.estimates], dtype=np.float64)
+        out[key("offline", seed, tid)] = (boxes, np.array([",".join(e.flags) for e in result.estimates]))
+    return out
+
+
+def write_offline() -> int:
+    from sot_apps.evaluation.tracker import CachedSource
+    from sot_apps.io import open_sequence
+
+    sequence = open_sequence(REPO.parent / "shared" / "data" / "pandaset_002")
+    tracks = dev_tracks(sequence)
+    arrays: dict[str, np.ndarray] = {"track_ids": np.array([t[0] for t in tracks])}
+    for k, (boxes, flags) in offline_boxes(CachedSource(sequence), tracks).items():
+        arrays[k + "/boxes"], arrays[k + "/flags"] = boxes, flags
+    np.savez_compressed(GOLDEN_OFFLINE, **arrays)
+    print(f"{GOLDEN_OFFLINE}: {len(tracks)} tracks", file=sys.stderr)
+    return 0
+
+
 def main(presets: list[str]) -> int:
     from sot_apps.evaluation.tracker import CachedSource
     from sot_apps.io import open_sequence
@@ -79,4 +112,4 @@ def main(presets: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main([p for p in sys.argv[1:] if p in PRESETS]))
+    sys.exit(write_offline() if sys.argv[1:] == ["offline"] else main([p for p in sys.argv[1:] if p in PRESETS]))
