@@ -189,7 +189,7 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
                                         np.arange(len(traj.times_ns)),
                             traj.times_ns, traj.states, np.ones(len(traj.times_ns), bool))
         kin = smooth_track(track, config)
-        states = np.stack([kin.x, kin.y, kin.z, kin.heading], axis=1)
+        states = kin.states
         if not np.isfinite(states).all():
             out.append(obj)
             continue
