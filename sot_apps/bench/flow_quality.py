@@ -90,7 +90,7 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
     tracks = seq.tracks()
     for vid in vehicle_ids:
         gt = tracks[vid]
-        ks = [k for k in gt.frames if frames is None or k in frames]
+        ks = [int(k) for k in gt.frames if frames is None or k in frames]
         if len(ks) < 2:
             continue
         result = track(seq, gt.box_at(ks[0]), start=ks[0], end=ks[-1])

@@ -146,8 +146,7 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
         raise InputError(seq.root, "the sequence has no annotations (needed by --from-annotations)")
     ids = [seq.resolve_track_id(t) for t in track_ids] if track_ids else sorted(tracks)
     frame_list = set(range(len(seq.frames)) if frames is None else frames)
-    boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label, {k: b for k, b in zip(tracks[tid].frames,
-                                                                                    tracks[tid].boxes, strict=True)
+    boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label, {k: b for k, b in tracks[tid].boxes_by_frame().items()
                                                                  if k in frame_list})
              for tid in ids}
     boxes = {tid: tb for tid, tb in boxes.items() if len(tb)}

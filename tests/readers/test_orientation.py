@@ -166,7 +166,7 @@ def test_motion_export_from_av2_annotations_keeps_the_tilt(readers_root, tmp_pat
     assert main(["motion-export", str(AV2_LOG_A), "--from-annotations", "--track-id", *ids,
                  "--out", str(tmp_path / "gt.mcap"), "--quiet"]) == 0
     frame_of = {int(f.timestamp_ns): f.index for f in seq.frames}
-    boxes = {(k, tid): box for tid in ids for k, box in zip(tracks[tid].frames, tracks[tid].boxes, strict=True)}
+    boxes = {(k, tid): box for tid in ids for k, box in tracks[tid].boxes_by_frame().items()}
     orientations, headings = [], {}
     with open(tmp_path / "gt.mcap", "rb") as handle:
         reader = make_reader(handle, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
