@@ -167,6 +167,18 @@ class ObjectTrack:
         return replace(self, frames=self.frames[pick], boxes=self.boxes[pick], flags=tuple(self.flags[i] for i in pick),
                        **columns)
 
+    def restamped(self, times_ns: Any) -> "ObjectTrack":
+        """The track with ``times_ns`` (one per row, e.g. the capture time of each box's points) as its
+        ``timestamps_ns``; a row whose time is not after the previous kept row's is dropped (times must increase)."""
+        times = np.asarray(times_ns, dtype=np.int64).reshape(-1)
+        if len(times) != len(self.frames):
+            raise ValueError(f"{self.object_id}: {len(times)} times for {len(self.frames)} rows")
+        keep = np.zeros(len(times), dtype=bool)
+        if len(times):
+            keep[0] = True
+            keep[1:] = times[1:] > np.maximum.accumulate(times)[:-1]
+        return replace(self.select(keep), timestamps_ns=times[keep])
+
     @property
     def mean_score(self) -> float:
         """The mean of the ``scores`` column (NaN without one)."""
