@@ -122,6 +122,9 @@ class Sequence:
     annotations: list[list[BoxAnnotation]] | None = None
     cache_size: int = 4
     _cache: "OrderedDict[int, Sweep]" = field(default_factory=OrderedDict, repr=False)
+    # tracks() of the annotations (the list object itself and its box count: a list replaced or grown is re-read)
+    _tracks: tuple[list, int, dict[str, ObjectTrack]] | None = field(default=None, init=False, repr=False,
+                                                                     compare=False)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -172,6 +175,13 @@ class Sequence:
         "annotations"."""
         if not self.annotations:
             return {}
+        count = sum(len(a) for a in self.annotations)
+        if self._tracks is None or self._tracks[0] is not self.annotations or self._tracks[1] != count:
+            self._tracks = (self.annotations, count, self._annotation_tracks())
+        return dict(self._tracks[2])
+
+    def _annotation_tracks(self) -> dict[str, ObjectTrack]:
+        assert self.annotations is not None
         boxes: dict[str, dict[int, Box]] = {}
         counts: dict[str, dict[int, int]] = {}
         labels: dict[str, str] = {}
