@@ -32,7 +32,7 @@ def main() -> None:
     seq = open_sequence(sequence_path)
     track_id = seq.resolve_track_id(prefix)
     annotated = seq.tracks()[track_id]
-    start, end = annotated.frames[0], annotated.frames[-1]
+    start, end = int(annotated.frames[0]), int(annotated.frames[-1])
     init_box = annotated.box_at(start)                      # WORLD frame box at the start frame
     result = track_sequence(seq, init_box, start, end, get_preset("full"))
     path = write_track_result(out, seq, result, track_id, init_box, annotated.label)

@@ -15,7 +15,8 @@ from tqdm import tqdm
 
 from tracker import points_in_box
 
-from .io.sequence import AnnotatedTrack, Sequence
+from .io.object_track import ObjectTrack
+from .io.sequence import Sequence
 from .objects.selection import DEFAULT_SELECTION, Selection
 
 __all__ = ["TrackSummary", "CameraSummary", "SequenceSummary", "summarize_sequence", "summarize_tracks"]
@@ -65,7 +66,7 @@ class SequenceSummary:
         return asdict(self)
 
 
-def _mean_points_first_frames(seq: Sequence, tracks: dict[str, AnnotatedTrack], first_n: int,
+def _mean_points_first_frames(seq: Sequence, tracks: dict[str, ObjectTrack], first_n: int,
                               progress: bool) -> dict[str, float]:
     """Mean number of points inside each track's GT box over its first ``first_n`` annotated frames.
 
@@ -112,7 +113,7 @@ def summarize_tracks(seq: Sequence, first_n: int = 10, vehicles_only: bool = Fal
         flags = stationary.get(tid)
         out.append(TrackSummary(
             track_id=tid, label=track.label, vehicle=vehicle, num_frames=len(track.frames),
-            first_frame=track.frames[0], last_frame=track.frames[-1], mean_points_first10=points[tid],
+            first_frame=int(track.frames[0]), last_frame=int(track.frames[-1]), mean_points_first10=points[tid],
             displacement_m=displacement, max_displacement_m=max_displacement, moving=moving,
             motion="moving" if moving else ("parked" if vehicle else "static"),
             stationary_flag=None if not flags else sum(flags) * 2 > len(flags)))

@@ -188,12 +188,12 @@ def annotated_track_start(seq: Sequence, track_id: str, config: TrackerConfig, s
     A frame out of range, or a ``start`` without an annotated box, is an InputError."""
     object_id = seq.resolve_track_id(track_id)
     annotated = seq.tracks()[object_id]
-    first = annotated.frames[0] if start is None else start
-    last = annotated.frames[-1] if end is None else end
+    first = int(annotated.frames[0]) if start is None else start
+    last = int(annotated.frames[-1]) if end is None else end
     resolve_span(seq, first, last)   # both frames in range, first <= last
     if start is None:
         try:
-            first, _ = first_box_with_points(seq, [(k, annotated.box_at(k)) for k in annotated.frames if k <= last],
+            first, _ = first_box_with_points(seq, [(int(k), annotated.box_at(k)) for k in annotated.frames if k <= last],
                                              config)
         except TrackingFailed:
             pass   # none: start at the first annotated box anyway (it is flagged on the prior only)

@@ -49,7 +49,8 @@ class FlowApp(AppBase):
         last = len(seq.cameras[camera].frames) - 1
         pairs = (0, last if config.max_pairs is None else min(last, int(config.max_pairs)))
         objects = objects_for_pairs(seq, [track_dir(out, sequence, o) for o in object_ids], pairs)
-        objects = [dataclasses.replace(o, source=f"track:{sequence}/tracks/{o.object_id}") for o in objects]
+        objects = [dataclasses.replace(o, track=dataclasses.replace(o.track, source=f"track:{sequence}/tracks/{o.object_id}"))
+                   for o in objects]
         stats_path = cam_root / "stats.json"
         if stats_path.is_file():   # a previous run with another set of objects: its pairs are stale
             try:

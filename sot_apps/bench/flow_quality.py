@@ -22,7 +22,7 @@ import numpy as np
 
 if TYPE_CHECKING:   # the module is imported by `sot-apps bench --help`: the libraries load when a measurement runs
     from ..flow.annotate import FlowOptions
-    from ..flow.objects import TrackedObject
+    from ..flow.objects import MeshedObject
     from ..io.sequence import Sequence
     from ..objects.trajectory import Trajectory
 
@@ -49,9 +49,9 @@ def _static(times: np.ndarray, state: np.ndarray) -> Trajectory:
                                    CAMERA_EXTRAPOLATION_NS)
 
 
-def _gt_objects(world) -> tuple[list[TrackedObject], int]:
+def _gt_objects(world) -> tuple[list[MeshedObject], int]:
     """Exact vehicles (1 ms trajectories, GT meshes) followed by the static world as occluders."""
-    from ..flow.objects import TrackedObject
+    from ..flow.objects import MeshedObject
     from ..objects.meshes import Mesh
     from ..objects.trajectory import Trajectory
 
@@ -62,17 +62,18 @@ def _gt_objects(world) -> tuple[list[TrackedObject], int]:
         trajectory = (_static(times, traj.states[0]) if traj.is_static
                       else Trajectory.from_samples(traj.times_ns, traj.states, "extrapolate", 0))
         mesh = Mesh(np.asarray(o.vertices, float), np.asarray(o.faces, np.int32))
-        out.append(TrackedObject(o.id, o.label, trajectory, mesh.vertices, mesh, np.asarray(o.size, float), "gt"))
+        out.append(MeshedObject.from_trajectory(o.id, o.label, trajectory, mesh.vertices, mesh, np.asarray(o.size, float),
+                                                "gt"))
     for i, b in enumerate(world.background):
         mesh = Mesh(np.asarray(b.vertices, float), np.asarray(b.faces, np.int32))
         state = b.trajectory.states[0]
-        out.append(TrackedObject(f"static_{b.name}_{i}", "static", _static(times, state), mesh.vertices, mesh,
-                                 np.ptp(mesh.vertices, axis=0), "gt"))
+        out.append(MeshedObject.from_trajectory(f"static_{b.name}_{i}", "static", _static(times, state), mesh.vertices,
+                                                mesh, np.ptp(mesh.vertices, axis=0), "gt"))
     return out, len(world.objects)
 
 
 def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None = None,
-                    mesh_method: str = "hull", box_time: str = "points") -> list[TrackedObject]:
+                    mesh_method: str = "hull", box_time: str = "points") -> list[MeshedObject]:
     """SOTracker run on each vehicle from its first ground-truth box within ``frames``.
 
     Each estimate is stamped with the median capture time of the sweep points inside its box (the
@@ -82,7 +83,7 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
     """
     from tracker import points_in_box, track, transform_points
 
-    from ..flow.objects import TrackedObject, mesh_for
+    from ..flow.objects import MeshedObject, mesh_for
     from ..objects.shapes import box_capture_time
     from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
 
@@ -90,7 +91,7 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
     tracks = seq.tracks()
     for vid in vehicle_ids:
         gt = tracks[vid]
-        ks = [k for k in gt.frames if frames is None or k in frames]
+        ks = [int(k) for k in gt.frames if frames is None or k in frames]
         if len(ks) < 2:
             continue
         result = track(seq, gt.box_at(ks[0]), start=ks[0], end=ks[-1])
@@ -105,8 +106,8 @@ def tracker_objects(seq: Sequence, vehicle_ids: list[str], frames: range | None 
             states.append(e.state.to_array())
         size = np.asarray(result.size, float)
         trajectory = Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS)
-        out.append(TrackedObject(vid, gt.label, trajectory, result.shape,
-                                 mesh_for(result.shape, size, mesh_method), size, "tracker"))
+        out.append(MeshedObject.from_trajectory(vid, gt.label, trajectory, result.shape,
+                                                mesh_for(result.shape, size, mesh_method), size, "tracker"))
     return out
 
 
@@ -132,7 +133,7 @@ def synthetic_quality(world_dir: str | Path, frames: int = 8, vehicles: int = 4,
     camera = seq.cameras["front_camera"]
     gt_objects, n_vehicles = _gt_objects(world)
     vehicle_ids = [o.id for o in world.objects]
-    methods: dict[str, list[TrackedObject]] = {
+    methods: dict[str, list[MeshedObject]] = {
         "ours (GT boxes)": objects_from_annotations(seq, vehicle_ids, box_time="frame", progress=False)}
     if with_tracker:
         moving = [o.id for o in world.objects if o.moving]
@@ -198,7 +199,7 @@ def synthetic_quality(world_dir: str | Path, frames: int = 8, vehicles: int = 4,
             "moving_vehicles": rows(totals["moving_vehicles"]), "per_pair": pairs}
 
 
-def photometric_quality(seq: Sequence, camera_name: str, objects: list[TrackedObject], pairs: range,
+def photometric_quality(seq: Sequence, camera_name: str, objects: list[MeshedObject], pairs: range,
                         options: FlowOptions | None = None) -> dict:
     """Mean |I_k - warp(I_k+1)| (grey levels) over annotated non-occluded object pixels, per flow."""
     import cv2

@@ -28,7 +28,6 @@ from ..io.sequence import Sequence
 from ..objects.smoother import (
     ANNOTATION_SMOOTHER,
     TRACKER_SMOOTHER,
-    Kinematics,
     SmootherConfig,
     central_difference_kinematics,
     smooth_track,
@@ -126,8 +125,8 @@ def _gt_track(sequence: Sequence, object_id: str, frames: np.ndarray) -> ObjectT
                        timestamps_ns=sequence.timestamps_ns[frames], states=states, valid=valid)
 
 
-def _velocity_error(a: Kinematics, b: Kinematics) -> np.ndarray:
-    return np.hypot(a.velocity_x - b.velocity_x, a.velocity_y - b.velocity_y)
+def _velocity_error(a: ObjectTrack, b: ObjectTrack) -> np.ndarray:
+    return np.hypot(*(a.velocity - b.velocity).T)
 
 
 def evaluate_track(sequence: Sequence, track: ObjectTrack, horizon: int = 30,
@@ -140,9 +139,9 @@ def evaluate_track(sequence: Sequence, track: ObjectTrack, horizon: int = 30,
     gt_central = central_difference_kinematics(gt_track)
     truth = gt_track.states
     both = exported.valid & gt_track.valid
-    d3 = np.where(both, np.sqrt((exported.x - truth[:, 0]) ** 2 + (exported.y - truth[:, 1]) ** 2
-                                + (exported.z - truth[:, 2]) ** 2), np.nan)
-    dbev = np.where(both, np.hypot(exported.x - truth[:, 0], exported.y - truth[:, 1]), np.nan)
+    d3 = np.where(both, np.sqrt((exported.boxes[:, 0] - truth[:, 0]) ** 2 + (exported.boxes[:, 1] - truth[:, 1]) ** 2
+                                + (exported.boxes[:, 2] - truth[:, 2]) ** 2), np.nan)
+    dbev = np.where(both, np.hypot(exported.boxes[:, 0] - truth[:, 0], exported.boxes[:, 1] - truth[:, 1]), np.nan)
     raw_d3 = np.where(both, np.linalg.norm(track.states[:, :3] - truth[:, :3], axis=1), np.nan)
     start = int(track.frames[0])
     steps = track.frames - start

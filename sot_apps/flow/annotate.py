@@ -34,7 +34,7 @@ from .camera import CameraModel
 from .dense import RayCache, dense_flow
 from .flo_io import write_flo
 from .kitti_io import write_kitti_flows
-from .objects import TrackedObject
+from .objects import MeshedObject
 from .occlusion import ProjectedPoints, project_lidar
 from .png import encode_png
 from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup, flow_magnitude
@@ -74,7 +74,7 @@ def camera_pose_at(seq: Sequence, camera: Camera, k: int) -> np.ndarray:
     return np.asarray(frame.world_from_camera, dtype=np.float64)
 
 
-def _lidar_occluders(seq: Sequence, k: int, objects: list[TrackedObject], camera_from_world: np.ndarray,
+def _lidar_occluders(seq: Sequence, k: int, objects: list[MeshedObject], camera_from_world: np.ndarray,
                      model: CameraModel, margin: float) -> ProjectedPoints:
     """Frame k's points minus those in (or near) any tracked object during the sweep, projected."""
     if not 0 <= k < len(seq.frames):
@@ -118,7 +118,7 @@ def _lidar_occluders(seq: Sequence, k: int, objects: list[TrackedObject], camera
     return project_lidar(points[keep], camera_from_world, model)
 
 
-def build_pair(seq: Sequence, camera: Camera, k: int, objects: list[TrackedObject], options: FlowOptions,
+def build_pair(seq: Sequence, camera: Camera, k: int, objects: list[MeshedObject], options: FlowOptions,
                lidar_cache: dict | None = None) -> tuple[PairSetup, list[FlowObject]]:
     """The pair's cameras, occluders and the objects present at camera k's time."""
     model = CameraModel.from_camera(camera)
@@ -271,7 +271,7 @@ def _check_instances(root: Path, mapping: list[dict]) -> None:
     write_json(path, doc)
 
 
-def annotate_camera(seq: Sequence, camera_name: str, objects: list[TrackedObject], out: str | Path,
+def annotate_camera(seq: Sequence, camera_name: str, objects: list[MeshedObject], out: str | Path,
                     pairs: tuple[int, int] | None = None, options: FlowOptions | None = None,
                     progress: bool = True, source: str = "") -> dict:
     """Annotate pairs k -> k+1 for A <= k < B of one camera; returns the stats document."""

@@ -1,4 +1,5 @@
-"""The objects to annotate: trajectories (states at known times) and shapes, from tracks or GT boxes.
+"""The objects to annotate (:class:`MeshedObject`: an ObjectTrack of states at known times, and a mesh), from
+tracks or GT boxes.
 
 - ``objects_from_tracks``: the tracker's ``track.json`` + ``shape.ply`` (states at each frame's
   ``timestamp_ns``, shape points in the object frame).
@@ -10,7 +11,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Iterable
 
@@ -24,22 +26,60 @@ from ..io.sequence import Sequence
 from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample_means
 from ..objects.selection import DEFAULT_SELECTION
 from ..objects.shapes import ShapeParams, box_capture_time, object_points_by_frame
-from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, Trajectory
+from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, EndMode, Trajectory
 
-__all__ = ["TrackedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]
+__all__ = ["MeshedObject", "objects_from_tracks", "objects_from_annotations", "mesh_for", "smoothed"]
 
 
-@dataclass(frozen=True)
-class TrackedObject:
-    """One object: id, label, trajectory (world), shape points and mesh (object frame), box size."""
+@dataclass(frozen=True, eq=False)
+class MeshedObject:
+    """One object flow places in the images: its :class:`ObjectTrack` and its mesh (object frame).
 
-    object_id: str
-    label: str
-    trajectory: Trajectory
-    points: np.ndarray
+    The track holds the object's id, label, size, source and shape points (object frame), and the WORLD states
+    flow interpolates, at the times its boxes describe (``timestamps_ns``: the capture time of the box's points,
+    or the frame time); its ``frames`` are the sequence frames of those states (sample indices for states that do
+    not come from a sequence, :meth:`from_trajectory`). :attr:`trajectory` interpolates them (``end``,
+    ``max_extrapolation_ns``), made on first use."""
+
+    track: ObjectTrack
     mesh: Mesh
-    size: np.ndarray
-    source: str
+    end: EndMode = "extrapolate"
+    max_extrapolation_ns: int | None = CAMERA_EXTRAPOLATION_NS
+
+    @classmethod
+    def from_trajectory(cls, object_id: str, label: str, trajectory: Trajectory, points: np.ndarray, mesh: Mesh,
+                        size: Iterable[float], source: str) -> "MeshedObject":
+        """An object whose states are the samples of ``trajectory`` (frames 0..N-1), with its end mode."""
+        n = len(trajectory.times_ns)
+        track = ObjectTrack.from_states(object_id, label, size, np.arange(n), trajectory.times_ns, trajectory.states,
+                                        np.ones(n, dtype=bool), tilts=trajectory.tilts, source=source,
+                                        shape_points=np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        return cls(track, mesh, trajectory.end, trajectory.max_extrapolation_ns)
+
+    @cached_property
+    def trajectory(self) -> Trajectory:
+        return Trajectory.from_track(self.track, self.end, self.max_extrapolation_ns)
+
+    @property
+    def object_id(self) -> str:
+        return self.track.object_id
+
+    @property
+    def label(self) -> str:
+        return self.track.label
+
+    @property
+    def source(self) -> str:
+        return self.track.source
+
+    @property
+    def points(self) -> np.ndarray:
+        """(M, 3) shape points, object frame."""
+        return self.track.shape_points if self.track.shape_points is not None else np.zeros((0, 3))
+
+    @property
+    def size(self) -> np.ndarray:
+        return np.asarray(self.track.size, dtype=np.float64)
 
     def extent(self) -> np.ndarray:
         """Half extents of the object (box size and mesh bounds, whichever is larger), object frame."""
@@ -78,7 +118,7 @@ def _near_box(points_ego: np.ndarray, world_from_ego: np.ndarray, box: Box) -> n
 
 
 def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hull", seq: Sequence | None = None,
-                        box_time: str = "points", frames: Iterable[int] | None = None) -> list[TrackedObject]:
+                        box_time: str = "points", frames: Iterable[int] | None = None) -> list[MeshedObject]:
     """Objects from track directories (track.json + shape.ply).
 
     ``box_time="points"`` (needs ``seq``) restamps the states of ``frames`` (default: all) with the median
@@ -86,7 +126,7 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
     motion is not compensated, so its state at frame k describes the object when the beam passed it,
     while track.json records the frame timestamp. ``"frame"`` keeps track.json's ``timestamp_ns``.
     """
-    from ..io.tracks import check_track_belongs, read_track
+    from ..io.tracks import check_track_belongs, object_track, read_track
 
     if box_time not in ("points", "frame"):
         raise ValueError(f"box_time must be 'points' or 'frame', not {box_time!r}")
@@ -98,29 +138,26 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
             raise InputError(directory, "track has no frames")
         if seq is not None:
             check_track_belongs(track, seq, Path(directory) / "track.json")
-        times = [r.timestamp_ns for r in track.frames]
+        rows = object_track(track, shape, f"track ({track.mode}):{Path(directory)}")
+        times = rows.timestamps_ns.copy()
         if box_time == "points" and seq is not None:
-            for i, record in enumerate(track.frames):
-                if (wanted is not None and record.frame not in wanted) or not 0 <= record.frame < len(seq.frames):
+            for i, frame in enumerate(int(k) for k in rows.frames):
+                if (wanted is not None and frame not in wanted) or not 0 <= frame < len(seq.frames):
                     continue
-                sweep = seq.sweep(record.frame)
+                sweep = seq.sweep(frame)
                 if sweep.time_offset_ns is None:
                     continue
-                box = track.box_at_record(record)
-                near = _near_box(sweep.xyz, seq.frames[record.frame].world_from_ego, box)
-                world = transform_points(seq.frames[record.frame].world_from_ego, sweep.xyz[near])
+                box = rows.box(i)
+                near = _near_box(sweep.xyz, seq.frames[frame].world_from_ego, box)
+                world = transform_points(seq.frames[frame].world_from_ego, sweep.xyz[near])
                 inside = near[points_in_box(world, box)]
-                times[i] = box_capture_time(seq.frames[record.frame].timestamp_ns, sweep.time_offset_ns[inside], 3)
-        states = [r.state.to_array() for r in track.frames]
-        size = track.size.to_array()
-        trajectory = Trajectory.from_samples(times, states, "extrapolate", CAMERA_EXTRAPOLATION_NS)
-        out.append(TrackedObject(track.object_id, track.label or "", trajectory, shape, mesh_for(shape, size, mesh_method),
-                                 size, f"track ({track.mode}):{Path(directory)}"))
+                times[i] = box_capture_time(seq.frames[frame].timestamp_ns, sweep.time_offset_ns[inside], 3)
+        out.append(MeshedObject(rows.restamped(times), mesh_for(shape, np.asarray(rows.size), mesh_method)))
     return out
 
 
 def objects_for_pairs(seq: Sequence, track_dirs: Iterable[str | Path], pairs: tuple[int, int] | None,
-                      mesh_method: str = "hull", box_time: str = "points") -> list[TrackedObject]:
+                      mesh_method: str = "hull", box_time: str = "points") -> list[MeshedObject]:
     """Objects from track directories for the flow of image ``pairs`` (inclusive; None = every frame): the
     states of the sweeps around the pairs (2 frames of margin) re-stamped as ``box_time`` says. ``sot-apps
     flow --tracks`` and the pipeline's flow stage both call this, so they give the same flow."""
@@ -132,7 +169,7 @@ def objects_for_pairs(seq: Sequence, track_dirs: Iterable[str | Path], pairs: tu
 def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, frames: Iterable[int] | None = None,
                              moving_only: bool = False, mesh_method: str = "hull", ground_clearance: float = 0.2,
                              voxel: float = 0.05, box_time: str = "points", extend_to_ground: bool = False,
-                             progress: bool = True) -> list[TrackedObject]:
+                             progress: bool = True) -> list[MeshedObject]:
     """Objects from the ground-truth boxes (see module doc). ``frames``: sweeps used for shapes and timing.
 
     ``box_time``: "points" stamps each box with the median capture time of its points (PandaSet: boxes
@@ -146,8 +183,7 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
         raise InputError(seq.root, "the sequence has no annotations (needed by --from-annotations)")
     ids = [seq.resolve_track_id(t) for t in track_ids] if track_ids else sorted(tracks)
     frame_list = set(range(len(seq.frames)) if frames is None else frames)
-    boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label, {k: b for k, b in zip(tracks[tid].frames,
-                                                                                    tracks[tid].boxes, strict=True)
+    boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label, {k: b for k, b in tracks[tid].boxes_by_frame().items()
                                                                  if k in frame_list})
              for tid in ids}
     boxes = {tid: tb for tid, tb in boxes.items() if len(tb)}
@@ -156,26 +192,25 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
                  if DEFAULT_SELECTION.track_motion(tracks[tid], seq.timestamps_ns).moving}
     params = ShapeParams(ground_clearance=ground_clearance, capture_time=box_time == "points", end="extrapolate",
                          max_extrapolation_ns=CAMERA_EXTRAPOLATION_NS)
-    points, trajectories = object_points_by_frame(seq, boxes, params, progress=progress)
+    points, stamped = object_points_by_frame(seq, boxes, params, progress=progress)
     out = []
     for tid, tb in boxes.items():
         size = np.median(tb.boxes[:, 4:7], axis=0)
         parts = [points[tid][k] for k in sorted(points[tid])]
         shape = voxel_downsample_means(np.concatenate(parts) if parts else np.zeros((0, 3)), voxel)
-        out.append(TrackedObject(tid, tracks[tid].label, trajectories[tid], shape,
-                                 mesh_for(shape, size, mesh_method, extend_to_ground), size, "annotations"))
+        track = replace(stamped[tid], shape_points=shape, size=tuple(float(v) for v in size), source="annotations")
+        out.append(MeshedObject(track, mesh_for(shape, size, mesh_method, extend_to_ground), params.end,
+                                params.max_extrapolation_ns))
     return out
 
 
-def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[TrackedObject]:
+def smoothed(objects: list[MeshedObject], source: str = "annotations") -> list[MeshedObject]:
     """The objects with their states replaced by the motion export's CTRV smoother (EKF + RTS).
 
     Per-frame box jitter of a few centimetres is several pixels of flow for a car 10 m away; the
     smoother keeps the states on a physically plausible path. ``source``: "annotations" or "tracks"
     (selects the smoother's measurement noise).
     """
-    from dataclasses import replace
-
     from ..objects.smoother import ANNOTATION_SMOOTHER, TRACKER_SMOOTHER, smooth_track
 
     config = ANNOTATION_SMOOTHER if source == "annotations" else TRACKER_SMOOTHER
@@ -189,10 +224,11 @@ def smoothed(objects: list[TrackedObject], source: str = "annotations") -> list[
                                         np.arange(len(traj.times_ns)),
                             traj.times_ns, traj.states, np.ones(len(traj.times_ns), bool))
         kin = smooth_track(track, config)
-        states = np.stack([kin.x, kin.y, kin.z, kin.heading], axis=1)
+        states = kin.states
         if not np.isfinite(states).all():
             out.append(obj)
             continue
-        out.append(replace(obj, trajectory=Trajectory.from_samples(traj.times_ns, states, traj.end,
-                                                                    traj.max_extrapolation_ns, traj.tilts)))
+        boxes = obj.track.boxes.copy()
+        boxes[:, :4] = states
+        out.append(MeshedObject(replace(obj.track, boxes=boxes), obj.mesh, obj.end, obj.max_extrapolation_ns))
     return out

@@ -10,10 +10,10 @@ from ..errors import InputError
 if TYPE_CHECKING:
     from .sequence import Sequence
 
-_SEQUENCE_NAMES = ("AnnotatedTrack", "BoxAnnotation", "Camera", "CameraFrame", "FrameInfo", "Sequence", "Sweep")
+_SEQUENCE_NAMES = ("BoxAnnotation", "Camera", "CameraFrame", "FrameInfo", "Sequence", "Sweep")
 
 __all__ = ["open_sequence", "detect_format", "FORMATS", "Sequence", "Sweep", "FrameInfo", "Camera",
-           "CameraFrame", "BoxAnnotation", "AnnotatedTrack"]
+           "CameraFrame", "BoxAnnotation"]
 
 FORMATS = ("sequence", "pandaset", "waymo_v1", "waymo_v2",
            # dataset readers of issue 14 (av2.py, nuscenes.py, kitti.py)

@@ -14,7 +14,6 @@ from pathlib import Path
 from ..errors import InputError
 from .labels import (
     LabelsWritten,
-    annotation_tracks,
     kitti_camera,
     write_av2_annotations,
     write_av2_submission,
@@ -72,7 +71,7 @@ def export_labels(seq: Sequence, fmt: str, out_dir: str | Path, tracks: list[Obj
     if tracks is None:
         if not seq.annotations:
             raise InputError(seq.root, "the sequence has no annotations to write as labels")
-        tracks = annotation_tracks(seq)
+        tracks = list(seq.tracks().values())
     targets = label_paths(seq, fmt, out_dir, submission)
     _refuse_overwriting_input(seq, Path(out_dir))
     if fmt == "kitti":

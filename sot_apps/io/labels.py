@@ -40,7 +40,7 @@ from .categories import av2_category, kitti_type
 from .object_track import ObjectTrack
 from .sequence import Camera, Sequence
 
-__all__ = ["LabelsWritten", "annotation_tracks", "kitti_camera", "kitti_label_box",
+__all__ = ["LabelsWritten", "kitti_camera", "kitti_label_box",
            "kitti_box_corners", "image_box", "KITTI_CAMERA_NAMES", "write_kitti_tracking", "write_av2_annotations", "write_av2_submission",
            "AV2_ANNOTATION_COLUMNS", "AV2_SUBMISSION_COLUMNS"]
 
@@ -57,20 +57,6 @@ class LabelsWritten:
     boxes: int                       # rows written
     unmapped: dict[str, int]         # label -> boxes left out (no name in the format)
     outside_camera: int = 0          # KITTI: boxes the camera does not see
-
-
-def annotation_tracks(seq: Sequence) -> list[ObjectTrack]:
-    """The sequence's annotations as label tracks: no score, the source's point counts (``num_points``)."""
-    boxes: dict[str, dict[int, Box]] = {}
-    counts: dict[str, dict[int, int]] = {}
-    labels: dict[str, str] = {}
-    for k, frame in enumerate(seq.annotations or []):
-        for ann in frame:
-            boxes.setdefault(ann.track_id, {})[k] = ann.box
-            labels.setdefault(ann.track_id, ann.label)
-            if ann.num_points is not None:
-                counts.setdefault(ann.track_id, {})[k] = int(ann.num_points)
-    return [ObjectTrack.from_boxes(tid, labels[tid], boxes[tid], num_points=counts.get(tid, {})) for tid in boxes]
 
 
 # ------------------------------------------------------------------------------------------ KITTI

@@ -10,7 +10,11 @@ associated over time. Its columns, one row per frame:
   boxes that are not level in the world; a row of an invalid frame may hold NaN;
 - optional: ``timestamps_ns`` (N,) int64 strictly increasing, ``valid`` (N,) bool (default: every frame whose box
   is finite; ``flags[i]`` says why a frame is not), ``scores`` (N,) float (a detector's or label's confidence),
-  ``num_points`` (N,) int64 (the source's own count of points in the box, -1 where unknown).
+  ``num_points`` (N,) int64 (the source's own count of points in the box, -1 where unknown);
+- optional kinematics (the motion smoother's output, :func:`sot_apps.objects.smoother.smooth_track`): ``velocity``
+  (N, 2) WORLD ``[vx, vy]`` m/s, ``speed`` (N,) m/s, ``acceleration`` (N,) m/s^2 along the heading, ``yaw_rate``
+  (N,) rad/s, and their 1-sigma ``position_std`` (m), ``heading_std`` (rad), ``speed_std`` (m/s), ``yaw_rate_std``
+  (rad/s), each (N,) float (NaN where invalid or unknown).
 
 Per object: ``object_id``, ``label``, ``size`` (length, width, height; default the per-dimension median of the
 boxes), ``source`` (where it came from), ``shape_points`` (M, 3) object frame and ``config`` (how it was made).
@@ -26,13 +30,19 @@ import numpy as np
 
 from tracker.geometry import Box
 
-__all__ = ["ObjectTrack"]
+__all__ = ["ObjectTrack", "KINEMATICS"]
+
+# The optional float columns of the smoother's kinematics (``velocity`` is (N, 2), the others (N,)).
+KINEMATICS: tuple[str, ...] = ("velocity", "speed", "acceleration", "yaw_rate", "position_std", "heading_std",
+                               "speed_std", "yaw_rate_std")
+# Every per-frame column besides ``frames``/``boxes``/``flags`` (``select`` cuts them all).
+_COLUMNS: tuple[str, ...] = ("timestamps_ns", "valid", "scores", "num_points") + KINEMATICS
 
 
-def _column(values: Any, n: int, dtype: Any, name: str, object_id: str) -> np.ndarray | None:
+def _column(values: Any, n: int, dtype: Any, name: str, object_id: str, width: int = 0) -> np.ndarray | None:
     if values is None:
         return None
-    out = np.asarray(values, dtype=dtype).reshape(-1)
+    out = np.asarray(values, dtype=dtype).reshape((-1, width) if width else -1)
     if len(out) != n:
         raise ValueError(f"{object_id}: {name} has {len(out)} entries for {n} frames")
     return out
@@ -51,6 +61,14 @@ class ObjectTrack:
     flags: tuple[tuple[str, ...], ...] = ()
     scores: np.ndarray | None = None
     num_points: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    speed: np.ndarray | None = None
+    acceleration: np.ndarray | None = None
+    yaw_rate: np.ndarray | None = None
+    position_std: np.ndarray | None = None
+    heading_std: np.ndarray | None = None
+    speed_std: np.ndarray | None = None
+    yaw_rate_std: np.ndarray | None = None
     size: tuple[float, float, float] | None = None
     source: str = ""
     shape_points: np.ndarray | None = None
@@ -79,6 +97,9 @@ class ObjectTrack:
                             ("num_points", _column(self.num_points, n, np.int64, "num_points", oid)),
                             ("size", tuple(float(v) for v in size))):
             object.__setattr__(self, name, value)
+        for name in KINEMATICS:
+            object.__setattr__(self, name, _column(getattr(self, name), n, np.float64, name, oid,
+                                                   2 if name == "velocity" else 0))
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -142,13 +163,21 @@ class ObjectTrack:
     def select(self, rows: np.ndarray) -> "ObjectTrack":
         """The track at the rows a boolean mask (or index array) picks, every column with them."""
         pick = np.arange(len(self.frames))[rows]
+        columns = {name: None if getattr(self, name) is None else getattr(self, name)[pick] for name in _COLUMNS}
+        return replace(self, frames=self.frames[pick], boxes=self.boxes[pick], flags=tuple(self.flags[i] for i in pick),
+                       **columns)
 
-        def cut(column: np.ndarray | None) -> np.ndarray | None:
-            return None if column is None else column[pick]
-
-        return replace(self, frames=self.frames[pick], boxes=self.boxes[pick], timestamps_ns=cut(self.timestamps_ns),
-                       valid=cut(self.valid), flags=tuple(self.flags[i] for i in pick), scores=cut(self.scores),
-                       num_points=cut(self.num_points))
+    def restamped(self, times_ns: Any) -> "ObjectTrack":
+        """The track with ``times_ns`` (one per row, e.g. the capture time of each box's points) as its
+        ``timestamps_ns``; a row whose time is not after the previous kept row's is dropped (times must increase)."""
+        times = np.asarray(times_ns, dtype=np.int64).reshape(-1)
+        if len(times) != len(self.frames):
+            raise ValueError(f"{self.object_id}: {len(times)} times for {len(self.frames)} rows")
+        keep = np.zeros(len(times), dtype=bool)
+        if len(times):
+            keep[0] = True
+            keep[1:] = times[1:] > np.maximum.accumulate(times)[:-1]
+        return replace(self.select(keep), timestamps_ns=times[keep])
 
     @property
     def mean_score(self) -> float:

@@ -17,6 +17,7 @@ from tracker.frames import LidarFrame
 from tracker.geometry import Box, transform_points
 
 from ..errors import InputError
+from .object_track import ObjectTrack
 
 __all__ = [
     "Sweep",
@@ -24,7 +25,6 @@ __all__ = [
     "CameraFrame",
     "Camera",
     "BoxAnnotation",
-    "AnnotatedTrack",
     "Sequence",
 ]
 
@@ -101,22 +101,6 @@ class BoxAnnotation:
     num_points: int | None = None
 
 
-@dataclass(frozen=True)
-class AnnotatedTrack:
-    """All annotated boxes of one object, in frame order."""
-
-    track_id: str
-    label: str
-    frames: list[int]
-    boxes: list[Box]
-
-    def box_at(self, frame: int) -> Box | None:
-        try:
-            return self.boxes[self.frames.index(frame)]
-        except ValueError:
-            return None
-
-
 SweepLoader = Callable[[int], Sweep]
 
 
@@ -138,6 +122,9 @@ class Sequence:
     annotations: list[list[BoxAnnotation]] | None = None
     cache_size: int = 4
     _cache: "OrderedDict[int, Sweep]" = field(default_factory=OrderedDict, repr=False)
+    # tracks() of the annotations (the list object itself and its box count: a list replaced or grown is re-read)
+    _tracks: tuple[list, int, dict[str, ObjectTrack]] | None = field(default=None, init=False, repr=False,
+                                                                     compare=False)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -181,19 +168,36 @@ class Sequence:
     def timestamps_ns(self) -> np.ndarray:
         return np.array([f.timestamp_ns for f in self.frames], dtype=np.int64)
 
-    def tracks(self) -> dict[str, AnnotatedTrack]:
-        """Annotated tracks by id (empty without annotations). Reads no sweep."""
+    def tracks(self) -> dict[str, ObjectTrack]:
+        """The annotations as one :class:`ObjectTrack` per object id, in order of first appearance (empty without
+        annotations; reads no sweep): the boxes by frame (a frame's first box of an id), the frames'
+        ``timestamps_ns``, the source's point counts as ``num_points`` (-1 where it has none), ``source`` =
+        "annotations"."""
         if not self.annotations:
             return {}
-        frames: dict[str, list[int]] = {}
-        boxes: dict[str, list[Box]] = {}
+        count = sum(len(a) for a in self.annotations)
+        if self._tracks is None or self._tracks[0] is not self.annotations or self._tracks[1] != count:
+            self._tracks = (self.annotations, count, self._annotation_tracks())
+        return dict(self._tracks[2])
+
+    def _annotation_tracks(self) -> dict[str, ObjectTrack]:
+        assert self.annotations is not None
+        boxes: dict[str, dict[int, Box]] = {}
+        counts: dict[str, dict[int, int]] = {}
         labels: dict[str, str] = {}
         for k, frame_annotations in enumerate(self.annotations):
             for ann in frame_annotations:
-                frames.setdefault(ann.track_id, []).append(k)
-                boxes.setdefault(ann.track_id, []).append(ann.box)
+                by_frame = boxes.setdefault(ann.track_id, {})
+                if k in by_frame:
+                    continue
+                by_frame[k] = ann.box
                 labels.setdefault(ann.track_id, ann.label)
-        return {tid: AnnotatedTrack(tid, labels[tid], frames[tid], boxes[tid]) for tid in frames}
+                if ann.num_points is not None:
+                    counts.setdefault(ann.track_id, {})[k] = int(ann.num_points)
+        stamps = self.timestamps_ns
+        return {tid: ObjectTrack.from_boxes(tid, labels[tid], by_frame, num_points=counts.get(tid, {}),
+                                            timestamps_ns=stamps, source="annotations")
+                for tid, by_frame in boxes.items()}
 
     def resolve_track_id(self, prefix: str) -> str:
         """The unique annotated track id starting with ``prefix``."""

@@ -11,7 +11,6 @@ from ..io.sequence import Sequence
 from ..objects.smoother import (
     ANNOTATION_SMOOTHER,
     TRACKER_SMOOTHER,
-    Kinematics,
     SmootherConfig,
     smooth_track,
 )
@@ -23,7 +22,7 @@ __all__ = ["ExportResult", "export_motion"]
 
 @dataclass
 class ExportResult:
-    kinematics: list[Kinematics]
+    kinematics: list[ObjectTrack]
     mcap: McapSummary | None = None
     outputs: dict[str, str] = field(default_factory=dict)
 

@@ -36,12 +36,12 @@ from scipy.spatial.transform import Rotation
 from tracker import rotation_z, rotation_zyx
 
 from ..io.atomic import atomic_path
+from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
-from ..objects.smoother import Kinematics
 from ..schemas import load_schema, validate
 
 __all__ = ["write_motion_mcap", "McapSummary", "object_color", "METADATA_NAME", "WORLD_FRAME", "EGO_FRAME",
-           "object_frame", "KINEMATICS_SCHEMA_NAME"]
+           "object_frame", "KINEMATICS_SCHEMA_NAME", "kinematics_sample"]
 
 METADATA_NAME = "sot_apps.motion_export"
 WORLD_FRAME = "world"
@@ -97,12 +97,33 @@ def _point_cloud(m, t_ns: int, frame_id: str, xyz: np.ndarray, intensity: np.nda
                         point_stride=4 * len(names), fields=fields, data=data.tobytes())
 
 
+def kinematics_sample(k: ObjectTrack, i: int) -> dict[str, Any]:
+    """Sample ``i`` of a smoothed track (:func:`sot_apps.objects.smoother.smooth_track`) as plain Python values
+    (None for NaN): the ``/objects/<id>/kinematics`` message (data_schema/kinematics.schema.json)."""
+    def f(value: float) -> float | None:
+        value = float(value)
+        return value if np.isfinite(value) else None
+
+    x, y, z, heading = k.boxes[i, :4]
+    return {
+        "object_id": k.object_id, "label": k.label, "frame": int(k.frames[i]),
+        "timestamp_ns": int(k.timestamps_ns[i]), "valid": bool(k.valid[i]), "flags": list(k.flags[i]),
+        "position": {"x": f(x), "y": f(y), "z": f(z)},
+        "heading": f(heading),
+        "velocity": {"x": f(k.velocity[i, 0]), "y": f(k.velocity[i, 1])},
+        "speed": f(k.speed[i]), "acceleration": f(k.acceleration[i]), "yaw_rate": f(k.yaw_rate[i]),
+        "std": {"position": f(k.position_std[i]), "heading": f(k.heading_std[i]),
+                "speed": f(k.speed_std[i]), "yaw_rate": f(k.yaw_rate_std[i])},
+        "size": {"length": float(k.size[0]), "width": float(k.size[1]), "height": float(k.size[2])},
+    }
+
+
 def _fmt(value: float, digits: int = 3) -> str:
     return "nan" if not np.isfinite(value) else f"{value:.{digits}f}"
 
 
 class _Writer:
-    def __init__(self, ctx, m, channels, kinematics: list[Kinematics], sequence: Sequence):
+    def __init__(self, ctx, m, channels, kinematics: list[ObjectTrack], sequence: Sequence):
         self.ctx, self.m = ctx, m
         self.counts: dict[str, int] = {}
         self.kin = kinematics
@@ -142,26 +163,26 @@ class _Writer:
             if i is None:
                 continue
             oid = k.object_id
-            sample = k.sample(i)
+            sample = kinematics_sample(k, i)
             if (oid, bool(k.valid[i])) not in self.checked:  # guard the contract once per object and validity
                 validate("kinematics", sample, f"/objects/{oid}/kinematics")
                 self.checked.add((oid, bool(k.valid[i])))
             self._log(self.kin_channels[oid], f"/objects/{oid}/kinematics", sample, t_ns)
             if not k.valid[i]:
                 continue
-            position = m.Vector3(x=float(k.x[i]), y=float(k.y[i]), z=float(k.z[i]))
+            position = m.Vector3(x=float(k.boxes[i, 0]), y=float(k.boxes[i, 1]), z=float(k.boxes[i, 2]))
             if k.tilts is None:
-                orientation = _quat_z(m, float(k.heading[i]))
-                rotation = rotation_z(float(k.heading[i]))
+                orientation = _quat_z(m, float(k.boxes[i, 3]))
+                rotation = rotation_z(float(k.boxes[i, 3]))
             else:   # a box that is not level in the world keeps its roll and pitch
-                rotation = rotation_zyx(float(k.heading[i]), float(k.tilts[i, 1]), float(k.tilts[i, 0]))
+                rotation = rotation_zyx(float(k.boxes[i, 3]), float(k.tilts[i, 1]), float(k.tilts[i, 0]))
                 orientation = _quat_matrix(m, rotation)
             pose = m.Pose(position=position, orientation=orientation)
             transforms.append(m.FrameTransform(timestamp=ts, parent_frame_id=WORLD_FRAME,
                                                child_frame_id=object_frame(oid), translation=position,
                                                rotation=orientation))
             # velocity (world x, y; no vertical component) and yaw rate (about world z) in the object frame
-            body_v = rotation.T @ [float(k.velocity_x[i]), float(k.velocity_y[i]), 0.0]
+            body_v = rotation.T @ [float(k.velocity[i, 0]), float(k.velocity[i, 1]), 0.0]
             body_w = rotation.T @ [0.0, 0.0, float(k.yaw_rate[i])]
             pos_var = float(k.position_std[i]) ** 2 / 2.0
             pose_cov = [0.0] * 36
@@ -190,12 +211,12 @@ class _Writer:
             sweep = self.sequence.sweep(frame)
             self._log(self.points, "/lidar/points", _point_cloud(m, t_ns, EGO_FRAME, sweep.xyz, sweep.intensity), t_ns)
 
-    def _entity(self, k: Kinematics, i: int, ts, pose):
+    def _entity(self, k: ObjectTrack, i: int, ts, pose):
         m = self.m
         r, g, b = object_color(k.object_id)
         color = m.Color(r=r, g=g, b=b, a=0.6)
         cube = m.CubePrimitive(pose=pose, size=m.Vector3(x=k.size[0], y=k.size[1], z=k.size[2]), color=color)
-        label_pose = m.Pose(position=m.Vector3(x=float(k.x[i]), y=float(k.y[i]), z=float(k.z[i]) + k.size[2] / 2 + 0.5),
+        label_pose = m.Pose(position=m.Vector3(x=float(k.boxes[i, 0]), y=float(k.boxes[i, 1]), z=float(k.boxes[i, 2]) + k.size[2] / 2 + 0.5),
                             orientation=m.Quaternion(w=1.0))
         text = m.TextPrimitive(pose=label_pose, billboard=True, font_size=14.0, scale_invariant=True,
                                color=m.Color(r=1.0, g=1.0, b=1.0, a=1.0),
@@ -206,8 +227,8 @@ class _Writer:
         seg = np.flatnonzero(ok[:-1] & ok[1:])
         points = []
         for s in seg:
-            points.append(m.Point3(x=float(k.x[s]), y=float(k.y[s]), z=float(k.z[s])))
-            points.append(m.Point3(x=float(k.x[s + 1]), y=float(k.y[s + 1]), z=float(k.z[s + 1])))
+            points.append(m.Point3(x=float(k.boxes[s, 0]), y=float(k.boxes[s, 1]), z=float(k.boxes[s, 2])))
+            points.append(m.Point3(x=float(k.boxes[s + 1, 0]), y=float(k.boxes[s + 1, 1]), z=float(k.boxes[s + 1, 2])))
         lines = [m.LinePrimitive(type=m.LinePrimitiveLineType.LineList, pose=m.Pose(orientation=m.Quaternion(w=1.0)),
                                  thickness=0.15, scale_invariant=False, points=points,
                                  color=m.Color(r=r, g=g, b=b, a=1.0))] if points else []
@@ -284,7 +305,7 @@ def _write_options():
     return MCAPWriteOptions(compression_level=1, compression_threads=0)
 
 
-def write_motion_mcap(path: str | Path, sequence: Sequence, kinematics: list[Kinematics], metadata: dict[str, Any],
+def write_motion_mcap(path: str | Path, sequence: Sequence, kinematics: list[ObjectTrack], metadata: dict[str, Any],
                       with_points: bool = False, progress: bool = True) -> McapSummary:
     """Write the MCAP atomically (temporary file, then rename); returns per-topic message counts.
 

@@ -70,24 +70,18 @@ def tracks_from_annotations(sequence: Sequence, track_ids: Seq[str] | None = Non
     out: list[ObjectTrack] = []
     for tid in dict.fromkeys(ids):
         ann = annotated[tid]
-        first, last = ann.frames[0], ann.frames[-1]
+        first, last = int(ann.frames[0]), int(ann.frames[-1])
         frames = np.arange(first, last + 1)
-        by_frame = dict(zip(ann.frames, ann.boxes, strict=True))
+        rows = ann.frames - first
         states = np.full((len(frames), 4), np.nan)
+        states[rows] = ann.states
         tilts = np.zeros((len(frames), 2))
+        if ann.tilts is not None:
+            tilts[rows] = ann.tilts
         valid = np.zeros(len(frames), dtype=bool)
-        flags: list[list[str]] = []
-        for i, k in enumerate(frames):
-            box = by_frame.get(int(k))
-            if box is None:
-                flags.append(["not_annotated"])
-                continue
-            states[i] = [box.x, box.y, box.z, box.heading]
-            tilts[i] = [box.roll, box.pitch]
-            valid[i] = True
-            flags.append([])
-        sizes = np.array([[b.length, b.width, b.height] for b in ann.boxes])
-        size = tuple(float(v) for v in np.median(sizes, axis=0))
+        valid[rows] = True
+        flags = [[] if v else ["not_annotated"] for v in valid]
+        size = ann.size
         out.append(ObjectTrack.from_states(object_id=tid, label=ann.label, size=size, frames=frames,
                                timestamps_ns=sequence.timestamps_ns[frames], states=states, valid=valid,
                                flags=flags, source=f"annotations of {sequence.id}",

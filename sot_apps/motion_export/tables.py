@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.atomic import atomic_path, write_npz, write_text
-from ..objects.smoother import Kinematics
+from ..io.object_track import ObjectTrack
 
 __all__ = ["Scenario", "make_scenario", "av2_object_type", "PARQUET_COLUMNS", "NPZ_ARRAYS", "CSV_COLUMNS",
            "write_parquet", "write_npz_table", "write_csv", "TRACK_CATEGORY"]
@@ -107,12 +107,12 @@ class Scenario:
     scenario_id: str
     frames: np.ndarray          # (T,) int64 sequence frames
     timestamps_ns: np.ndarray   # (T,) int64
-    objects: list[Kinematics]
+    objects: list[ObjectTrack]
     focal_track_id: str
     observed_steps: int | None = None
     city: str = "unknown"
 
-    def category(self, k: Kinematics) -> int:
+    def category(self, k: ObjectTrack) -> int:
         """AV2 category: FOCAL for the focal track; SCORED if valid at every timestep of the scenario;
         UNSCORED if valid at >= 10 timesteps; otherwise TRACK_FRAGMENT."""
         if k.object_id == self.focal_track_id:
@@ -122,13 +122,13 @@ class Scenario:
             return TRACK_CATEGORY["SCORED_TRACK"]
         return TRACK_CATEGORY["UNSCORED_TRACK"] if n_valid >= 10 else TRACK_CATEGORY["TRACK_FRAGMENT"]
 
-    def observed(self, k: Kinematics) -> np.ndarray:
+    def observed(self, k: ObjectTrack) -> np.ndarray:
         steps = k.frames - self.frames[0]
         limit = len(self.frames) if self.observed_steps is None else self.observed_steps
         return k.valid & (steps < limit)
 
 
-def make_scenario(scenario_id: str, sequence_timestamps_ns: np.ndarray, objects: list[Kinematics],
+def make_scenario(scenario_id: str, sequence_timestamps_ns: np.ndarray, objects: list[ObjectTrack],
                   focal_track_id: str | None = None, observed_steps: int | None = None) -> Scenario:
     """Scenario over the frames spanned by ``objects``; ``sequence_timestamps_ns`` indexed by frame."""
     if objects:
@@ -153,11 +153,11 @@ def _parquet_columns(scenario: Scenario) -> dict[str, list | np.ndarray]:
         cols["object_type"].append([av2_object_type(k.label)] * n)
         cols["object_category"].append(np.full(n, scenario.category(k), dtype=np.int64))
         cols["timestep"].append(k.frames - scenario.frames[0])
-        cols["position_x"].append(k.x)
-        cols["position_y"].append(k.y)
-        cols["heading"].append(k.heading)
-        cols["velocity_x"].append(k.velocity_x)
-        cols["velocity_y"].append(k.velocity_y)
+        cols["position_x"].append(k.boxes[:, 0])
+        cols["position_y"].append(k.boxes[:, 1])
+        cols["heading"].append(k.boxes[:, 3])
+        cols["velocity_x"].append(k.velocity[:, 0])
+        cols["velocity_y"].append(k.velocity[:, 1])
         cols["scenario_id"].append([scenario.scenario_id] * n)
         cols["start_timestamp"].append(np.full(n, start, dtype=np.int64))
         cols["end_timestamp"].append(np.full(n, end, dtype=np.int64))
@@ -167,7 +167,7 @@ def _parquet_columns(scenario: Scenario) -> dict[str, list | np.ndarray]:
         cols["valid"].append(k.valid)
         cols["frame"].append(k.frames)
         cols["timestamp_ns"].append(k.timestamps_ns)
-        cols["position_z"].append(k.z)
+        cols["position_z"].append(k.boxes[:, 2])
         cols["speed"].append(k.speed)
         cols["acceleration"].append(k.acceleration)
         cols["yaw_rate"].append(k.yaw_rate)
@@ -223,8 +223,8 @@ def dense_arrays(scenario: Scenario) -> dict[str, np.ndarray]:
     for o, k in enumerate(scenario.objects):
         cols = k.frames - scenario.frames[0]
         v = k.valid
-        for name, values in (("x", k.x), ("y", k.y), ("z", k.z), ("heading", k.heading),
-                             ("velocity_x", k.velocity_x), ("velocity_y", k.velocity_y), ("speed", k.speed),
+        for name, values in (("x", k.boxes[:, 0]), ("y", k.boxes[:, 1]), ("z", k.boxes[:, 2]), ("heading", k.boxes[:, 3]),
+                             ("velocity_x", k.velocity[:, 0]), ("velocity_y", k.velocity[:, 1]), ("speed", k.speed),
                              ("acceleration", k.acceleration), ("yaw_rate", k.yaw_rate)):
             out[name][o, cols[v]] = values[v]
         for name, value in zip(("length", "width", "height"), k.size, strict=True):
@@ -245,7 +245,7 @@ def write_npz_table(path: str | Path, scenario: Scenario) -> tuple[int, int]:
     return arrays["valid"].shape
 
 
-def write_csv(path: str | Path, objects: list[Kinematics]) -> int:
+def write_csv(path: str | Path, objects: list[ObjectTrack]) -> int:
     """Long CSV (one row per object and frame, CSV_COLUMNS); NaN is written as an empty cell."""
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
@@ -258,8 +258,8 @@ def write_csv(path: str | Path, objects: list[Kinematics]) -> int:
     for k in objects:
         for i in range(len(k)):
             writer.writerow([k.object_id, k.label, int(k.frames[i]), int(k.timestamps_ns[i]), int(bool(k.valid[i])),
-                             ",".join(k.flags[i]), num(k.x[i], 4), num(k.y[i], 4), num(k.z[i], 4),
-                             num(k.heading[i], 5), num(k.velocity_x[i], 4), num(k.velocity_y[i], 4),
+                             ",".join(k.flags[i]), num(k.boxes[i, 0], 4), num(k.boxes[i, 1], 4), num(k.boxes[i, 2], 4),
+                             num(k.boxes[i, 3], 5), num(k.velocity[i, 0], 4), num(k.velocity[i, 1], 4),
                              num(k.speed[i], 4), num(k.acceleration[i], 4), num(k.yaw_rate[i], 5),
                              num(k.position_std[i], 4), num(k.heading_std[i], 5), num(k.speed_std[i], 4),
                              num(k.yaw_rate_std[i], 5)])

@@ -206,7 +206,7 @@ def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: I
         raise InputError(seq.root, f"no annotated track {missing[0]!r}")
     excluded = set(int(k) for k in exclude_frames)
     boxes = {tid: ObjectTrack.from_boxes(tid, tracks[tid].label,
-                                         dict(zip(tracks[tid].frames, tracks[tid].boxes, strict=True)))
+                                         tracks[tid].boxes_by_frame())
              for tid in track_ids}
     params = ShapeParams(near=BoxMargin(scale=(1.3, 1.3, 1.05)), stamp=BoxMargin(), min_stamp_points=1,
                          keep=BoxMargin(scale=(1.02, 1.02, 1.02)), ground_clearance=ground_clearance, end="hold")
@@ -228,7 +228,7 @@ def aggregate_track_points(seq: Sequence, track_id: str, exclude_frames: Iterabl
                            ) -> tuple[np.ndarray, list[int], Box]:
     """One track's aggregated object-frame points, the frames used and its first box."""
     points, used = aggregate_tracks_points(seq, [track_id], exclude_frames)[track_id]
-    return points, used, seq.tracks()[track_id].boxes[0]
+    return points, used, seq.tracks()[track_id].box(0)
 
 
 def entries_from_annotations(bank_root: Path, seq: Sequence, track_ids: list[str], mirror: bool = False,
@@ -243,7 +243,7 @@ def entries_from_annotations(bank_root: Path, seq: Sequence, track_ids: list[str
     for tid in track_ids:
         start = time.perf_counter()
         points, frames = aggregated[tid]
-        box = tracks[tid].boxes[0]
+        box = tracks[tid].box(0)
         if len(points) < min_points:
             skipped.append(f"{tid}: only {len(points)} points (< {min_points})")
             continue

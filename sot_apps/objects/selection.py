@@ -95,11 +95,10 @@ class Selection:
         return TrackMotion(moving, displacement, float(distances.max()))
 
     def track_motion(self, track, timestamps_ns: np.ndarray) -> TrackMotion:
-        """Motion of an :class:`~sot_apps.io.sequence.AnnotatedTrack` (frame timestamps of its sequence)."""
+        """Motion of an :class:`~sot_apps.io.object_track.ObjectTrack` (frame timestamps of its sequence)."""
         import numpy as np
 
-        centres = np.array([[b.x, b.y] for b in track.boxes])
-        return self.motion(centres, np.asarray(timestamps_ns)[list(track.frames)])
+        return self.motion(track.boxes[:, :2], np.asarray(timestamps_ns)[track.frames])
 
     def is_moving_vehicle(self, track, timestamps_ns: np.ndarray) -> bool:
         return self.is_vehicle(track.label) and self.track_motion(track, timestamps_ns).moving

@@ -69,10 +69,10 @@ class ShapeParams:
 
 def object_points_by_frame(seq, tracks: dict[str, ObjectTrack], params: ShapeParams = ShapeParams(),
                            point_frames: Iterable[int] | None = None, progress: bool = False
-                           ) -> tuple[dict[str, dict[int, np.ndarray]], dict[str, Trajectory]]:
-    """Per track (an ObjectTrack: boxes at frames) and frame, the object-frame points of its box; and each track's
-    box trajectory (the boxes at
-    their capture times). ``point_frames`` (default: all) limits the frames whose points are returned; every
+                           ) -> tuple[dict[str, dict[int, np.ndarray]], dict[str, ObjectTrack]]:
+    """Per track (an ObjectTrack: boxes at frames) and frame, the object-frame points of its box; and each track
+    stamped with its boxes' capture times (:meth:`ObjectTrack.restamped`; ``params.capture_time=False``: the frame
+    times). ``point_frames`` (default: all) limits the frames whose points are returned; every
     box is stamped. Each sweep is read once."""
     from tqdm import tqdm
 
@@ -101,11 +101,10 @@ def object_points_by_frame(seq, tracks: dict[str, ObjectTrack], params: ShapePar
                 near_points[tid][k] = (local[near] if not params.per_point_time else world[near],
                                        frame_ns + offsets[near])
     out: dict[str, dict[int, np.ndarray]] = {tid: {} for tid in tracks}
-    trajectories: dict[str, Trajectory] = {}
+    stamped: dict[str, ObjectTrack] = {}
     for tid, track in tracks.items():
-        trajectory = Trajectory.from_samples([stamps[tid][int(k)] for k in track.frames], track.states, params.end,
-                                             params.max_extrapolation_ns, track.tilts)
-        trajectories[tid] = trajectory
+        stamped[tid] = track.restamped([stamps[tid][int(k)] for k in track.frames])
+        trajectory = Trajectory.from_track(stamped[tid], params.end, params.max_extrapolation_ns)
         for k, (pts, t) in near_points[tid].items():
             box = track.box_at(k)
             local = trajectory.object_from_world_points(pts, t) if params.per_point_time else pts
@@ -114,4 +113,4 @@ def object_points_by_frame(seq, tracks: dict[str, ObjectTrack], params: ShapePar
                 keep &= local[:, 2] > -box.height / 2 + params.ground_clearance
             if keep.any():
                 out[tid][k] = local[keep]
-    return out, trajectories
+    return out, stamped

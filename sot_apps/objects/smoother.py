@@ -29,7 +29,8 @@ every step uses its own dt) and a Rauch-Tung-Striebel pass runs backward. The pa
 each pass started from the previous pass's smoothed initial state, which removes the start-up
 transient of the unknown initial speed and yaw rate.
 
-Outputs per frame: position, heading (wrapped), velocity (x, y) = v (cos phi, sin phi),
+Outputs per frame, as an :class:`~sot_apps.io.object_track.ObjectTrack` with its kinematics columns: the smoothed
+boxes (position, heading wrapped, the input's size and tilts), velocity (x, y) = v (cos phi, sin phi),
 speed = |v|, yaw rate = omega, longitudinal acceleration = dv/dt (np.gradient of the smoothed v
 over the true frame times), and 1-sigma uncertainties from the smoothed covariance.
 
@@ -40,7 +41,7 @@ interpolated value presented as data.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,8 +49,7 @@ from tracker import ctrv_arc, wrap_angle
 
 from ..io.object_track import ObjectTrack
 
-__all__ = ["SmootherConfig", "Kinematics", "smooth_track", "ctrv_transition",
-           "central_difference_kinematics"]
+__all__ = ["SmootherConfig", "smooth_track", "ctrv_transition", "central_difference_kinematics"]
 
 _NX = 8  # x, y, theta, v, omega, z, vz, beta
 _IX, _IY, _ITH, _IV, _IW, _IZ, _IVZ, _IB = range(_NX)
@@ -80,57 +80,6 @@ class SmootherConfig:
 # Presets: tracker outputs are noisier than human annotations.
 TRACKER_SMOOTHER = SmootherConfig()
 ANNOTATION_SMOOTHER = SmootherConfig(sigma_position=0.05, sigma_heading=0.02, sigma_z=0.05)
-
-
-@dataclass
-class Kinematics:
-    """Smoothed kinematics of one object at its frame times. Invalid samples hold NaN."""
-
-    object_id: str
-    label: str
-    size: tuple[float, float, float]
-    frames: np.ndarray          # (N,) int64
-    timestamps_ns: np.ndarray   # (N,) int64
-    valid: np.ndarray           # (N,) bool
-    flags: list[list[str]]
-    x: np.ndarray
-    y: np.ndarray
-    z: np.ndarray
-    heading: np.ndarray         # wrapped to [-pi, pi)
-    velocity_x: np.ndarray      # m/s, world frame
-    velocity_y: np.ndarray
-    speed: np.ndarray           # |v|, m/s
-    acceleration: np.ndarray    # dv/dt along the heading, m/s^2
-    yaw_rate: np.ndarray        # rad/s, CCW positive
-    position_std: np.ndarray    # m, sqrt(var x + var y)
-    heading_std: np.ndarray     # rad
-    speed_std: np.ndarray       # m/s
-    yaw_rate_std: np.ndarray    # rad/s
-    source: str = ""
-    shape_points: np.ndarray | None = None
-    config: dict = field(default_factory=dict)
-    tilts: np.ndarray | None = None   # (N, 2) [roll, pitch] of the input boxes (NaN where invalid); None: level
-
-    def __len__(self) -> int:
-        return len(self.frames)
-
-    def sample(self, i: int) -> dict:
-        """Sample i as plain Python values (None for NaN), for JSON messages."""
-        def f(value: float) -> float | None:
-            value = float(value)
-            return value if np.isfinite(value) else None
-
-        return {
-            "object_id": self.object_id, "label": self.label, "frame": int(self.frames[i]),
-            "timestamp_ns": int(self.timestamps_ns[i]), "valid": bool(self.valid[i]), "flags": list(self.flags[i]),
-            "position": {"x": f(self.x[i]), "y": f(self.y[i]), "z": f(self.z[i])},
-            "heading": f(self.heading[i]),
-            "velocity": {"x": f(self.velocity_x[i]), "y": f(self.velocity_y[i])},
-            "speed": f(self.speed[i]), "acceleration": f(self.acceleration[i]), "yaw_rate": f(self.yaw_rate[i]),
-            "std": {"position": f(self.position_std[i]), "heading": f(self.heading_std[i]),
-                    "speed": f(self.speed_std[i]), "yaw_rate": f(self.yaw_rate_std[i])},
-            "size": {"length": float(self.size[0]), "width": float(self.size[1]), "height": float(self.size[2])},
-        }
 
 
 def ctrv_transition(state: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -214,14 +163,25 @@ def _ekf_rts(t: np.ndarray, meas: np.ndarray, valid: np.ndarray, r_scale: np.nda
     return xs_s, ps_s
 
 
-def _valid_tilts(track: ObjectTrack) -> np.ndarray | None:
-    """The track's [roll, pitch] at its valid frames (NaN elsewhere), or None for a level track."""
-    return None if track.tilts is None else np.where(track.valid[:, None], track.tilts, np.nan)
+def _kinematics(track: ObjectTrack, columns: dict[str, np.ndarray], config: dict,
+                shape_points: np.ndarray | None = None) -> ObjectTrack:
+    """``track``'s frames with the kinematics ``columns`` (x, y, z, heading, velocity_x, velocity_y and
+    :data:`~sot_apps.io.object_track.KINEMATICS` but velocity): the boxes of the given positions and headings with
+    the track's size and, at its valid frames, its [roll, pitch] (NaN elsewhere)."""
+    valid = track.valid.copy()
+    states = np.stack([columns.pop(name) for name in ("x", "y", "z", "heading")], axis=1)
+    tilts = None if track.tilts is None else np.where(valid[:, None], track.tilts, np.nan)
+    velocity = np.stack([columns.pop("velocity_x"), columns.pop("velocity_y")], axis=1)
+    return ObjectTrack.from_states(track.object_id, track.label, track.size, track.frames.copy(),
+                                   track.timestamps_ns.copy(), states, valid, track.flags, tilts=tilts,
+                                   velocity=velocity, source=track.source, config=config, shape_points=shape_points,
+                                   **columns)
 
 
 def smooth_track(track: ObjectTrack, config: SmootherConfig = TRACKER_SMOOTHER,
-                 measurement_sigma_scale: np.ndarray | None = None) -> Kinematics:
-    """Smoothed kinematics of ``track`` at its frame times (see the module docstring)."""
+                 measurement_sigma_scale: np.ndarray | None = None) -> ObjectTrack:
+    """Smoothed kinematics of ``track`` at its frame times (see the module docstring): an ObjectTrack of the
+    smoothed boxes with the kinematics columns, its shape points and its config plus ``config["smoother"]``."""
     n = len(track.frames)
     nan = np.full(n, np.nan)
     out = {name: nan.copy() for name in ("x", "y", "z", "heading", "velocity_x", "velocity_y", "speed",
@@ -261,14 +221,11 @@ def smooth_track(track: ObjectTrack, config: SmootherConfig = TRACKER_SMOOTHER,
             arr = out[name]
             arr[lo:hi] = np.atleast_1d(values)
             arr[~valid] = np.nan
-    return Kinematics(object_id=track.object_id, label=track.label, size=tuple(float(s) for s in track.size),
-                      frames=track.frames.copy(), timestamps_ns=track.timestamps_ns.copy(), valid=valid,
-                      flags=[list(f) for f in track.flags], source=track.source, shape_points=track.shape_points,
-                      config={**track.config, "smoother": {"model": "CTRV EKF + RTS", **config.to_dict()}},
-                      tilts=_valid_tilts(track), **out)
+    return _kinematics(track, out, {**track.config, "smoother": {"model": "CTRV EKF + RTS", **config.to_dict()}},
+                       track.shape_points)
 
 
-def central_difference_kinematics(track: ObjectTrack) -> Kinematics:
+def central_difference_kinematics(track: ObjectTrack) -> ObjectTrack:
     """Unsmoothed reference: velocity and yaw rate by central differences of the raw states
     (one-sided at the ends and next to invalid frames; np.gradient over the true frame times).
 
@@ -299,10 +256,8 @@ def central_difference_kinematics(track: ObjectTrack) -> Kinematics:
         acc[run] = np.gradient(vx[run] * c[run] + vy[run] * s[run], t[run])
     nan = np.full(n, np.nan)
     mask = lambda a: np.where(valid, a, np.nan)  # noqa: E731
-    return Kinematics(object_id=track.object_id, label=track.label, size=track.size, frames=track.frames.copy(),
-                      timestamps_ns=track.timestamps_ns.copy(), valid=valid.copy(), flags=[list(f) for f in track.flags],
-                      x=mask(st[:, 0]), y=mask(st[:, 1]), z=mask(st[:, 2]), heading=mask(wrap_angle(st[:, 3])),
-                      velocity_x=vx, velocity_y=vy, speed=speed, acceleration=acc, yaw_rate=w,
-                      position_std=nan.copy(), heading_std=nan.copy(), speed_std=nan.copy(), yaw_rate_std=nan.copy(),
-                      source=track.source, config={"smoother": {"model": "central differences"}},
-                      tilts=_valid_tilts(track))
+    return _kinematics(track, {"x": mask(st[:, 0]), "y": mask(st[:, 1]), "z": mask(st[:, 2]),
+                               "heading": mask(wrap_angle(st[:, 3])), "velocity_x": vx, "velocity_y": vy, "speed": speed,
+                               "acceleration": acc, "yaw_rate": w, "position_std": nan.copy(), "heading_std": nan.copy(),
+                               "speed_std": nan.copy(), "yaw_rate_std": nan.copy()},
+                       {"smoother": {"model": "central differences"}})

@@ -25,6 +25,8 @@ import numpy as np
 
 from tracker import rotation_zyx
 
+from ..io.object_track import ObjectTrack
+
 __all__ = ["Trajectory", "EndMode", "CAMERA_EXTRAPOLATION_NS", "world_from_object", "wrap_heading"]
 
 EndMode = Literal["hold", "extrapolate"]
@@ -90,6 +92,14 @@ class Trajectory:
     def from_samples(cls, times_ns, states, end: EndMode = "hold", max_extrapolation_ns: int | None = None,
                      tilts=None) -> "Trajectory":
         return cls(times_ns, states, end, None if max_extrapolation_ns is None else int(max_extrapolation_ns), tilts)
+
+    @classmethod
+    def from_track(cls, track: ObjectTrack, end: EndMode = "hold", max_extrapolation_ns: int | None = None
+                   ) -> "Trajectory":
+        """The states (and tilts) of ``track`` at its ``timestamps_ns``: every row, valid or not."""
+        if track.timestamps_ns is None:
+            raise ValueError(f"{track.object_id}: a trajectory needs the track's timestamps_ns")
+        return cls.from_samples(track.timestamps_ns, track.states, end, max_extrapolation_ns, track.tilts)
 
     @classmethod
     def static(cls, x: float, y: float, z: float, heading: float, roll: float = 0.0, pitch: float = 0.0

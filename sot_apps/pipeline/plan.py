@@ -117,7 +117,7 @@ def _annotation_objects(seq: Sequence, src: ObjectSource, first: int, last: int)
     out = []
     for tid in ids:
         t = tracks[tid]
-        frames = [k for k in t.frames if first <= k <= last]
+        frames = [int(k) for k in t.frames if first <= k <= last]
         if len(frames) < 2:
             continue
         out.append((tid, t.label, frames[0], frames[-1], t.box_at(frames[0]),

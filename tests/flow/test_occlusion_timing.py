@@ -9,7 +9,7 @@ import numpy as np
 from sot_apps.flow.annotate import FlowOptions, build_pair, compute_pair
 from sot_apps.flow.camera import CameraModel, project
 from sot_apps.flow.dense import RayCache, dense_flow
-from sot_apps.flow.objects import TrackedObject
+from sot_apps.flow.objects import MeshedObject
 from sot_apps.flow.occlusion import project_lidar
 from sot_apps.flow.scene import FlowObject, OcclusionParams, PairSetup
 from sot_apps.io.sequence import Camera, CameraFrame, FrameInfo, Sequence, Sweep
@@ -131,7 +131,7 @@ def test_shifted_camera_timestamp_changes_flow_by_projected_velocity():
                                           [25.0 + velocity[0] * 0.4, -1.0 + velocity[1] * 0.4, 1.5, 0.0]],
                                          "extrapolate", 150_000_000)
     mesh = plate(1.0, 0.8)
-    obj = TrackedObject("car", "Car", trajectory, mesh.vertices, mesh, np.array([0.1, 2.0, 1.6]), "test")
+    obj = MeshedObject.from_trajectory("car", "Car", trajectory, mesh.vertices, mesh, np.array([0.1, 2.0, 1.6]), "test")
     options = FlowOptions(use_lidar=False)
     camera_k_time = t0 - 50_000_000
     shift = 30_000_000  # image k+1 taken 30 ms later than nominal

@@ -55,7 +55,7 @@ def test_tiny_matches_its_generator(tiny_dir):
     tracks = seq.tracks()
     assert set(tracks) == set(TINY_TRACKS)
     moving = tracks["car-move"]
-    assert moving.boxes[10].x - moving.boxes[0].x == pytest.approx(8.0, abs=1e-9)  # 8 m/s for 1 s
+    assert moving.box(10).x - moving.box(0).x == pytest.approx(8.0, abs=1e-9)  # 8 m/s for 1 s
     # every car point the generator made lies in its GT box
     inside = points_in_box(seq.points_world(7), moving.box_at(7))
     assert inside.sum() >= 600

@@ -233,7 +233,7 @@ def test_synthetic_boxes_tracks_and_camera(synthetic):
                                        atol=1e-6)
             assert np.cos(a.box.heading - b.world[3]) == pytest.approx(1.0)
     tracks = seq.tracks()
-    assert tracks["car-7"].frames == [0, 1, 2] and tracks["car-7"].label == "Vehicle"
+    assert list(tracks["car-7"].frames) == [0, 1, 2] and tracks["car-7"].label == "Vehicle"
 
     camera = seq.cameras["FRONT"]
     assert (camera.width, camera.height) == ws.CAMERA_SIZE and len(camera.frames) == 3

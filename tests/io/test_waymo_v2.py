@@ -81,7 +81,7 @@ def test_synthetic_components_match_truth(synthetic):
                                        atol=1e-3)
             assert np.cos(a.box.heading - b.world[3]) == pytest.approx(1.0)
     assert seq.annotations[2] == []
-    assert seq.tracks()["car-7"].frames == [0, 1, 50]
+    assert list(seq.tracks()["car-7"].frames) == [0, 1, 50]
 
 
 def test_choosing_a_lidar(synthetic):

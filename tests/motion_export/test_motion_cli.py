@@ -56,7 +56,7 @@ def _write_flagged_track(directory, pandaset, prefix: str, last: int, flags: dic
 
     tid = pandaset.resolve_track_id(prefix)
     gt = pandaset.tracks()[tid]
-    boxes = gt.boxes[: last + 1]
+    boxes = [gt.box(i) for i in range(last + 1)]
     records = [FrameRecord(frame=k, timestamp_ns=int(pandaset.frames[k].timestamp_ns),
                            state=State(b.x, b.y, b.z, b.heading), num_points=100, quality=0.9,
                            flags=flags.get(k, [])) for k, b in enumerate(boxes)]

@@ -26,9 +26,9 @@ def test_constant_turn_velocity_and_yaw_rate_within_2_percent(speed, yaw_rate, h
     assert _relative_error(kin.speed, abs(speed)) < 0.02
     assert _relative_error(kin.yaw_rate, yaw_rate) < 0.02
     # the velocity vector, not only its norm (reversing: velocity points against the heading)
-    speed_error = np.hypot(kin.velocity_x - speed * np.cos(heading), kin.velocity_y - speed * np.sin(heading))
+    speed_error = np.hypot(kin.velocity[:, 0] - speed * np.cos(heading), kin.velocity[:, 1] - speed * np.sin(heading))
     assert np.max(speed_error) < 0.02 * abs(speed)
-    assert np.max(np.hypot(kin.x - states[:, 0], kin.y - states[:, 1])) < 0.01
+    assert np.max(np.hypot(kin.boxes[:, 0] - states[:, 0], kin.boxes[:, 1] - states[:, 1])) < 0.01
     assert np.max(np.abs(kin.acceleration)) < 0.02 * abs(speed)
 
 
@@ -41,7 +41,7 @@ def test_heading_is_unwrapped_across_the_seam():
     assert states[:, 3].min() < -2.5 and states[:, 3].max() > 2.9
     kin = smooth_track(make_track("a", times, states))
     assert _relative_error(kin.yaw_rate, 0.12) < 0.02
-    assert np.all(np.abs(kin.heading) <= np.pi)
+    assert np.all(np.abs(kin.boxes[:, 3]) <= np.pi)
 
 
 def test_straight_line_and_standing_still():
@@ -65,11 +65,12 @@ def test_flagged_frames_are_not_measurements_and_not_interpolated():
     valid[bad] = False
     kin = smooth_track(make_track("a", times, corrupted, valid=valid))
     assert np.array_equal(kin.valid, valid)
-    for name in ("x", "y", "heading", "velocity_x", "speed", "acceleration", "yaw_rate", "position_std"):
-        values = getattr(kin, name)
+    columns = {"x": kin.boxes[:, 0], "y": kin.boxes[:, 1], "heading": kin.boxes[:, 3], "velocity_x": kin.velocity[:, 0],
+               **{name: getattr(kin, name) for name in ("speed", "acceleration", "yaw_rate", "position_std")}}
+    for name, values in columns.items():
         assert np.isnan(values[bad]).all(), name
         assert np.isfinite(values[valid]).all(), name
-    assert kin.flags[15] == ["no_points"]
+    assert kin.flags[15] == ("no_points",)
     good = np.flatnonzero(valid)
     assert _relative_error(kin.speed[good], 10.0) < 0.02
     assert _relative_error(kin.yaw_rate[good], 0.2) < 0.02
@@ -94,7 +95,7 @@ def test_noise_is_reduced_compared_with_central_differences():
     assert err_smooth < 0.5 * err_raw
     assert np.abs(smooth.yaw_rate - 0.15)[inner].mean() < 0.5 * np.abs(raw.yaw_rate - 0.15)[inner].mean()
     # reported 1-sigma position uncertainty is of the right size: the centre error is within 3 sigma
-    centre_error = np.hypot(smooth.x - truth[:, 0], smooth.y - truth[:, 1])
+    centre_error = np.hypot(smooth.boxes[:, 0] - truth[:, 0], smooth.boxes[:, 1] - truth[:, 1])
     assert np.mean(centre_error < 3 * smooth.position_std) > 0.95
 
 
@@ -114,8 +115,8 @@ def test_central_differences_of_an_analytic_line():
     times = frame_times_ns(20, seed=7, jitter_s=0.0)
     t = (times - times[0]) * 1e-9
     kin = central_difference_kinematics(make_track("a", times, constant_turn(t, 5.0, 0.0, heading0=0.3)))
-    assert np.allclose(kin.velocity_x, 5.0 * np.cos(0.3), atol=1e-6)
-    assert np.allclose(kin.velocity_y, 5.0 * np.sin(0.3), atol=1e-6)
+    assert np.allclose(kin.velocity[:, 0], 5.0 * np.cos(0.3), atol=1e-6)
+    assert np.allclose(kin.velocity[:, 1], 5.0 * np.sin(0.3), atol=1e-6)
 
 
 def test_side_slip_of_the_box_centre_is_not_forced_onto_the_heading():
@@ -128,6 +129,6 @@ def test_side_slip_of_the_box_centre_is_not_forced_onto_the_heading():
     states[:, 3] = wrap_angle(course[:, 3] - slip)  # the box heading lags the direction of travel
     kin = smooth_track(make_track("a", times, states))
     direction = 0.4 + 0.35 * t
-    assert np.max(np.hypot(kin.velocity_x - 2.0 * np.cos(direction), kin.velocity_y - 2.0 * np.sin(direction))) < 0.04
+    assert np.max(np.hypot(kin.velocity[:, 0] - 2.0 * np.cos(direction), kin.velocity[:, 1] - 2.0 * np.sin(direction))) < 0.04
     assert _relative_error(kin.yaw_rate, 0.35) < 0.02
-    assert np.max(np.hypot(kin.x - states[:, 0], kin.y - states[:, 1])) < 0.01
+    assert np.max(np.hypot(kin.boxes[:, 0] - states[:, 0], kin.boxes[:, 1] - states[:, 1])) < 0.01

@@ -109,7 +109,7 @@ def test_transforms_match_the_inputs(exported):
         yaw = 2 * np.arctan2(ego.rotation.z, ego.rotation.w)
         assert np.isclose(np.cos(yaw), w_e[0, 0]) and np.isclose(np.sin(yaw), w_e[1, 0])
         a = by_child["object/car-a"]
-        assert np.isclose(a.translation.x, kin[0].x[k]) and np.isclose(a.translation.y, kin[0].y[k])
+        assert np.isclose(a.translation.x, kin[0].boxes[k, 0]) and np.isclose(a.translation.y, kin[0].boxes[k, 1])
         # car-b: frames 2..9, its frame 5 (index 3) is invalid and must have no transform
         assert ("object/car-b" in by_child) == (2 <= k <= 9 and k != 5)
 
@@ -118,9 +118,9 @@ def test_odometry_and_markers_carry_the_kinematics(exported):
     kin_a = exported["kin"][0]
     for i, (_, _, odom) in enumerate(exported["messages"]["/objects/car-a/pose"]):
         assert odom.frame_id == "world" and odom.body_frame_id == "object/car-a"
-        c, s = np.cos(kin_a.heading[i]), np.sin(kin_a.heading[i])
-        assert np.isclose(odom.linear_velocity.x, c * kin_a.velocity_x[i] + s * kin_a.velocity_y[i])
-        assert np.isclose(odom.linear_velocity.y, -s * kin_a.velocity_x[i] + c * kin_a.velocity_y[i])
+        c, s = np.cos(kin_a.boxes[i, 3]), np.sin(kin_a.boxes[i, 3])
+        assert np.isclose(odom.linear_velocity.x, c * kin_a.velocity[i, 0] + s * kin_a.velocity[i, 1])
+        assert np.isclose(odom.linear_velocity.y, -s * kin_a.velocity[i, 0] + c * kin_a.velocity[i, 1])
         assert np.isclose(odom.angular_velocity.z, kin_a.yaw_rate[i])
     b_speeds = [float(kv.value) for _, _, update in exported["messages"]["/markers/objects"]
                 for e in update.entities if e.id == "car-b" for kv in e.metadata if kv.key == "speed"]

@@ -67,9 +67,9 @@ def test_per_point_capture_time_undoes_the_rolling_scan_smear():
     # extrapolate: the first sweep's early points were captured before the first box's capture time
     params = ShapeParams(near=wide, stamp=BoxMargin(pad=(0.6, 0.1, 0.0)), keep=wide, ground_clearance=None,
                          end="extrapolate")
-    points, trajectories = object_points_by_frame(world, tracks, params)
+    points, stamped = object_points_by_frame(world, tracks, params)
     # the boxes are stamped at their capture time (the median point time, 50 ms before the frame)
-    np.testing.assert_allclose(trajectories["car"].times_ns - np.array([f.timestamp_ns for f in world.frames]),
+    np.testing.assert_allclose(stamped["car"].timestamps_ns - np.array([f.timestamp_ns for f in world.frames]),
                                -DT // 2, atol=8_000_000)
     sharp = np.concatenate(list(points["car"].values()))
     assert len(sharp) > 2000

@@ -62,7 +62,7 @@ def test_tracking_track_ids_and_first_van(readers_root):
     seq = open_sequence(f"{KITTI_TRACKING}#0000")
     tracks = seq.tracks()
     assert len(tracks) == 15 and tracks["0"].label == "Van"
-    first = tracks["0"].boxes[0]
+    first = tracks["0"].box(0)
     np.testing.assert_allclose([first.x, first.y, first.z], [13.69, 4.56, -0.74], atol=0.01)  # SOURCE.md
 
 

@@ -163,7 +163,7 @@ def test_tables_from_the_synthetic_world_read_back(tmp_path, capsys):
         assert got.timestamp_ns == want.timestamp_ns  # per-image time (50 ms before the lidar)
         np.testing.assert_allclose(got.world_from_camera, want.world_from_camera, atol=1e-9)
     tracks = seq.tracks()
-    assert sorted(tracks) == ["inst-car-move", "inst-car-park"] and tracks["inst-car-move"].frames == list(range(0, 20, 2))
+    assert sorted(tracks) == ["inst-car-move", "inst-car-park"] and list(tracks["inst-car-move"].frames) == list(range(0, 20, 2))
 
 
 # ------------------------------------------------------------------ the real demo keyframe

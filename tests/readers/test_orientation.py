@@ -127,9 +127,10 @@ def test_trajectories_place_tilted_boxes_as_given(readers_root):
     k = next(f.index for f in seq.frames if f.has_sweep)
     tracks = {a.track_id: ObjectTrack.from_boxes(a.track_id, a.label, {k: a.box})
               for a in seq.annotations[k] if a.num_points > 50}
-    points, trajectories = object_points_by_frame(seq, tracks, ShapeParams(capture_time=False, ground_clearance=None))
+    points, stamped = object_points_by_frame(seq, tracks, ShapeParams(capture_time=False, ground_clearance=None))
     assert tracks and points
-    for tid, trajectory in trajectories.items():
+    for tid, track in stamped.items():
+        trajectory = Trajectory.from_track(track)
         box = tracks[tid].box(0)
         np.testing.assert_allclose(trajectory.world_from_object_at(seq.frames[k].timestamp_ns), box.world_from_object(),
                                    atol=1e-12)
@@ -166,7 +167,7 @@ def test_motion_export_from_av2_annotations_keeps_the_tilt(readers_root, tmp_pat
     assert main(["motion-export", str(AV2_LOG_A), "--from-annotations", "--track-id", *ids,
                  "--out", str(tmp_path / "gt.mcap"), "--quiet"]) == 0
     frame_of = {int(f.timestamp_ns): f.index for f in seq.frames}
-    boxes = {(k, tid): box for tid in ids for k, box in zip(tracks[tid].frames, tracks[tid].boxes, strict=True)}
+    boxes = {(k, tid): box for tid in ids for k, box in tracks[tid].boxes_by_frame().items()}
     orientations, headings = [], {}
     with open(tmp_path / "gt.mcap", "rb") as handle:
         reader = make_reader(handle, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])

@@ -28,10 +28,10 @@ def _tracks_from_annotations(seq, count: int) -> list[tuple[TrackFile, np.ndarra
     for tid in ids:
         gt = annotated[tid]
         records = [FrameRecord(k, int(seq.frames[k].timestamp_ns), State(b.x, b.y, b.z, b.heading), 50, 0.9)
-                   for k, b in zip(gt.frames, gt.boxes, strict=True)]
-        first = gt.boxes[0]
-        out.append((TrackFile(seq.id, tid, Size(first.length, first.width, first.height), gt.frames[0],
-                              gt.frames[-1], first, {}, records, gt.label), np.zeros((0, 3))))
+                   for k, b in gt.boxes_by_frame().items()]
+        first = gt.box(0)
+        out.append((TrackFile(seq.id, tid, Size(first.length, first.width, first.height), int(gt.frames[0]),
+                              int(gt.frames[-1]), first, {}, records, gt.label), np.zeros((0, 3))))
     return out
 
 

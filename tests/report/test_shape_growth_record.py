@@ -11,7 +11,7 @@ from tracker import TrackerConfig, track
 
 def test_recording_the_shape_growth_does_not_change_the_track(tiny_dir, tmp_path):
     seq = open_sequence(tiny_dir)
-    init = seq.tracks()["car-move"].boxes[0]
+    init = seq.tracks()["car-move"].box(0)
     config = TrackerConfig()
     plain = track(seq, init, 0, 12, config)
     result, growth = track_with_shape_growth(seq, init, 0, 12, config, "car-move", shots=4)
