@@ -365,6 +365,12 @@ class OfflineParams:
     travel_frames: int = 2
     travel_min_step: float = 0.3        # m per frame over the chord: slower frames get no travel term (full
                                         # weight from twice this)
+    window_start: int = 0               # > 0 (offline): a second solve starts from the states of a fixed-lag window
+                                        # pass of this lag (refinement.lag's solve) and is kept when its boxes hold
+                                        # more points (tracker/offline.py, step 6)
+    window_start_moved: float = 0.5     # ... only when the window moved some centre farther than this (m) from the
+                                        # online one
+    window_start_margin: float = 1.05   # ... kept when its boxes hold more than this x the first solve's points
 
     def __post_init__(self) -> None:
         _choice("refinement.*.ground", self.ground, ("local", "tracker"))
@@ -619,6 +625,7 @@ _FULL = TrackerConfig(
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
     reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True),
+    refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10)),
 )
 # faithful: the authors' implementation (docs/tracker.md)
 _FAITHFUL = TrackerConfig(
