@@ -43,13 +43,14 @@ def test_offline_is_at_least_the_window_where_the_online_pass_held_the_car_off_b
     seq, boxes, online, config = held_off
     assert config.refinement.offline.window_start == 10                       # full's default
     lagged = _iou(refine_fixed_lag(seq, online, 10, config), boxes)
-    offline = _iou(refine_offline(seq, online, config), boxes)
+    refined = refine_offline(seq, online, config)
+    offline = _iou(refined, boxes)
     from_online = _iou(refine_offline(seq, online, config.updated({"refinement.offline.window_start": 0})), boxes)
     assert _iou(online, boxes)[list(HELD_OFF)].max() < 0.3                     # the online pass lost them
     assert from_online.mean() < lagged.mean() - 0.05                           # the solve from the online states
     assert offline.mean() >= lagged.mean() and offline.mean() > from_online.mean() + 0.1
     assert offline[15:].min() > 0.9                                            # the re-locked frames stay on the car
-    start = refine_offline(seq, online, config).estimates[0].box                # the start box is kept
+    start = refined.estimates[0].box                                           # the start box is kept
     assert np.allclose(start.center, boxes[0].center)
 
 
