@@ -30,7 +30,7 @@ from .geometry import Box, State, points_in_box
 from .offline import _box, _rebuild_shape, frame_region_points, refine_states
 from .sotracker import FrameEstimate, LocalCrop, Tracker, TrackResult
 
-__all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag"]
+__all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag", "window_states"]
 
 class FixedLagSmoother:
     """Sliding-window refinement of online estimates; ``add`` returns the estimates that became final."""
@@ -54,15 +54,19 @@ class FixedLagSmoother:
         self.floor = 0  # windows start no earlier (set by a backward pass: the frames before it are lost, and the
                         # window must not smooth the revised frames toward them)
 
-    def add(self, frame: LidarFrame, estimate: FrameEstimate, world: np.ndarray | None = None,
-            crop: LocalCrop | None = None) -> list[FrameEstimate]:
+    def add(self, frame: LidarFrame | None, estimate: FrameEstimate, world: np.ndarray | None = None,
+            crop: LocalCrop | None = None, points: np.ndarray | None = None) -> list[FrameEstimate]:
         """Add frame k's online estimate; returns the estimates that are now final (frame k - lag, or none).
-        ``world``, ``crop``: see :func:`~tracker.offline.frame_region_points`."""
+        ``world``, ``crop``: see :func:`~tracker.offline.frame_region_points`; ``points``: the frame's region
+        points when the caller has them (then ``frame`` is not read and may be None; no :meth:`revise` after)."""
         t0 = time.perf_counter()
-        self.points.append(frame_region_points(frame, estimate.box, self.config, self.params, self._previous, world,
-                                               crop))
+        if points is None:
+            assert frame is not None
+            points = frame_region_points(frame, estimate.box, self.config, self.params, self._previous, world, crop)
+        self.points.append(points)
         self._previous_of.append(self._previous)
-        self._previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+        if frame is not None:
+            self._previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
         self.online.append(estimate)
         self.states = np.vstack([self.states, estimate.state.to_array()[None]])
         k = len(self.online)
@@ -235,3 +239,15 @@ def track_fixed_lag(source: FrameSource, init_box: Box, start: int, end: int, co
         tracker.step(source.lidar_frame(k))
     tracker.finish()
     return tracker.result()
+
+
+def window_states(points: list[np.ndarray], result: TrackResult, lag: int, config: TrackerConfig | None = None,
+                  params: OfflineParams | None = None) -> np.ndarray:
+    """States (K, 4) of the fixed-lag window pass over a finished online ``result``, given each frame's region
+    points (as :func:`~tracker.offline.gather_frame_points` gathers them; no frames read, no backward passes):
+    the states :func:`refine_fixed_lag` gives when its window gathers the same points."""
+    config = config or result.config
+    smoother = FixedLagSmoother(config, lag, np.asarray(result.size), params)
+    for estimate, region in zip(result.estimates, points, strict=True):
+        smoother.add(None, estimate, points=region)
+    return smoother.states.copy()

@@ -35,7 +35,17 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    With ``gauge="regauge"`` (default) all states are free and afterwards every pose is composed with the
    one object-frame correction that maps the refined S_0 onto the given start box (so S_0 is exact and
    all frames keep their relative registration); ``gauge="fix_first"`` holds S_0 fixed instead;
-5. steps 2–4 repeat ``outer_iterations`` times; the shape is rebuilt from the final states (all frames).
+5. steps 2–4 repeat ``outer_iterations`` times; the shape is rebuilt from the final states (all frames);
+6. second start (``window_start`` = N > 0; ``full``: 10): where the online pass held the object metres off and
+   then re-locked, the solve from the online states keeps the offset stretch (its frames agree with each other,
+   so the other fold's shape holds them there: a local minimum), while the fixed-lag window, registering each
+   new frame to frames it has already corrected, pulls them toward the object. So the window pass with lag N
+   runs on the same points (:func:`~tracker.fixed_lag.window_states`), and when it moved some centre farther than
+   ``window_start_moved`` from the online one, steps 2–5 run again from its states (the weak pull still toward
+   the online states; with a ``source``, each frame's points also gathered around the window's box). The second
+   solution is kept when its boxes hold more than ``window_start_margin`` × the points the first one's hold
+   (summed over frames, on the same points); a start from the window alone is no good where the online offset
+   is one rigid shift, which the gauge removes but the window, part-corrected, no longer is.
 
 The result is a new TrackResult (same frames, sizes and per-frame online ``time_ms``; ``points`` and
 ``num_points`` recomputed; flag ``"offline"`` added). Deterministic for a given ``config.seed``.
@@ -686,6 +696,34 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
     return out, _rebuild_shape(points, states, size, params.voxel) if with_shape else None
 
 
+def _support(points: list[np.ndarray], states: np.ndarray, size: np.ndarray) -> int:
+    """How many of the frames' points lie inside their boxes (all frames)."""
+    return int(sum(points_in_box(p, _box(s, size), 1.0).sum() for p, s in zip(points, states, strict=True) if len(p)))
+
+
+def _window_start(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
+                  points: list[np.ndarray], online: np.ndarray, states: np.ndarray, shape: np.ndarray | None
+                  ) -> tuple[np.ndarray, np.ndarray | None, list[np.ndarray]]:
+    """Step 6 of the module docstring: the solve from the fixed-lag window's states, kept when its boxes hold
+    more of the points than the solve from the online states; returns (states, shape, points) of the one kept."""
+    from .fixed_lag import window_states
+
+    size = np.asarray(result.size)
+    window = window_states(points, result, params.window_start, config)
+    if np.max(np.hypot(window[:, 0] - online[:, 0], window[:, 1] - online[:, 1])) <= params.window_start_moved:
+        return states, shape, points
+    both = points
+    if source is not None:  # the points around the window's boxes too (the online regions may not reach them)
+        moved = dataclasses.replace(result, estimates=[dataclasses.replace(e, box=_box(w, size))
+                                                       for e, w in zip(result.estimates, window, strict=True)])
+        around = gather_frame_points(source, moved, config, params)
+        both = [np.unique(np.vstack([a, b]), axis=0) if len(b) else a for a, b in zip(points, around, strict=True)]
+    second, second_shape = refine_states(both, online, size, params, seed=config.seed, initial=window)
+    if _support(both, second, size) > params.window_start_margin * _support(both, states, size):
+        return second, second_shape, both
+    return states, shape, points
+
+
 def refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig | None = None,
                    params: OfflineParams | None = None, points: list[np.ndarray] | None = None) -> TrackResult:
     """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
@@ -706,6 +744,8 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
         points = gather_frame_points(source, result, config, params)
     online = np.array([e.state.to_array() for e in result.estimates])
     states, shape = refine_states(points, online, np.asarray(result.size), params, seed=config.seed)
+    if params.window_start > 0 and len(online) > 2:
+        states, shape, points = _window_start(source, result, config, params, points, online, states, shape)
     assert shape is not None   # with_shape=True
     estimates: list[FrameEstimate] = []
     for est, pts, s in zip(result.estimates, points, states, strict=True):
