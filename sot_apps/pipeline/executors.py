@@ -434,14 +434,32 @@ class ExecutorSession:
         from distributed import as_completed
 
         client = self._dask_client()
-        # in the given order (the tracking chunks come costliest first): Dask orders tasks of equal priority by key
-        futures = [client.submit(_call, task, key=f"{task.key}-{uuid.uuid4().hex[:8]}", pure=False,
-                                 priority=len(tasks) - i) for i, task in enumerate(tasks)]
-        index = {f.key: i for i, f in enumerate(futures)}
+        # Dynamic scheduling in the given order (the tracking chunks come costliest first): as many tasks in flight as
+        # the cluster has threads, the next one submitted as one finishes. Submitting all at once let the scheduler
+        # hand each single-threaded worker 2 tasks (worker-saturation 1.1), and a worker that finished early then
+        # idled while another still held a queued task (its duration unknown, Dask does not steal it).
+        slots = max(1, sum(int(w.get("nthreads", 1)) for w in client.scheduler_info().get("workers", {}).values()))
+        pending = iter(enumerate(tasks))
+        futures: list = []
+        index: dict[str, int] = {}
+        running = as_completed()
+
+        def submit_next() -> None:
+            for i, task in pending:
+                future = client.submit(_call, task, key=f"{task.key}-{uuid.uuid4().hex[:8]}", pure=False,
+                                       priority=len(tasks) - i)
+                index[future.key] = i
+                futures.append(future)
+                running.add(future)
+                return
+
         outcomes: list[TaskOutcome | None] = [None] * len(tasks)
         try:
+            for _ in range(slots):
+                submit_next()
             with _progress(len(tasks), desc, progress) as bar:
-                for future in as_completed(futures):
+                for future in running:
+                    submit_next()
                     i = index[future.key]
                     try:
                         outcomes[i] = future.result()
