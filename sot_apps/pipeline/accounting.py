@@ -94,7 +94,9 @@ def format_accounting(schedule: dict, phases: dict, workers: int, startup: bool 
     b = schedule_balance(schedule, workers)
     lines.append(f"\nschedule: {b['tasks']} tasks, {b['task_cpu_s']:.2f} s task CPU; busiest worker {b['busiest_worker_cpu_s']:.2f} s "
                  f"against an even share of {b['even_share_s']:.2f} s (balance {b['balance'] or 0:.2f}); costliest "
-                 f"object {b['costliest_object_s']:.2f} s; stage wall {float(schedule.get('wall_s', 0.0)):.2f} s")
+                 f"object {b['costliest_object_s']:.2f} s; tasks' wall {float(schedule.get('wall_s', 0.0)):.2f} s, after "
+                 f"chunking {float(schedule.get('chunking_s', 0.0)):.2f} s ({float(schedule.get('chunking_cpu_s', 0.0)):.2f} "
+                 "s CPU: the cost estimate)")
     m = main_accounting(phases, startup)
     if m:
         begin = (f"start-up {m['startup_wall_s']:.2f} s wall ({m['startup_cpu_s']:.2f} s CPU), " if startup else "")

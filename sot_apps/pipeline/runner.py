@@ -166,14 +166,17 @@ def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
     digests = {o.key: _unit_digest({"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage})
                for o in plan.objects}
     todo = [o for o in plan.objects if not _marker(out, f"track/{o.key}").is_done(digests[o.key])]
+    chunking = time.perf_counter(), time.process_time()
     chunks = track_chunks(todo, session.worker_count(), estimate=estimate_costs) if todo else []
+    chunking = time.perf_counter() - chunking[0], time.process_time() - chunking[1]
     tasks = [Task(f"track/{c[0].sequence}/chunk{i}", st.track_objects,
                   kwargs={"out": str(out), "plans": c, "stage": stage,
                           "digests": {o.object_id: digests[o.key] for o in c}})
              for i, c in enumerate(chunks)]
     started = time.time()
     outcomes = session.run(tasks, "track", progress)
-    schedule = _schedule(chunks, tasks, outcomes, started, time.time())
+    schedule = _schedule(chunks, tasks, outcomes, started, time.time()) | {
+        "chunking_s": round(chunking[0], 4), "chunking_cpu_s": round(chunking[1], 4)}
     for o in outcomes:
         if o.environment:   # a full disk or an unwritable output stops the run (finished objects resume)
             raise OutputError(None, o.error or "cannot write an output")
@@ -306,8 +309,6 @@ def _score_motion(context: RunContext, out: Path, app_records: list[UnitRecord],
                          "object_ids": list(s.objects)})
              for s in context.sequences if s.name in exported]
     return _run_units(units, out, session, "motion_eval", progress)
-
-
 
 
 def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec(), progress: bool = True,
