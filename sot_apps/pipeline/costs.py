@@ -41,14 +41,23 @@ def _box_near(plan: ObjectPlan, k: int) -> Box:
     return min(plan.annotated, key=lambda kb: abs(kb[0] - k))[1]
 
 
-def _points_in(frame: LidarFrame, box: Box) -> int:
-    """How many points of the sweep lie in ``box`` (world frame): the points within the box's radius of its centre
-    (in the ego frame, float32, a cheap pre-selection), then the exact test on those."""
-    centre = np.linalg.inv(frame.world_from_ego) @ np.array([box.x, box.y, box.z, 1.0])
-    radius = 0.5 * math.sqrt(box.length**2 + box.width**2 + box.height**2)
-    ego = frame.points_ego
-    near = ego[(np.abs(ego[:, 0] - centre[0]) <= radius) & (np.abs(ego[:, 1] - centre[1]) <= radius)]
-    return int(points_in_box(transform_points(frame.world_from_ego, near), box).sum())
+class _Sweep:
+    """A sampled sweep: its points' ego x and y as contiguous columns (the pre-selection reads only those)."""
+
+    def __init__(self, frame: LidarFrame) -> None:
+        self.frame = frame
+        self.x = np.ascontiguousarray(frame.points_ego[:, 0])
+        self.y = np.ascontiguousarray(frame.points_ego[:, 1])
+        self.ego_from_world = np.linalg.inv(frame.world_from_ego)
+
+    def points_in(self, box: Box) -> int:
+        """How many points lie in ``box`` (world frame): those within the box's radius of its centre in x and y (ego
+        frame, float32, a cheap pre-selection), then the exact test on them."""
+        centre = self.ego_from_world @ np.array([box.x, box.y, box.z, 1.0])
+        radius = 0.5 * math.sqrt(box.length**2 + box.width**2 + box.height**2)
+        near = np.flatnonzero((np.abs(self.x - centre[0]) <= radius) & (np.abs(self.y - centre[1]) <= radius))
+        points = transform_points(self.frame.world_from_ego, self.frame.points_ego[near])
+        return int(points_in_box(points, box).sum())
 
 
 def estimate_costs(objects: list[ObjectPlan]) -> list[ObjectPlan]:
@@ -64,16 +73,16 @@ def estimate_costs(objects: list[ObjectPlan]) -> list[ObjectPlan]:
     samples = {o.key: ([k for k in grid if o.start <= k <= o.end] if o.annotated else []) or [o.start]
                for o in objects}
     seq = open_cached(objects[0].sequence_path, objects[0].format)
-    frames: dict[int, LidarFrame | None] = {}
+    frames: dict[int, _Sweep | None] = {}
     for k in sorted({k for ks in samples.values() for k in ks}):
         try:
             frame = seq.lidar_frame(k)
-            frames[k] = frame if frame.has_sweep else None
+            frames[k] = _Sweep(frame) if frame.has_sweep else None
         except Exception:  # noqa: BLE001 - an estimate only: the task reports a sweep it cannot read
             frames[k] = None
     out = []
     for o in objects:
-        counts = [_points_in(frames[k], _box_near(o, k)) for k in samples[o.key] if frames[k] is not None]
+        counts = [sweep.points_in(_box_near(o, k)) for k in samples[o.key] if (sweep := frames[k]) is not None]
         per_frame = float(np.mean([frame_cost(n) for n in counts])) if counts else FIXED_MS
         out.append(dataclasses.replace(o, cost=round(max(1, o.end - o.start) * per_frame, 1)))
     return out
