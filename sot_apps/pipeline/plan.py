@@ -211,7 +211,8 @@ def track_chunks(objects: list[ObjectPlan], workers: int, max_objects: int = MAX
     """The tracking stage's work units: each a chunk of ONE sequence's objects, tracked in one pass over its
     sweeps. A sequence is one chunk unless it has more than ``max_objects`` objects or there are fewer sequences
     than ``workers``: then it is split into up to ``SPLIT_PER_WORKER`` chunks per worker of about equal estimated
-    cost, ``estimate(objects)`` (the objects with ``ObjectPlan.cost`` set, :func:`sot_apps.pipeline.costs.
+    cost, ``estimate(objects)``, asked only then (it reads a few sweeps of each such sequence in this process; the
+    objects with ``ObjectPlan.cost`` set, :func:`sot_apps.pipeline.costs.
     estimate_costs`: objects of a sequence cost very differently, a dense near vehicle 4-5x a far one per frame;
     without an estimate, a cost not set counts the object's frames). Objects go to the chunk with the least cost
     so far, costliest first (longest processing time first), and keep plan order inside a chunk. Chunks come
@@ -226,7 +227,7 @@ def track_chunks(objects: list[ObjectPlan], workers: int, max_objects: int = MAX
     chunks: list[tuple[float, list[ObjectPlan]]] = []
     for objs in by_sequence.values():
         n = min(len(objs), max(per_sequence, math.ceil(len(objs) / max_objects)))
-        if n > 1 and estimate is not None:
+        if n > 1 and per_sequence > 1 and estimate is not None:   # few sequences: their sweeps are read here
             objs = estimate(objs)
         cost = [o.cost or float(o.end - o.start) for o in objs]
         loads, members = [0.0] * n, [[] for _ in range(n)]

@@ -46,6 +46,9 @@ def test_sequences_are_not_split_nor_estimated_when_there_are_enough_of_them():
     objects = _objects("a", [1.0, 1.0]) + _objects("b", [1.0, 1.0, 1.0])
     chunks = track_chunks(objects, workers=2, estimate=lambda objs: calls.append(objs) or objs)
     assert calls == [] and [[o.key for o in c] for c in chunks] == [["b/o0", "b/o1", "b/o2"], ["a/o0", "a/o1"]]
+    # a sequence cut because it has too many objects (max_objects) among enough sequences: by frames, no estimate
+    chunks = track_chunks(objects, workers=2, max_objects=2, estimate=lambda objs: calls.append(objs) or objs)
+    assert calls == [] and sorted(len(c) for c in chunks) == [1, 2, 2]
 
 
 def test_cost_estimate_counts_the_points_in_each_box_at_the_sampled_sweeps(pandaset_root):
