@@ -17,8 +17,7 @@ import math
 
 import numpy as np
 
-from tracker import Box, LidarFrame, points_in_box
-from tracker.geometry import transform_points
+from tracker import Box, LidarFrame, points_in_box, transform_points
 
 from .plan import ObjectPlan, open_cached
 
