@@ -77,6 +77,7 @@ def tracking_only(config, out: str):
 def measure(config, configs: list[tuple[str, int, str | None]], progress: bool = False) -> list[dict]:
     """One row per (executor kind, workers, Dask address) of ``configs``: ``config``'s tracking stage into a
     fresh temporary output."""
+    from ..pipeline.accounting import format_accounting, main_accounting, schedule_balance, worker_accounting
     from ..pipeline.executors import ExecutorSession, ExecutorSpec, Task
     from ..pipeline.runner import WORKER_MODULES, run_pipeline
 
@@ -104,6 +105,10 @@ def measure(config, configs: list[tuple[str, int, str | None]], progress: bool =
             times = result.track_times
             cpu = float(times.get("cpu_s", 0.0))
             rate = frames / seconds if seconds else 0.0
+            accounting = {"workers": worker_accounting(result.track_schedule),
+                          "balance": schedule_balance(result.track_schedule, count),
+                          "main": main_accounting(result.phases, startup=False)}
+            accounting_text = format_accounting(result.track_schedule, result.phases, count, startup=False)
             rows.append({"executor": f"Dask {address}" if address else EXECUTOR_NAMES[kind],
                          "workers": count, "objects": len(result.by_stage("track")),
                          "failed": len(result.failed), "object_frames": frames, "startup_s": round(startup, 2),
@@ -115,7 +120,8 @@ def measure(config, configs: list[tuple[str, int, str | None]], progress: bool =
                          # the speed-up the tasks' CPU times allow with this many workers on otherwise idle cores
                          "cpu_bound_speedup": round(cpu / max(float(times.get("max_task_cpu_s", 0.0)), cpu / count), 2)
                          if cpu else None,
-                         "cpu_breakdown_s": {p: round(float(times.get(f"{p}_s", 0.0)), 2) for p in PARTS}})
+                         "cpu_breakdown_s": {p: round(float(times.get(f"{p}_s", 0.0)), 2) for p in PARTS},
+                         "accounting": accounting, "accounting_text": accounting_text})
     base = {r["executor"]: r["object_frames_per_s"] for r in rows if r["workers"] == 1}
     for r in rows:
         b = base.get(r["executor"])
@@ -140,6 +146,10 @@ def format_table(rows: list[dict]) -> str:
         n = max(1, r["object_frames"])
         cells = [f"{r['cpu_breakdown_s'][p]:.2f} ({1e3 * r['cpu_breakdown_s'][p] / n:.1f})" for p in PARTS]
         lines.append(f"| {r['executor']} | {r['workers']} | " + " | ".join(cells) + " |")
+    for r in rows:
+        if r.get("accounting_text"):
+            lines += ["", f"Per worker, {r['executor']}, {r['workers']} worker{'s' if r['workers'] != 1 else ''} "
+                          "(seconds; wait = busy - the process's CPU; pipeline.accounting):", "", r["accounting_text"]]
     return "\n".join(lines)
 
 
@@ -200,7 +210,8 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(rows))
     print("\nmachine:\n" + format_machine(machine))
     if args.json:
-        write_json(args.json, {"sequence": source, "mode": mode, "rows": rows, "machine": machine})
+        write_json(args.json, {"sequence": source, "mode": mode, "machine": machine,
+                               "rows": [{k: v for k, v in r.items() if k != "accounting_text"} for r in rows]})
     return 0
 
 

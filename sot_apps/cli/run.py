@@ -66,12 +66,18 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..pipeline import WORKER_MODULES
+    from ..pipeline.executors import ExecutorSession
+
+    spec = executor_from_args(args)
+    # the workers' fork server imports the toolkit on the other core while this process imports and plans
+    # (docs/pipeline.md, "Worker start-up"); run_pipeline's session finds it running
+    ExecutorSession(spec).prestart(WORKER_MODULES)
     from ..io.atomic import ensure_writable
     from ..pipeline.config import load_config
     from ..pipeline.runner import run_pipeline
 
     config = load_config(args.pipeline, out=args.out, detections=args.detections)
-    spec = executor_from_args(args)
     ensure_writable(config.out, directory=True)
     result = run_pipeline(config, spec, progress=not args.quiet)
     print(f"{len(result.plan.objects)} objects in {len(result.plan.sequences)} sequences, {spec.describe()}, "

@@ -223,9 +223,24 @@ def _forkserver_method(modules: Iterable[str] = ()) -> Iterator[None]:
     from distributed.utils import get_mp_context
 
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
-        get_mp_context()   # Dask's preload list for the server (distributed, numpy, ...): workers start faster
-        _start_forkserver(modules)   # and the toolkit's modules (the session's preload list)
+        if _start_forkserver(("distributed", *modules)):   # distributed and the toolkit preloaded (prestart)
+            import distributed.utils
+
+            # Dask's own preload list (get_mp_context) would import pandas and lz4 into this process at the first
+            # worker's start, ~0.5 s of CPU the tasks do not need; the server runs already, so that list is moot
+            if hasattr(distributed.utils, "_forkserver_preload_set"):
+                distributed.utils._forkserver_preload_set = True
+        get_mp_context()
         yield
+
+
+# Our LocalCluster's settings (its nannies hand them to the workers): Dask's statistical profiler samples the running
+# task's stack every 10 ms (it took the GIL from the task: +16 % task CPU measured with 2 workers), and the event
+# loops' latency tick (every 20 ms) and memory monitors (every 100 ms) wake the scheduler, the nannies (all in this
+# process) and every worker many times a second beside the tasks. A cluster given by address keeps its own settings.
+LOCAL_DASK_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+                     "distributed.worker.memory.monitor-interval": "1s",
+                     "distributed.admin.system-monitor.interval": "2s"}
 
 
 def _progress(total: int, desc: str, enabled: bool) -> tqdm:
@@ -313,7 +328,10 @@ class ExecutorSession:
         spec = self.spec
         self._preload = tuple(modules)
         if spec.kind == "dask" and not spec.address:
-            return   # the cluster starts with the session's first batch (_dask_client), with these modules
+            # the cluster starts with the session's first batch (_dask_client); its workers are forked from this
+            # fork server, which imports Dask's worker and ``modules`` meanwhile
+            _start_forkserver(("distributed", *self._preload))
+            return
         if spec.kind != "local" or spec.workers <= 1 or self._pool is not None:
             return
         if _start_forkserver(self._preload):
@@ -390,6 +408,7 @@ class ExecutorSession:
     def _dask_client(self):
         if self._client is None:
             try:
+                import dask
                 from distributed import Client, LocalCluster
             except ImportError as exc:  # pragma: no cover - depends on the optional extra
                 raise RuntimeError("the Dask executor needs the 'dist' extra: pip install 'sot-apps[dist]'") from exc
@@ -400,7 +419,7 @@ class ExecutorSession:
                 # then stops it; ignoring it lost the Ctrl-C for seconds); the workers ignore SIGINT from their
                 # first instruction on (_forkserver_method) and keep it so (asyncio installs no handler over an
                 # ignored signal), so they print nothing of their own
-                with deferred_interrupt(), _forkserver_method(self._preload):
+                with deferred_interrupt(), _forkserver_method(self._preload), dask.config.set(LOCAL_DASK_CONFIG):
                     self._cluster = LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1,
                                                  processes=True, dashboard_address=None,
                                                  worker_dashboard_address=None,
@@ -415,12 +434,32 @@ class ExecutorSession:
         from distributed import as_completed
 
         client = self._dask_client()
-        futures = client.map(_call, tasks, key=[f"{t.key}-{uuid.uuid4().hex[:8]}" for t in tasks], pure=False)
-        index = {f.key: i for i, f in enumerate(futures)}
+        # Dynamic scheduling in the given order (the tracking chunks come costliest first): as many tasks in flight as
+        # the cluster has threads, the next one submitted as one finishes. Submitting all at once let the scheduler
+        # hand each single-threaded worker 2 tasks (worker-saturation 1.1), and a worker that finished early then
+        # idled while another still held a queued task (its duration unknown, Dask does not steal it).
+        slots = max(1, sum(int(w.get("nthreads", 1)) for w in client.scheduler_info().get("workers", {}).values()))
+        pending = iter(enumerate(tasks))
+        futures: list = []
+        index: dict[str, int] = {}
+        running = as_completed()
+
+        def submit_next() -> None:
+            for i, task in pending:
+                future = client.submit(_call, task, key=f"{task.key}-{uuid.uuid4().hex[:8]}", pure=False,
+                                       priority=len(tasks) - i)
+                index[future.key] = i
+                futures.append(future)
+                running.add(future)
+                return
+
         outcomes: list[TaskOutcome | None] = [None] * len(tasks)
         try:
+            for _ in range(slots):
+                submit_next()
             with _progress(len(tasks), desc, progress) as bar:
-                for future in as_completed(futures):
+                for future in running:
+                    submit_next()
                     i = index[future.key]
                     try:
                         outcomes[i] = future.result()

@@ -23,6 +23,7 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from tracker import Box
 
@@ -72,6 +73,8 @@ class ObjectPlan:
     # start at the first of them with enough LiDAR points (stages.track.start = "first_with_points")
     annotated: tuple[tuple[int, Box], ...] = ()
     detections: str | None = None   # the sequence's detections file (Detection term / Det baseline)
+    # the tracking stage's estimated cost (relative units; :func:`estimate_costs`), 0 = not estimated: chunking only
+    cost: float = 0.0
 
     @property
     def key(self) -> str:
@@ -198,19 +201,22 @@ def make_plan(config: PipelineConfig) -> Plan:
 
 # a tracking task holds at most this many live objects (each keeps its track and, offline, its region points)
 MAX_OBJECTS_PER_TASK = 32
-# fewer sequences than workers: chunks per worker (dynamic scheduling evens out objects of unequal cost)
-SPLIT_PER_WORKER = 4
+# fewer sequences than workers: chunks per worker. Each chunk reads the sequence's sweeps once more (~2-3 ms a sweep
+# from the sweep cache); two per worker leave the dynamic scheduling room to even out errors of the cost estimate.
+SPLIT_PER_WORKER = 2
 
 
-def track_chunks(objects: list[ObjectPlan], workers: int,
-                 max_objects: int = MAX_OBJECTS_PER_TASK) -> list[list[ObjectPlan]]:
+def track_chunks(objects: list[ObjectPlan], workers: int, max_objects: int = MAX_OBJECTS_PER_TASK,
+                 estimate: Callable[[list[ObjectPlan]], list[ObjectPlan]] | None = None) -> list[list[ObjectPlan]]:
     """The tracking stage's work units: each a chunk of ONE sequence's objects, tracked in one pass over its
     sweeps. A sequence is one chunk unless it has more than ``max_objects`` objects or there are fewer sequences
-    than ``workers``: then each sequence is split into up to ``SPLIT_PER_WORKER`` chunks per worker, so the
-    workers share the work evenly although objects cost very differently (a dense vehicle several times a far
-    one; the extra passes re-read the sweeps from the sweep cache, and their ground masks with them). Objects
-    go to the chunk with the fewest planned frames so far, longest first, keep plan order inside a chunk;
-    chunks come largest first (the executors start them in that order)."""
+    than ``workers``: then it is split into up to ``SPLIT_PER_WORKER`` chunks per worker of about equal estimated
+    cost, ``estimate(objects)``, asked only then (it reads a few sweeps of each such sequence in this process; the
+    objects with ``ObjectPlan.cost`` set, :func:`sot_apps.pipeline.costs.
+    estimate_costs`: objects of a sequence cost very differently, a dense near vehicle 4-5x a far one per frame;
+    without an estimate, a cost not set counts the object's frames). Objects go to the chunk with the least cost
+    so far, costliest first (longest processing time first), and keep plan order inside a chunk. Chunks come
+    costliest first (the executors start them in that order), so the cheap ones fill the workers' ends."""
     by_sequence: dict[str, list[ObjectPlan]] = {}
     for o in objects:
         by_sequence.setdefault(o.sequence, []).append(o)
@@ -218,13 +224,16 @@ def track_chunks(objects: list[ObjectPlan], workers: int,
         return []
     workers = max(1, workers)
     per_sequence = 1 if len(by_sequence) >= workers else math.ceil(SPLIT_PER_WORKER * workers / len(by_sequence))
-    chunks: list[tuple[int, list[ObjectPlan]]] = []
+    chunks: list[tuple[float, list[ObjectPlan]]] = []
     for objs in by_sequence.values():
         n = min(len(objs), max(per_sequence, math.ceil(len(objs) / max_objects)))
-        loads, members = [0] * n, [[] for _ in range(n)]
-        for i in sorted(range(len(objs)), key=lambda i: objs[i].start - objs[i].end):
+        if n > 1 and per_sequence > 1 and estimate is not None:   # few sequences: their sweeps are read here
+            objs = estimate(objs)
+        cost = [o.cost or float(o.end - o.start) for o in objs]
+        loads, members = [0.0] * n, [[] for _ in range(n)]
+        for i in sorted(range(len(objs)), key=lambda i: -cost[i]):
             j = min((j for j in range(n) if len(members[j]) < max_objects), key=lambda j: loads[j])
             members[j].append(i)
-            loads[j] += objs[i].end - objs[i].start
+            loads[j] += cost[i]
         chunks += [(load, [objs[i] for i in sorted(m)]) for load, m in zip(loads, members, strict=True) if m]
     return [c for _, c in sorted(chunks, key=lambda lc: -lc[0])]

@@ -15,6 +15,7 @@ per unit its status, time and output checksums.
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,15 +24,17 @@ from typing import Any, Callable
 from ..apps import App, RunContext, SequenceTracks, Skip, get_app
 from ..errors import InputError, OutputError
 from ..io.atomic import remove_stale_temporaries, write_json
+from . import WORKER_MODULES
 from . import stages as st
 from .config import PipelineConfig
+from .costs import estimate_costs
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
 from .health import health_lines, run_track_health
 from .lock import RunLock
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
 from .plan import Plan, make_plan, open_sequences, track_chunks
 
-__all__ = ["UnitRecord", "PipelineResult", "run_pipeline"]
+__all__ = ["UnitRecord", "PipelineResult", "run_pipeline", "WORKER_MODULES"]
 
 
 @dataclass
@@ -65,6 +68,10 @@ class PipelineResult:
     # the tracking stage's CPU seconds (of the tasks' threads) summed over its tasks: read, ground, step, refine, write,
     # overhead, cpu, wall; and the largest task's CPU seconds (max_task_cpu_s)
     track_times: dict[str, float] = field(default_factory=dict)
+    # the tracking tasks' schedule (worker, start, end, CPU per task: :func:`_schedule`) and this process's own
+    # phases (wall seconds from the run's start and this process's CPU seconds at their end): pipeline.accounting
+    track_schedule: dict = field(default_factory=dict)
+    phases: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def by_stage(self, stage: str) -> list[UnitRecord]:
         return [u for u in self.units if u.stage == stage]
@@ -151,7 +158,7 @@ def _run_units(units: list[_Unit], out: Path, session: ExecutorSession, desc: st
 
 
 def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
-                  progress: bool) -> tuple[list[UnitRecord], dict[str, float]]:
+                  progress: bool) -> tuple[list[UnitRecord], dict[str, float], dict]:
     """The tracking stage: every unfinished object, in chunks of one sequence each tracked in one pass
     (:func:`~sot_apps.pipeline.plan.track_chunks`); one record per object (a chunk's time shared by its objects'
     CPU time) and the stage's time breakdown summed over the chunks (read, ground, step, refine, write, overhead)."""
@@ -159,12 +166,17 @@ def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
     digests = {o.key: _unit_digest({"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage})
                for o in plan.objects}
     todo = [o for o in plan.objects if not _marker(out, f"track/{o.key}").is_done(digests[o.key])]
-    chunks = track_chunks(todo, session.worker_count()) if todo else []
+    chunking = time.perf_counter(), time.process_time()
+    chunks = track_chunks(todo, session.worker_count(), estimate=estimate_costs) if todo else []
+    chunking = time.perf_counter() - chunking[0], time.process_time() - chunking[1]
     tasks = [Task(f"track/{c[0].sequence}/chunk{i}", st.track_objects,
                   kwargs={"out": str(out), "plans": c, "stage": stage,
                           "digests": {o.object_id: digests[o.key] for o in c}})
              for i, c in enumerate(chunks)]
+    started = time.time()
     outcomes = session.run(tasks, "track", progress)
+    schedule = _schedule(chunks, tasks, outcomes, started, time.time()) | {
+        "chunking_s": round(chunking[0], 4), "chunking_cpu_s": round(chunking[1], 4)}
     for o in outcomes:
         if o.environment:   # a full disk or an unwritable output stops the run (finished objects resume)
             raise OutputError(None, o.error or "cannot write an output")
@@ -198,7 +210,25 @@ def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
         extra = {k: v for k, v in marker.items() if k not in ("name", "config", "outputs", "finished_unix")}
         records.append(UnitRecord("track", f"track/{o.key}", o.sequence, o.object_id, "cached", result=extra or None,
                                   outputs=marker.get("outputs", {})))
-    return records, breakdown
+    return records, breakdown, schedule
+
+
+def _schedule(chunks: list, tasks: list[Task], outcomes: list[TaskOutcome], started: float, ended: float) -> dict:
+    """When and where each tracking task ran (:mod:`sot_apps.pipeline.accounting` reads it): per task its worker,
+    start and end (seconds from the stage's start), CPU and its objects' own CPU seconds."""
+    entries = []
+    for task, chunk, outcome in zip(tasks, chunks, outcomes, strict=True):
+        result = outcome.result if outcome.ok else {}
+        ran = result.get("task", {})
+        entry = {"key": task.key, "ok": outcome.ok, "planned_cost": round(sum(o.cost for o in chunk), 2),
+                 "objects": {e["object"]: e["cpu_s"] for e in result.get("objects", [])} or [o.object_id for o in chunk]}
+        if ran:
+            entry |= {"pid": ran["pid"], "start_s": round(ran["start_unix"] - started, 4),
+                      "end_s": round(ran["end_unix"] - started, 4),
+                      **{k: v for k, v in ran.items() if k not in ("pid", "start_unix", "end_unix")},
+                      **{k: result["times"][k] for k in ("cpu_s", "read_s", "ground_s", "sweeps", "object_frames")}}
+        entries.append(entry)
+    return {"wall_s": round(ended - started, 4), "tasks": entries}
 
 
 def _track_checksums(out: Path, sequence: str, objects: list[str]) -> dict[str, dict[str, str]]:
@@ -281,11 +311,6 @@ def _score_motion(context: RunContext, out: Path, app_records: list[UnitRecord],
     return _run_units(units, out, session, "motion_eval", progress)
 
 
-# what a worker imports for the tracking stage (its tasks run sot_apps.pipeline.stages; the tracker's modules load
-# lazily, so they are named too): imported by :meth:`ExecutorSession.prestart` while the run plans
-WORKER_MODULES = ("sot_apps.pipeline.stages", "tracker.sotracker", "tracker.offline", "sot_apps.io.sweep_cache")
-
-
 def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec(), progress: bool = True,
                  plan: Plan | None = None, session: ExecutorSession | None = None) -> PipelineResult:
     """Run every enabled stage of ``config``; returns what ran, was cached or failed (see module doc).
@@ -306,26 +331,35 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
                       session: ExecutorSession) -> PipelineResult:
     started = time.time()
     t0 = time.perf_counter()
+    phases = {"started": {"at_s": -_process_age(), "cpu_s": round(time.process_time(), 4)}}
+
+    def phase(name: str) -> None:   # this process's wall seconds since the run's start and its CPU seconds so far
+        phases[name] = {"at_s": round(time.perf_counter() - t0, 4), "cpu_s": round(time.process_time(), 4)}
+
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(out)   # left by a killed worker or process; never under a final name
     plan = plan or make_plan(config)
+    phase("planned")
     stages = config.stages
     records: list[UnitRecord] = []
     stage_seconds: dict[str, float] = {}
     track_times: dict[str, float] = {}
+    track_schedule: dict = {}
 
     # ---- 0. every Dask worker opens the planned sequences into its cache once (tasks then reuse them)
     start = time.perf_counter()
     session.on_every_worker(open_sequences, [(s.path, s.format) for s in plan.sequences])
     stage_seconds["open"] = time.perf_counter() - start
+    phase("opened")
 
     # ---- 1. tracking: one task per (sequence, chunk of its objects), one pass over the sweeps each
     finished: dict[str, list[str]] = {s.name: [] for s in plan.sequences}
     if stages.track.enabled:
         start = time.perf_counter()
-        track_records, stage_times = _run_tracking(plan, out, stages.track, session, progress)
+        track_records, stage_times, track_schedule = _run_tracking(plan, out, stages.track, session, progress)
         stage_seconds["track"] = time.perf_counter() - start
+        phase("tracked")
         records += track_records
         track_times.update(stage_times)
         for r in track_records:
@@ -346,6 +380,7 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
             start = time.perf_counter()
             records += _score_motion(context, out, batch_records, session, progress)
             stage_seconds["motion_eval"] = time.perf_counter() - start
+    phase("apps")
 
     failures = [{"stage": r.stage, "key": r.key, "sequence": r.sequence, "object": r.object, "error": r.error}
                 for r in records if r.status == "failed"]
@@ -353,8 +388,22 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
     write_json(failures_path, {"failures": failures})
     stage_docs = [{"stage": r.stage, **r.to_json()} for r in records]
     health = run_track_health(out, records)
+    phase("finished")
     manifest = write_manifest(out, {**config.to_json(), "executor": executor.describe(),
                                     "objects": [o.to_json() for o in plan.objects]}, stage_docs, started,
-                              {"track_health": health, "track_times": track_times})
+                              {"track_health": health, "track_times": track_times,
+                               "track_schedule": track_schedule, "phases": phases})
     return PipelineResult(out, plan, records, time.perf_counter() - t0, manifest, failures_path, stage_seconds,
-                          health, track_times)
+                          health, track_times, track_schedule, phases)
+
+
+def _process_age() -> float:
+    """Seconds since this process started (Linux: /proc; 0 where unknown): its interpreter start-up and imports."""
+    try:
+        with open("/proc/self/stat") as f:
+            start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])
+        with open("/proc/uptime") as f:
+            uptime = float(f.read().split()[0])
+        return round(max(0.0, uptime - start_ticks / os.sysconf("SC_CLK_TCK")), 3)
+    except (OSError, ValueError, IndexError, AttributeError):
+        return 0.0

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import json
+import os
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -44,9 +45,11 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     LiDAR points to start or follow) and where the chunk's time went (CPU seconds)."""
     from tracker import get_preset
 
-    t0, cpu0 = time.perf_counter(), time.thread_time()
+    t0, cpu0, process0, started = time.perf_counter(), time.thread_time(), time.process_time(), time.time()
     first = plans[0]
+    opened = open_cached.cache_info().misses
     seq = open_cached(first.sequence_path, first.format)
+    open_s = time.thread_time() - cpu0
     config = get_preset(stage.preset, **dict(stage.overrides or {}))
     detections = None
     if first.detections:
@@ -90,7 +93,13 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     breakdown = times.to_json() | {"write_s": round(write_seconds, 4), "cpu_s": round(cpu, 4),
                                    "wall_s": round(time.perf_counter() - t0, 4)}
     breakdown["overhead_s"] = round(cpu - times.read - times.ground - times.step - times.refine - write_seconds, 4)
-    return {"sequence": first.sequence, "objects": objects, "times": breakdown}
+    # where and when it ran (pipeline.accounting): the worker process, its CPU before this task (its start-up when
+    # this is its first task), the whole process's CPU during the task (the task's threads and anything else the
+    # worker runs meanwhile, e.g. Dask's event loop), and the sequence opening (a worker's first task opens it)
+    task = {"pid": os.getpid(), "start_unix": started, "end_unix": time.time(),
+            "process_cpu_before_s": round(process0, 4), "process_cpu_s": round(time.process_time() - process0, 4),
+            "open_cpu_s": round(open_s, 4) if open_cached.cache_info().misses > opened else 0.0}
+    return {"sequence": first.sequence, "objects": objects, "times": breakdown, "task": task}
 
 
 def _write_timed(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -> tuple[dict, float]:
