@@ -190,6 +190,10 @@ class MotionConfig:
     coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
     first_motion_along_heading: bool = False  # "average" models: the first motion seeds the prior with only its
                                          # part along the start box's heading
+    first_turn_points: int = 0           # > 0, "average" models: the first motion's heading change seeds the turn
+                                         # rate with weight n / (n + this), n its object points (the start box's
+                                         # heading is given; a frame-1 rotation of a few points is a partial view
+                                         # sliding, not a turn); 0: fully (the paper)
     trend: float = 0.0                   # > 0, "average" models: Holt's trend weight beta (tracker/motion.py): a
                                          # speed or turn-rate ramp is predicted without the average's lag (0: off)
     trend_points: int = 0                # > 0: a frame with n object points adds n / (n + this) of its change to the
