@@ -194,6 +194,9 @@ class MotionConfig:
                                          # rate with weight n / (n + this), n its object points (the start box's
                                          # heading is given; a frame-1 rotation of a few points is a partial view
                                          # sliding, not a turn); 0: fully (the paper)
+    first_turn_max: float = 0.0          # > 0, "average" models: the first motion's heading change seeds the turn
+                                         # rate at most at this (rad per frame; a vehicle cannot turn that
+                                         # suddenly: the yaw cap's rate against the 0 turn before the first motion)
     trend: float = 0.0                   # > 0, "average" models: Holt's trend weight beta (tracker/motion.py): a
                                          # speed or turn-rate ramp is predicted without the average's lag (0: off)
     trend_points: int = 0                # > 0: a frame with n object points adds n / (n + this) of its change to the

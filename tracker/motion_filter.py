@@ -259,7 +259,7 @@ class AverageMotion:
 
     def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
                  first_along_heading: bool = False, trend: float = 0.0, trend_points: int = 0,
-                 trend_velocity: bool = True, first_turn_points: int = 0) -> None:
+                 trend_velocity: bool = True, first_turn_points: int = 0, first_turn_max: float = 0.0) -> None:
         self.prior = MotionPrior(alpha, frame, trend, trend_velocity)
         self.trend_points = trend_points
         self._support = 1.0  # the last update's support: the share of the trend's prediction
@@ -267,6 +267,7 @@ class AverageMotion:
         self.per_second = per_second
         self.first_along_heading = first_along_heading
         self.first_turn_points = first_turn_points
+        self.first_turn_max = first_turn_max
 
     def predict(self, box: Box, dt: float, coasting: int = 0) -> np.ndarray:
         interval = dt if self.per_second else 1.0
@@ -295,6 +296,9 @@ class AverageMotion:
             # as a turn, which the yaw cap (motion.max_yaw_change, against the prediction) then enforces
             motion = motion.copy()
             motion[3] *= points / (points + self.first_turn_points)
+        if self.first_turn_max > 0 and not self.prior.initialised:
+            motion = motion.copy()
+            motion[3] = np.clip(motion[3], -self.first_turn_max, self.first_turn_max)
         self._support = points / (points + self.trend_points) if self.trend_points > 0 else 1.0
         self.prior.update(motion / dt if self.per_second else motion, box.heading, dt if self.per_second else 1.0,
                           self._support)
