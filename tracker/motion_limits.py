@@ -37,7 +37,8 @@ def limit_motion(x: np.ndarray, prior: np.ndarray, heading: float, first: bool, 
             flags.append("yaw_clamped")
             x[3] = np.sign(x[3]) * cap
     sparse = params.max_yaw_change_points <= 0 or points < params.max_yaw_change_points
-    if params.max_yaw_change > 0 and not first and sparse and abs(x[3] - prior[3]) > params.max_yaw_change:
+    yaw_capped = not first or params.first_yaw_capped
+    if params.max_yaw_change > 0 and yaw_capped and sparse and abs(x[3] - prior[3]) > params.max_yaw_change:
         if "yaw_clamped" not in flags:  # a vehicle cannot turn that suddenly: the prior's turn rate +- the cap
             flags.append("yaw_clamped")
         x[3] = prior[3] + np.sign(x[3] - prior[3]) * params.max_yaw_change
