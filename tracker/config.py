@@ -624,7 +624,7 @@ _FULL = TrackerConfig(
     registration=RegistrationConfig(outer_iterations=10, solver_iterations=6, convergence_tolerance=2e-3,
                                     anderson_depth=3),
     motion=MotionConfig(model="turn", alpha=0.6, per_second=True, first_motion_along_heading=True,
-                        consistency="x_only", max_yaw_change=0.03),
+                        consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
     reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True),
