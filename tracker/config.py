@@ -194,8 +194,8 @@ class MotionConfig:
                                          # rate with weight n / (n + this), n its object points (the start box's
                                          # heading is given; a frame-1 rotation of a few points is a partial view
                                          # sliding, not a turn); 0: fully (the paper)
-    first_yaw_capped: bool = False       # True: max_yaw_change caps frame 1's heading change too (the start box's
-                                         # heading is given; against the prior's zero turn)
+    first_yaw_capped: bool = False       # True: max_yaw_change caps frame 1's heading change too, against the
+                                         # prediction (zero turn at a start: the start box's heading is given)
     first_turn_max: float = 0.0          # > 0, "average" models: the first motion's heading change seeds the turn
                                          # rate at most at this (rad per frame; a vehicle cannot turn that
                                          # suddenly: the yaw cap's rate against the 0 turn before the first motion)
