@@ -190,6 +190,15 @@ class MotionConfig:
     coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
     first_motion_along_heading: bool = False  # "average" models: the first motion seeds the prior with only its
                                          # part along the start box's heading
+    first_turn_points: int = 0           # > 0, "average" models: the first motion's heading change seeds the turn
+                                         # rate with weight n / (n + this), n its object points (the start box's
+                                         # heading is given; a frame-1 rotation of a few points is a partial view
+                                         # sliding, not a turn); 0: fully (the paper)
+    first_yaw_capped: bool = False       # True: max_yaw_change caps frame 1's heading change too, against the
+                                         # prediction (zero turn at a start: the start box's heading is given)
+    first_turn_max: float = 0.0          # > 0, "average" models: the first motion's heading change seeds the turn
+                                         # rate at most at this (rad per frame; a vehicle cannot turn that
+                                         # suddenly: the yaw cap's rate against the 0 turn before the first motion)
     trend: float = 0.0                   # > 0, "average" models: Holt's trend weight beta (tracker/motion.py): a
                                          # speed or turn-rate ramp is predicted without the average's lag (0: off)
     trend_points: int = 0                # > 0: a frame with n object points adds n / (n + this) of its change to the
@@ -623,7 +632,7 @@ _FULL = TrackerConfig(
     registration=RegistrationConfig(outer_iterations=10, solver_iterations=6, convergence_tolerance=2e-3,
                                     anderson_depth=3),
     motion=MotionConfig(model="turn", alpha=0.6, per_second=True, first_motion_along_heading=True,
-                        consistency="x_only", max_yaw_change=0.03),
+                        consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
     reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True),

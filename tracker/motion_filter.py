@@ -259,13 +259,15 @@ class AverageMotion:
 
     def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
                  first_along_heading: bool = False, trend: float = 0.0, trend_points: int = 0,
-                 trend_velocity: bool = True) -> None:
+                 trend_velocity: bool = True, first_turn_points: int = 0, first_turn_max: float = 0.0) -> None:
         self.prior = MotionPrior(alpha, frame, trend, trend_velocity)
         self.trend_points = trend_points
         self._support = 1.0  # the last update's support: the share of the trend's prediction
         self.coast_yaw_decay = coast_yaw_decay
         self.per_second = per_second
         self.first_along_heading = first_along_heading
+        self.first_turn_points = first_turn_points
+        self.first_turn_max = first_turn_max
 
     def predict(self, box: Box, dt: float, coasting: int = 0) -> np.ndarray:
         interval = dt if self.per_second else 1.0
@@ -288,6 +290,15 @@ class AverageMotion:
             c, s = np.cos(box.heading), np.sin(box.heading)
             along = c * motion[0] + s * motion[1]
             motion = np.array([c * along, s * along, motion[2], motion[3]])
+        if self.first_turn_points > 0 and not self.prior.initialised:
+            # the first heading change seeds the turn rate as far as its points pin it: the start box's heading is
+            # given, and a frame-1 rotation of a few points (a partial view sliding) seeded in full is predicted on
+            # as a turn, which the yaw cap (motion.max_yaw_change, against the prediction) then enforces
+            motion = motion.copy()
+            motion[3] *= points / (points + self.first_turn_points)
+        if self.first_turn_max > 0 and not self.prior.initialised:
+            motion = motion.copy()
+            motion[3] = np.clip(motion[3], -self.first_turn_max, self.first_turn_max)
         self._support = points / (points + self.trend_points) if self.trend_points > 0 else 1.0
         self.prior.update(motion / dt if self.per_second else motion, box.heading, dt if self.per_second else 1.0,
                           self._support)

@@ -1,7 +1,8 @@
 """Physical limits on a registered motion: a vehicle cannot turn or change its velocity that suddenly in one frame.
 
 ``motion.max_yaw_change``, ``motion.max_speed_change``: the change against the motion model's prediction (the
-yaw cap only below ``motion.max_yaw_change_points`` object points, where a few clutter points can swing a fit).
+yaw cap only below ``motion.max_yaw_change_points`` object points, where a few clutter points can swing a fit;
+frame 1, whose prediction has no turn at a start, only with ``motion.first_yaw_capped``).
 ``motion.max_lateral_accel``: the heading change itself, at most the yaw rate a vehicle at the frame's speed can
 drive, min(speed / ``min_turn_radius``, ``max_lateral_accel`` / speed) + ``yaw_rate_margin``, per second."""
 
@@ -37,7 +38,8 @@ def limit_motion(x: np.ndarray, prior: np.ndarray, heading: float, first: bool, 
             flags.append("yaw_clamped")
             x[3] = np.sign(x[3]) * cap
     sparse = params.max_yaw_change_points <= 0 or points < params.max_yaw_change_points
-    if params.max_yaw_change > 0 and not first and sparse and abs(x[3] - prior[3]) > params.max_yaw_change:
+    yaw_capped = not first or params.first_yaw_capped
+    if params.max_yaw_change > 0 and yaw_capped and sparse and abs(x[3] - prior[3]) > params.max_yaw_change:
         if "yaw_clamped" not in flags:  # a vehicle cannot turn that suddenly: the prior's turn rate +- the cap
             flags.append("yaw_clamped")
         x[3] = prior[3] + np.sign(x[3] - prior[3]) * params.max_yaw_change

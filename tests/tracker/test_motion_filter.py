@@ -77,6 +77,39 @@ def test_the_first_motion_seeds_the_prior_along_the_start_heading(along):
     assert motion.predict(start, 0.1)[:2] @ sideways == pytest.approx(expected_sideways, abs=1e-12)
 
 
+@pytest.mark.parametrize("points", [0, 15, 200, 5000])
+def test_the_first_heading_change_seeds_the_turn_rate_as_far_as_its_points_pin_it(points):
+    """motion.first_turn_points n0: the first motion's heading change seeds the averaged turn rate with weight
+    n / (n + n0); its translation and the returned motion are untouched; later motions are averaged in full."""
+    start = Box(0.0, 0.0, 0.0, 0.0, 4.5, 1.8, 1.5)
+    first = np.array([0.3, 0.0, 0.0, 0.3])                      # a partial view rotated 17 deg in frame 1
+    plain = AverageMotion(0.6, "turn", 0.5, per_second=True, first_along_heading=True)
+    weighted = AverageMotion(0.6, "turn", 0.5, per_second=True, first_along_heading=True, first_turn_points=200)
+    assert np.array_equal(weighted.update(start, first.copy(), None, None, 0.1, points), first)
+    plain.update(start, first.copy(), None, None, 0.1, points)
+    share = points / (points + 200)
+    assert weighted.predict(start, 0.1)[3] == pytest.approx(0.3 * share, abs=1e-12)
+    assert plain.predict(start, 0.1)[3] == pytest.approx(0.3)
+    assert np.linalg.norm(weighted.predict(start, 0.1)[:2]) == pytest.approx(0.3)   # the speed is seeded in full
+    turn = np.array([0.3, 0.0, 0.0, 0.05])
+    weighted.update(start, turn, None, None, 0.1, 0)                               # later: averaged as they come
+    assert weighted.predict(start, 0.1)[3] == pytest.approx(0.6 * 0.3 * share + 0.4 * 0.05, abs=1e-12)
+
+
+@pytest.mark.parametrize("first_turn", [0.3, -0.3, 0.01])
+def test_the_first_heading_change_seeds_the_turn_rate_at_most_at_the_cap(first_turn):
+    """motion.first_turn_max: the first motion's heading change seeds the turn rate clipped to +- the cap (rad per
+    frame; a per-second prior holds it over dt); a smaller change and the translation are seeded as they are."""
+    start = Box(0.0, 0.0, 0.0, 0.0, 4.5, 1.8, 1.5)
+    first = np.array([0.3, 0.0, 0.0, first_turn])
+    capped = AverageMotion(0.6, "turn", 0.5, per_second=True, first_along_heading=True, first_turn_max=0.03)
+    assert np.array_equal(capped.update(start, first.copy(), None, None, 0.1, 15), first)
+    assert capped.predict(start, 0.1)[3] == pytest.approx(float(np.clip(first_turn, -0.03, 0.03)), abs=1e-12)
+    assert np.linalg.norm(capped.predict(start, 0.1)[:2]) == pytest.approx(0.3)
+    capped.update(start, np.array([0.3, 0.0, 0.0, 0.2]), None, None, 0.1, 15)     # later: not capped
+    assert capped.predict(start, 0.1)[3] == pytest.approx(0.6 * float(np.clip(first_turn, -0.03, 0.03)) + 0.4 * 0.2)
+
+
 def test_travel_heading_is_folded_for_a_reversing_vehicle_and_skipped_when_standing():
     f = CTRVFilter(0.0, 0.0, 0.2)
     theta, sigma = travel_heading(np.array([-np.cos(0.25), -np.sin(0.25)]), 0.05, 0.02, 0.2)

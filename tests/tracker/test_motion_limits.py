@@ -60,3 +60,18 @@ def test_a_car_turning_at_1_rad_per_s_is_followed_within_3_degrees():
     # full's defaults (a cap of 0.03 rad/frame around the predicted turn rate, the MP term pulled toward the
     # prediction) fall behind the same turn: the prediction lags the turn's onset
     assert _max_heading_error_deg({}) > 4.5
+
+
+@pytest.mark.parametrize("capped", [False, True])
+def test_frame_one_heading_change_is_capped_only_when_asked(capped):
+    """motion.first_yaw_capped: frame 1's heading change is capped at max_yaw_change against the prior's zero turn
+    (the start box's heading is given); later frames are capped as before either way."""
+    params = MotionConfig(max_yaw_change=0.03, first_yaw_capped=capped)
+    rotated = np.array([0.3, 0.0, 0.0, 0.3])   # frame 1 rotated a partial view by 17 degrees
+    flags: list[str] = []
+    out = limit_motion(rotated.copy(), np.zeros(4), 0.0, True, 1, params, flags, DT)
+    assert out[3] == pytest.approx(0.03 if capped else 0.3)
+    assert flags == (["yaw_clamped"] if capped else [])
+    np.testing.assert_array_equal(out[:3], rotated[:3])
+    later = limit_motion(rotated.copy(), np.zeros(4), 0.0, False, 5, params, [], DT)
+    assert later[3] == pytest.approx(0.03)

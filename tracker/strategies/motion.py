@@ -22,4 +22,5 @@ def choose_motion_model(params: MotionConfig, box: Box) -> AverageMotion | CTRVM
                           k.position_sigma, k.heading_sigma, k.travel_heading_sigma, k.travel_min_distance)
     return AverageMotion(params.alpha, _AVERAGE_FRAMES[params.model], params.coast_yaw_decay, params.per_second,
                          params.first_motion_along_heading, params.trend, params.trend_points,
-                         params.trend_velocity)
+                         params.trend_velocity, params.first_turn_points,
+                         params.first_turn_max)
