@@ -10,8 +10,8 @@ float64 boxes x, y, z, heading, l, w, h, and the flags of each frame joined by '
 
 ``python tests/tracker/golden_boxes.py offline`` writes tests/tracker/golden/dev_tracks_offline_boxes.npz: the same
 tracks with ``full``, seed 0, online and then refined offline (:func:`tracker.refine_offline`), the boxes as above
-(made with the code before the offline solve's matching became a voxel look-up; tests/tracker/test_golden_boxes.py
-checks today's offline solve gives them bit for bit).
+(made with today's solve with its voxel look-up reverted to the kd-tree it replaced;
+tests/tracker/test_golden_boxes.py checks today's offline solve gives them bit for bit).
 """
 
 from __future__ import annotations
