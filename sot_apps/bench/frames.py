@@ -39,7 +39,7 @@ def frame_errors(boxes: Sequence[Box], truth: Sequence[Box]) -> FrameErrors:
     """The errors of ``boxes`` against ``truth`` frame by frame (equal lengths)."""
     import numpy as np
 
-    from tracker.metrics import iou_3d_batch
+    from tracker import iou_3d_batch
 
     est = np.array([[b.x, b.y, b.z, b.heading] for b in boxes], dtype=np.float64).reshape(-1, 4)
     gt = np.array([[b.x, b.y, b.z, b.heading] for b in truth], dtype=np.float64).reshape(-1, 4)
