@@ -59,14 +59,15 @@ class VoxelNearest:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if self.table is None or len(points) == 0:
             return self.tree.query(points, k=1)
-        scaled = points / self.cell
-        keys = np.floor(scaled)
-        scaled -= keys                                   # the position inside the cell, 0..1
-        scaled -= 0.5
-        np.abs(scaled, out=scaled)
-        keys -= self.low
-        # inside the grid and clear of the cell's borders (NaN: neither)
-        clear = np.all((scaled <= 0.5 - _BORDER) & (keys >= 0) & (keys < self.dims), axis=1)
+        with np.errstate(invalid="ignore"):   # a non-finite point gives NaN here: not clear, the tree refuses it
+            scaled = points / self.cell
+            keys = np.floor(scaled)
+            scaled -= keys                               # the position inside the cell, 0..1
+            scaled -= 0.5
+            np.abs(scaled, out=scaled)
+            keys -= self.low
+            # inside the grid and clear of the cell's borders (NaN: neither)
+            clear = np.all((scaled <= 0.5 - _BORDER) & (keys >= 0) & (keys < self.dims), axis=1)
         rows = np.flatnonzero(clear)
         cells = keys[rows] @ self.strides.astype(np.float64)    # exact: integers below 2**23
         cand = self.table[cells.astype(np.int64)]
