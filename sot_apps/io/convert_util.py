@@ -6,7 +6,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from tracker.geometry import Box, interpolate_pose, make_transform, zyx_angles
 
@@ -22,6 +21,8 @@ def quaternion_wxyz_to_matrix(w: float, x: float, y: float, z: float, path: Path
     norm = float(np.linalg.norm(q))
     if not np.isfinite(q).all() or not 0.5 < norm < 2.0:
         raise InputError(path, f"{where}: quaternion {q.tolist()} is not a rotation (norm {norm:.3g})")
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_quat(q / norm).as_matrix()
 
 
@@ -35,6 +36,8 @@ def quaternions_wxyz_to_matrices(wxyz: np.ndarray, path: Path, what: str) -> np.
         raise InputError(path, f"{what} {i}: quaternion {q[i].tolist()} is not a rotation")
     if len(q) == 0:
         return np.zeros((0, 3, 3))
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_quat(q / norm[:, None]).as_matrix()
 
 

@@ -18,9 +18,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError, cKDTree
-
-from tracker import voxel_downsample_means
 
 __all__ = ["Mesh", "mesh_from_points", "box_mesh", "voxel_downsample_means", "SurfelParams", "mirror_complete",
            "estimate_normals", "surfel_mesh"]
@@ -40,6 +37,8 @@ class Mesh:
 
 def box_mesh(length: float, width: float, height: float) -> Mesh:
     """Closed box centred at the origin, 12 outward-facing triangles."""
+    from scipy.spatial import ConvexHull
+
     l, w, h = length / 2.0, width / 2.0, height / 2.0
     v = np.array([[x, y, z] for x in (-l, l) for y in (-w, w) for z in (-h, h)], dtype=np.float64)
     hull = ConvexHull(v)
@@ -57,6 +56,8 @@ def _outward(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def _convex_hull(points: np.ndarray) -> Mesh | None:
+    from scipy.spatial import ConvexHull, QhullError
+
     try:
         hull = ConvexHull(points)
     except (QhullError, ValueError):
@@ -107,6 +108,14 @@ class SurfelParams:
     voxel: float = 0.07
 
 
+def voxel_downsample_means(points: np.ndarray, voxel: float) -> np.ndarray:
+    """One point per occupied voxel of size ``voxel`` (the mean of its points; :func:`tracker.voxel_downsample_means`,
+    whose module, with the tracker's metrics, is imported only when this is called)."""
+    from tracker import voxel_downsample_means as downsample
+
+    return downsample(points, voxel)
+
+
 def mirror_complete(points_object: np.ndarray) -> np.ndarray:
     """Points plus their mirror image about the length axis (object frame: y -> -y)."""
     mirrored = points_object * np.array([1.0, -1.0, 1.0])
@@ -116,6 +125,8 @@ def mirror_complete(points_object: np.ndarray) -> np.ndarray:
 def estimate_normals(points: np.ndarray, k: int = 10) -> tuple[np.ndarray, np.ndarray]:
     """(N, 3) unit normals (k-NN PCA, oriented away from the centroid) and (N,) mean k-NN distance."""
     points = np.asarray(points, dtype=np.float64)
+    from scipy.spatial import cKDTree
+
     k_eff = int(min(k + 1, len(points)))
     tree = cKDTree(points)
     dist, idx = tree.query(points, k=k_eff)

@@ -117,3 +117,27 @@ def test_cuboids_csv_that_is_not_utf8_is_one_line_exit_2(tmp_path, pandaset_root
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert "03.csv" in err and "UTF-8" in err
+
+
+def test_pose_quaternions_match_scipy_bit_for_bit(pandaset_root):
+    """pose_to_matrix computes the rotation without scipy (start-up): the same bits as scipy's Rotation, on every
+    pose of the sequence (LiDAR and cameras) and on random quaternions of norms 0.6-1.6."""
+    import json
+
+    from scipy.spatial.transform import Rotation
+
+    from sot_apps.io.pandaset import pose_to_matrix
+
+    files = [pandaset_root / "lidar" / "poses.json", *sorted((pandaset_root / "camera").glob("*/poses.json"))]
+    poses = [p for f in files for p in json.loads(f.read_text())]
+    rng = np.random.default_rng(7)
+    for q in rng.normal(size=(3000, 4)):
+        x, y, z, w = (float(v) for v in q / np.linalg.norm(q) * rng.uniform(0.6, 1.6))
+        poses.append({"position": {"x": 1.0, "y": 2.0, "z": 3.0}, "heading": {"w": w, "x": x, "y": y, "z": z}})
+    assert len(poses) > 1000
+    for pose in poses:
+        h = pose["heading"]
+        truth = Rotation.from_quat([float(h[k]) for k in ("x", "y", "z", "w")]).as_matrix()
+        matrix = pose_to_matrix(pose, files[0], "pose")
+        assert np.array_equal(matrix[:3, :3], truth)
+        assert matrix[:3, 3].tolist() == [float(pose["position"][k]) for k in ("x", "y", "z")]
