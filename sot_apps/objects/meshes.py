@@ -62,7 +62,7 @@ def _convex_hull(points: np.ndarray) -> Mesh | None:
     faces = hull_faces(points)
     if faces is None:
         return None
-    used = np.unique(faces)
+    used = np.flatnonzero(np.bincount(faces.reshape(-1), minlength=len(points)))   # np.unique's answer (sorted)
     remap = np.full(len(points), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     vertices = points[used]
