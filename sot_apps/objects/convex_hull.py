@@ -6,7 +6,8 @@ order: each triangle starts at its smallest point index, triangles sorted. Point
 (``1e-13`` of the points' extent, about qhull's round-off) count as inside. Flat input (no volume) gives None, as
 qhull's error does. Points in general position give exactly qhull's triangles; where more than three points lie
 on one face (a voxel grid's planes), both triangulate that polygon, each its own way. A result that is not a
-closed surface holding every point (only nearly degenerate input can do that) is replaced by qhull's.
+closed surface holding every point (only nearly degenerate input can do that), or a hull of more than 512
+vertices (each costs a Python step; vehicle shapes have 40-250), is qhull's.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 
 __all__ = ["hull_faces", "canonical_faces"]
 
+_MAX_VERTICES = 512   # hulls with more vertices (vehicles have 40-250) go to qhull: each vertex costs a Python step
 _TOLERANCE = 1e-13  # of the points' extent: a point nearer to a face than this is on it (inside; qhull: its round-off)
 
 
@@ -141,7 +143,7 @@ def _quickhull(points: np.ndarray, eps: float) -> np.ndarray | None:
     # per point: the face it lies highest above, -1 once it is on or inside the hull, and that height
     owner, height = _assign(points, faces, np.arange(4), eps)
     owner[simplex] = -1
-    for _ in range(len(points)):
+    for _ in range(min(len(points), _MAX_VERTICES)):
         outside = np.flatnonzero(owner >= 0)
         if len(outside) == 0:
             return np.asarray(faces.tri, dtype=np.int64)[faces.alive[:faces.count]]
