@@ -31,7 +31,7 @@ def canonical_faces(faces: np.ndarray) -> np.ndarray:
 
 def hull_faces(points: np.ndarray) -> np.ndarray | None:
     """(F, 3) int64 triangles (indices into ``points`` (N, 3)) of their convex hull, outward and canonical (module
-    doc); None when the points span no volume or the result fails its checks."""
+    doc); None when they span no volume (flat, fewer than 4) or hold a non-finite value."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(points) < 4 or not np.isfinite(points).all():
         return None
