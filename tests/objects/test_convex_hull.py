@@ -109,3 +109,23 @@ def test_a_failed_check_falls_back_to_qhull(monkeypatch):
     expected = hull_faces(points)
     monkeypatch.setattr(convex_hull, "_closed_and_holding", lambda *args: False)
     assert np.array_equal(hull_faces(points), expected)
+
+
+def test_flow_start_up_imports_no_scipy(pandaset_root):
+    """The flow's modules, opening a PandaSet sequence and meshing a shape by its hull import no scipy (its
+    spatial package costs ~0.35 s of start-up)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import sys, numpy as np\n"
+            "import sot_apps.flow.annotate, sot_apps.flow.objects\n"
+            "from sot_apps.io import open_sequence\n"
+            f"seq = open_sequence({str(pandaset_root)!r})\n"
+            "from sot_apps.flow.objects import mesh_for\n"
+            "mesh = mesh_for(np.random.default_rng(0).normal(size=(500, 3)), np.array([4.5, 1.9, 1.5]))\n"
+            "assert len(mesh.faces) > 12\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[2])   # this checkout's sot_apps
+    assert out.stdout.strip() == "[]"
