@@ -231,6 +231,11 @@ def main(argv: Seq[str] | None = None) -> int:
     finally:
         if _AS_PROGRAM:   # the command is over: a Ctrl-C during interpreter shutdown (atexit, pools) changes nothing
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+            # and the interpreter's teardown need not search every object it holds for cycles: its collections took
+            # ~0.1 s of CPU after a pipeline run (~0.2 s with Dask loaded); atexit handlers and finalizers still run
+            import gc
+
+            gc.freeze()
         if _CAN_REDELIVER:   # no re-delivery once the command is over
             signal.setitimer(signal.ITIMER_REAL, 0.0)
             signal.signal(signal.SIGALRM, previous_alarm)
