@@ -26,7 +26,7 @@ from .plan import ObjectPlan, open_cached
 if TYPE_CHECKING:
     from ..tracking import TrackOutcome
 
-# The tracking machinery (sot_apps.tracking, the tracker, scipy: ~0.4 s of imports) is imported by the tasks that
+# The tracking machinery (sot_apps.tracking, the tracker's step and offline modules) is imported by the tasks that
 # use it, not with this module: the run's own process plans and hands out tasks without it when workers track
 # (a 1-worker run imports it at its first task; workers have it from their fork server, WORKER_MODULES).
 
