@@ -38,11 +38,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle
 
 from ..errors import InputError, not_a_file
+from .convert_util import rotation_matrices_xyzw
 from .npz import read_npz
 from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
@@ -93,7 +93,7 @@ def pose_to_matrix(pose: dict, path: Path, what: str) -> np.ndarray:
     norm = math.sqrt(sum(v * v for v in q))
     if not 0.5 < norm < 2.0:
         raise InputError(path, f"{what}: quaternion norm {norm:.3g} is not close to 1")
-    return make_transform(Rotation.from_quat(q).as_matrix(), np.array(t))
+    return make_transform(rotation_matrices_xyzw(q)[0], np.array(t))
 
 
 def _frame_files(directory: Path, suffixes: tuple[str, ...]) -> list[Path]:
