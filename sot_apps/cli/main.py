@@ -231,6 +231,12 @@ def main(argv: Seq[str] | None = None) -> int:
     finally:
         if _AS_PROGRAM:   # the command is over: a Ctrl-C during interpreter shutdown (atexit, pools) changes nothing
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+            # and the interpreter's teardown need not search every object it holds for cycles (~0.1 s of CPU with the
+            # pipeline loaded; from a run's end to its exit 1.2-4.3 s -> 0.2-0.4 s on the loaded 2-core VM); atexit
+            # handlers and weakref.finalize callbacks still run
+            import gc
+
+            gc.freeze()
         if _CAN_REDELIVER:   # no re-delivery once the command is over
             signal.setitimer(signal.ITIMER_REAL, 0.0)
             signal.signal(signal.SIGALRM, previous_alarm)

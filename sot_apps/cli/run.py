@@ -71,15 +71,18 @@ def run(args: argparse.Namespace) -> int:
 
     spec = executor_from_args(args)
     # the workers' fork server imports the toolkit on the other core while this process imports and plans
-    # (docs/pipeline.md, "Worker start-up"); run_pipeline's session finds it running
-    ExecutorSession(spec).prestart(WORKER_MODULES)
-    from ..io.atomic import ensure_writable
-    from ..pipeline.config import load_config
-    from ..pipeline.runner import run_pipeline
+    # (docs/pipeline.md, "Worker start-up"); a Dask LocalCluster is created once the pipeline file is read, on a
+    # thread, while this process plans
+    with ExecutorSession(spec) as session:
+        session.prestart(WORKER_MODULES, cluster=False)
+        from ..io.atomic import ensure_writable
+        from ..pipeline.config import load_config
+        from ..pipeline.runner import run_pipeline
 
-    config = load_config(args.pipeline, out=args.out, detections=args.detections)
-    ensure_writable(config.out, directory=True)
-    result = run_pipeline(config, spec, progress=not args.quiet)
+        config = load_config(args.pipeline, out=args.out, detections=args.detections)
+        ensure_writable(config.out, directory=True)
+        session.prestart(WORKER_MODULES)
+        result = run_pipeline(config, spec, progress=not args.quiet, session=session)
     print(f"{len(result.plan.objects)} objects in {len(result.plan.sequences)} sequences, {spec.describe()}, "
           f"{result.seconds:.1f} s")
     print(result.summary())

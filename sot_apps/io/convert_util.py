@@ -11,8 +11,32 @@ from tracker.geometry import Box, interpolate_pose, make_transform, zyx_angles
 
 from ..errors import InputError, not_a_file
 
-__all__ = ["quaternion_wxyz_to_matrix", "quaternions_wxyz_to_matrices", "transform_from_quaternion", "box_from_transform", "pose_at",
+__all__ = ["rotation_matrices_xyzw", "quaternion_wxyz_to_matrix", "quaternions_wxyz_to_matrices", "transform_from_quaternion", "box_from_transform", "pose_at",
            "split_selector", "read_text_lines", "read_float32_records"]
+
+
+def rotation_matrices_xyzw(xyzw: np.ndarray) -> np.ndarray:
+    """(N, 4) quaternions (x, y, z, w) of any non-zero norm -> (N, 3, 3) rotation matrices: each normalised, then the
+    usual products. The same arithmetic as scipy's ``Rotation.from_quat(q).as_matrix()``, bit for bit (tested), so
+    the readers need no scipy.spatial (its import, with scipy.sparse and scipy.linalg, was ~0.3-0.45 s of CPU of the
+    pipeline's planning process, which needs nothing else from it)."""
+    q = np.asarray(xyzw, dtype=np.float64).reshape(-1, 4)
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    norm = np.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+    matrices = np.empty((len(q), 3, 3))
+    matrices[:, 0, 0] = x2 - y2 - z2 + w2
+    matrices[:, 1, 0] = 2 * (xy + zw)
+    matrices[:, 2, 0] = 2 * (xz - yw)
+    matrices[:, 0, 1] = 2 * (xy - zw)
+    matrices[:, 1, 1] = -x2 + y2 - z2 + w2
+    matrices[:, 2, 1] = 2 * (yz + xw)
+    matrices[:, 0, 2] = 2 * (xz + yw)
+    matrices[:, 1, 2] = 2 * (yz - xw)
+    matrices[:, 2, 2] = -x2 - y2 + z2 + w2
+    return matrices
 
 
 def quaternion_wxyz_to_matrix(w: float, x: float, y: float, z: float, path: Path, where: str) -> np.ndarray:
@@ -21,9 +45,7 @@ def quaternion_wxyz_to_matrix(w: float, x: float, y: float, z: float, path: Path
     norm = float(np.linalg.norm(q))
     if not np.isfinite(q).all() or not 0.5 < norm < 2.0:
         raise InputError(path, f"{where}: quaternion {q.tolist()} is not a rotation (norm {norm:.3g})")
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_quat(q / norm).as_matrix()
+    return rotation_matrices_xyzw(q / norm)[0]
 
 
 def quaternions_wxyz_to_matrices(wxyz: np.ndarray, path: Path, what: str) -> np.ndarray:
@@ -36,9 +58,7 @@ def quaternions_wxyz_to_matrices(wxyz: np.ndarray, path: Path, what: str) -> np.
         raise InputError(path, f"{what} {i}: quaternion {q[i].tolist()} is not a rotation")
     if len(q) == 0:
         return np.zeros((0, 3, 3))
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_quat(q / norm[:, None]).as_matrix()
+    return rotation_matrices_xyzw(q / norm[:, None])
 
 
 def transform_from_quaternion(wxyz, translation, path: Path, where: str) -> np.ndarray:

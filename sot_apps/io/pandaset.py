@@ -42,6 +42,7 @@ import numpy as np
 from tracker.geometry import Box, invert_transform, make_transform, transform_points, wrap_angle
 
 from ..errors import InputError, not_a_file
+from .convert_util import rotation_matrices_xyzw
 from .npz import read_npz
 from .sequence import BoxAnnotation, Camera, CameraFrame, FrameInfo, Sequence, Sweep
 
@@ -92,20 +93,7 @@ def pose_to_matrix(pose: dict, path: Path, what: str) -> np.ndarray:
     norm = math.sqrt(sum(v * v for v in q))
     if not 0.5 < norm < 2.0:
         raise InputError(path, f"{what}: quaternion norm {norm:.3g} is not close to 1")
-    return make_transform(_unit_quaternion_matrix(*q), np.array(t))
-
-
-def _unit_quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
-    """3x3 rotation of the quaternion (x, y, z, w) normalised: the operations of
-    ``scipy.spatial.transform.Rotation.from_quat(q).as_matrix()`` in its order, so the same bits (tested), without
-    importing scipy.spatial (~0.35 s of start-up for every command reading PandaSet)."""
-    norm = math.sqrt(x * x + y * y + z * z + w * w)
-    x, y, z, w = x / norm, y / norm, z / norm, w / norm
-    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
-    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
-    return np.array([[x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw)],
-                     [2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw)],
-                     [2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2]])
+    return make_transform(rotation_matrices_xyzw(q)[0], np.array(t))
 
 
 def _frame_files(directory: Path, suffixes: tuple[str, ...]) -> list[Path]:

@@ -214,6 +214,8 @@ def _check_objects(objects: ObjectSource, path) -> None:
         raise InputError(path, "objects: 'from: detections' needs 'path' (the detections file)")
     if objects.kind == "boxes" and not objects.boxes:
         raise InputError(path, "objects: 'from: boxes' needs a non-empty 'boxes' list")
+    if not objects.boxes:
+        return   # (sot_apps.tracking, the tracker and scipy are imported only when there are boxes to check)
     from tracker import Box
 
     from ..tracking import check_vehicle_size

@@ -234,6 +234,20 @@ def _forkserver_method(modules: Iterable[str] = ()) -> Iterator[None]:
         yield
 
 
+def _in_thread(fn: Callable[[], Any], name: str) -> Future:
+    """``fn()`` on a daemon thread; its result (or exception) in the returned future."""
+    future: Future = Future()
+
+    def target() -> None:
+        try:
+            future.set_result(fn())
+        except BaseException as exc:  # noqa: BLE001 - handed to whoever takes the result
+            future.set_exception(exc)
+
+    threading.Thread(target=target, name=name, daemon=True).start()
+    return future
+
+
 # Our LocalCluster's settings (its nannies hand them to the workers): Dask's statistical profiler samples the running
 # task's stack every 10 ms (it took the GIL from the task: +16 % task CPU measured with 2 workers), and the event
 # loops' latency tick (every 20 ms) and memory monitors (every 100 ms) wake the scheduler, the nannies (all in this
@@ -262,6 +276,7 @@ class ExecutorSession:
         self._stop_event = None
         self._client = None
         self._cluster = None
+        self._cluster_start: Future | None = None   # a LocalCluster being created on a thread (prestart)
 
     def __enter__(self) -> "ExecutorSession":
         return self
@@ -290,6 +305,10 @@ class ExecutorSession:
         if self._cluster is not None:
             self._cluster.close()
             self._cluster = None
+        if self._cluster_start is not None:   # started by prestart, never used (the run stopped before its tasks)
+            start, self._cluster_start = self._cluster_start, None
+            with deferred_interrupt(), contextlib.suppress(Exception):
+                start.result().close()
 
     def _interrupt_dask_tasks(self) -> None:
         _quieten_dask_logs()
@@ -318,19 +337,23 @@ class ExecutorSession:
             return self._run_dask(tasks, desc, progress)
         raise ValueError(f"unknown executor kind {spec.kind!r}")
 
-    def prestart(self, modules: Iterable[str] = ()) -> None:
+    def prestart(self, modules: Iterable[str] = (), cluster: bool = True) -> None:
         """Prepare the workers now, without waiting for them, so that their start-up overlaps with what this
         process does before its first batch (planning). Local processes: where the platform has fork servers,
         start multiprocessing's fork server importing ``modules`` (once; every worker is then forked from it with
         them loaded, in milliseconds, instead of a fresh interpreter importing the toolkit, ~0.6-1 s of CPU
-        each); else start the spawned workers now, each importing ``modules``. A Dask LocalCluster started later
-        forks its workers from the same server (``modules`` preloaded). Nothing for inline runs."""
+        each); else start the spawned workers now, each importing ``modules``. A Dask LocalCluster forks its
+        workers from the same server (``modules`` preloaded); with ``cluster`` it is created now on a thread of
+        this process (its scheduler and nannies live here) while this process goes on planning, and the first
+        batch takes it (``cluster=False``: only the fork server; ``sot-apps run`` starts the cluster once its
+        pipeline file is read, so that a bad file is reported at once). Nothing for inline runs."""
         spec = self.spec
         self._preload = tuple(modules)
         if spec.kind == "dask" and not spec.address:
-            # the cluster starts with the session's first batch (_dask_client); its workers are forked from this
-            # fork server, which imports Dask's worker and ``modules`` meanwhile
+            # the cluster's workers are forked from this fork server, which imports Dask's worker and ``modules``
             _start_forkserver(("distributed", *self._preload))
+            if cluster and self._cluster is None and self._cluster_start is None:
+                self._cluster_start = _in_thread(self._start_local_cluster, "dask-cluster-start")
             return
         if spec.kind != "local" or spec.workers <= 1 or self._pool is not None:
             return
@@ -408,8 +431,7 @@ class ExecutorSession:
     def _dask_client(self):
         if self._client is None:
             try:
-                import dask
-                from distributed import Client, LocalCluster
+                from distributed import Client
             except ImportError as exc:  # pragma: no cover - depends on the optional extra
                 raise RuntimeError("the Dask executor needs the 'dist' extra: pip install 'sot-apps[dist]'") from exc
             if self.spec.address:
@@ -419,16 +441,26 @@ class ExecutorSession:
                 # then stops it; ignoring it lost the Ctrl-C for seconds); the workers ignore SIGINT from their
                 # first instruction on (_forkserver_method) and keep it so (asyncio installs no handler over an
                 # ignored signal), so they print nothing of their own
-                with deferred_interrupt(), _forkserver_method(self._preload), dask.config.set(LOCAL_DASK_CONFIG):
-                    self._cluster = LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1,
-                                                 processes=True, dashboard_address=None,
-                                                 worker_dashboard_address=None,
-                                                 # no dashboard; its HTTP server (health, metrics) on a free port
-                                                 # instead of 8787, which another cluster may hold (a warning)
-                                                 scheduler_kwargs={"dashboard_address": ":0"})
+                with deferred_interrupt():
+                    if self._cluster_start is not None:   # prestart's, created meanwhile
+                        start, self._cluster_start = self._cluster_start, None
+                        self._cluster = start.result()
+                    else:
+                        self._cluster = self._start_local_cluster()
                 self._client = Client(self._cluster)
             self._client.run(_single_threaded_env)
         return self._client
+
+    def _start_local_cluster(self):
+        import dask
+        from distributed import LocalCluster
+
+        with _forkserver_method(self._preload), dask.config.set(LOCAL_DASK_CONFIG):
+            return LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1, processes=True,
+                                dashboard_address=None, worker_dashboard_address=None,
+                                # no dashboard; its HTTP server (health, metrics) on a free port instead of 8787,
+                                # which another cluster may hold (a warning)
+                                scheduler_kwargs={"dashboard_address": ":0"})
 
     def _run_dask(self, tasks: list[Task], desc: str, progress: bool) -> list[TaskOutcome]:
         from distributed import as_completed

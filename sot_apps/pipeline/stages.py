@@ -13,25 +13,24 @@ import os
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..apps import track_dir
 from ..evaluation.track_health import track_health
-from ..tracking import (
-    ObjectRequest,
-    TrackingFailed,
-    TrackOutcome,
-    track_result_to_trackfile,
-    write_shape_growth,
-    write_track_result,
-)
-from ..tracking import track_objects as track_objects_pass
 from .config import TrackStage
 from .manifest import DoneMarker
 from .plan import ObjectPlan, open_cached
 
-__all__ = ["TrackingFailed", "track_objects", "write_object", "run_app_unit", "score_motion", "track_dir",
+if TYPE_CHECKING:
+    from ..tracking import TrackOutcome
+
+# The tracking machinery (sot_apps.tracking, the tracker's step and offline modules) is imported by the tasks that
+# use it, not with this module: the run's own process plans and hands out tasks without it when workers track
+# (a 1-worker run imports it at its first task; workers have it from their fork server, WORKER_MODULES).
+
+__all__ = ["track_objects", "write_object", "run_app_unit", "score_motion", "track_dir",
            "MOTION_EVAL_FILE"]
 
 
@@ -44,6 +43,9 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     (``digests[object_id]``). Returns per object its result or error (``TrackingFailed: ...`` when it had too few
     LiDAR points to start or follow) and where the chunk's time went (CPU seconds)."""
     from tracker import get_preset
+
+    from ..tracking import ObjectRequest
+    from ..tracking import track_objects as track_objects_pass
 
     t0, cpu0, process0, started = time.perf_counter(), time.thread_time(), time.process_time(), time.time()
     first = plans[0]
@@ -110,6 +112,8 @@ def _write_timed(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -
 
 def write_object(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -> dict:
     """One tracked object's outputs and completion marker; returns its summary for the manifest."""
+    from ..tracking import track_result_to_trackfile, write_shape_growth, write_track_result
+
     result = track.result
     directory = track_dir(out, plan.sequence, plan.object_id)
     # Per-frame time_ms is left out (it differs run to run): pipeline outputs are reproducible byte for byte;

@@ -102,3 +102,32 @@ def test_prestart_starts_nothing_inline():
     with ExecutorSession(ExecutorSpec("inline")) as session:
         session.prestart(("json",))   # nothing to start
         assert set(multiprocessing.active_children()) == before
+
+
+@pytest.mark.slow
+def test_dask_prestart_creates_the_cluster_the_first_batch_runs_on(monkeypatch):
+    """``prestart`` with a Dask LocalCluster spec creates the cluster on a thread while this process goes on; the
+    first batch runs on that cluster (no second one is created), and it is closed with the session. A session
+    closed before any batch closes the cluster prestart created (nothing left running)."""
+    from distributed.core import Status
+    from distributed.deploy.spec import SpecCluster
+
+    from sot_apps.pipeline.executors import ExecutorSession
+
+    monkeypatch.setattr(SpecCluster, "_instances", set(SpecCluster._instances))   # kept after they are closed
+    before = set(SpecCluster._instances)
+    with ExecutorSession(ExecutorSpec("dask", workers=1)) as session:
+        session.prestart(())
+        outcomes = session.run(_tasks(), progress=False)
+        created = set(SpecCluster._instances) - before
+        assert len(created) == 1
+        (cluster,) = created
+        assert len(cluster.workers) == 1
+    assert _summary(outcomes) == _summary(run_tasks(_tasks(), ExecutorSpec("inline"), progress=False))
+    assert cluster.status == Status.closed
+
+    before = set(SpecCluster._instances)
+    with ExecutorSession(ExecutorSpec("dask", workers=1)) as session:
+        session.prestart(())
+    unused = set(SpecCluster._instances) - before
+    assert len(unused) == 1 and all(c.status == Status.closed for c in unused)
