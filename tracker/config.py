@@ -242,7 +242,8 @@ class HeightConfig:
     """The box height. ``model``: "icp" dz from the loss like dx, dy; "ground" the box keeps its start height above
     the road; "fixed" dz = 0; "filter" a slow estimate from the registration's z with the road as a prior.
     ``road`` ("ground"/"filter"): the road under the box from "local" per-cell planes (fitted for this even when
-    the ground remover is "sweep"), from the points the ground "removal" took, or "none"."""
+    the ground remover is "sweep"), from the points the ground "removal" took, or "none"; ``road_max_range`` > 0:
+    none for a box farther than that from the sensor."""
 
     model: str = "icp"
     road: str = "local"
@@ -250,6 +251,8 @@ class HeightConfig:
     fit_sigma: float = 0.15              # "filter": noise of the registration's z (m)
     road_sigma: float = 0.05             # "filter": noise of road height + offset (m)
     offset_gain: float = 0.05            # "filter": the height above the road follows the estimate this slowly
+    road_max_range: float = 0.0          # > 0: no road for a box farther than this from the sensor (m, horizontal):
+                                         # a plane through the sparse ground around a far box is off by several cm
 
     def __post_init__(self) -> None:
         _choice("height.model", self.model, ("icp", "ground", "fixed", "filter"))

@@ -208,6 +208,9 @@ class Tracker:
         s, c = self.strategies, self.config
         region = local_region(frame, box, scale, s.ground, s.road, c.ground.margin, c.deskew, self._previous_pose)
         self._ground_points = region.road
+        far = c.height.road_max_range
+        if far > 0 and np.hypot(*(box.center[:2] - frame.world_from_ego[:2, 3])) > far:
+            self._ground_points = region.road[:0]  # the road around a far box is seen too sparsely to hold its z
         if region.crop is not None:
             self.last_crop = region.crop
         return region.points, list(region.flags)
