@@ -107,6 +107,7 @@ class RansacResult:
     translation: np.ndarray  # (2,)
     iterations: int
 
+
 def _squared_bev(d: np.ndarray) -> np.ndarray:
     """``(d ** 2).sum(axis=1)`` of (N, 2) differences, bit for bit (two non-negative squares: their one sum),
     without numpy's slow reduction over a short axis."""
