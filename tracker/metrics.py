@@ -45,6 +45,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .geometry import Box, rotation_zyx
+from .rows import finite3
 
 __all__ = [
     "unique_sorted",
@@ -387,7 +388,7 @@ def unique_sorted(values: np.ndarray) -> np.ndarray:
 def voxel_downsample_centres(points: np.ndarray, voxel: float = 0.05) -> np.ndarray:
     """One point per occupied voxel, at the voxel's centre (grid anchored at the origin), sorted."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    points = points[np.all(np.isfinite(points), axis=1)]
+    points = points[finite3(points)]
     if points.shape[0] == 0:
         return np.zeros((0, 3))
     keys = np.floor(points / voxel).astype(np.int64)

@@ -66,6 +66,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
 from .metrics import unique_sorted, voxel_downsample_centres, voxel_downsample_means
+from .rows import finite3, inside3, norm3, sum3
 from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
 from .voxel_nearest import VoxelNearest
@@ -172,7 +173,7 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
             world = world[above_ground]
     near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
     local = world[near]
-    local = local[np.all(np.isfinite(local), axis=1)]
+    local = local[finite3(local)]
     if removes_ground and not sweep_ground and len(local) >= 3:
         local = local[~ground_mask(local, config.ground.params())]
     return local[points_in_box(local, box, params.region_scale)]
@@ -215,7 +216,7 @@ def _object_points(stacked: tuple[np.ndarray, np.ndarray], states: np.ndarray, s
     pts, frame = stacked
     if local is None:
         local = _to_object_per_point(pts, states, frame)
-    keep = np.all(np.abs(local) <= np.asarray(size, dtype=np.float64) / 2.0, axis=1)
+    keep = inside3(local, np.asarray(size, dtype=np.float64) / 2.0)
     if per_frame > 0 and keep.any():
         frame_in = frame[keep]
         counts = np.bincount(frame_in, minlength=len(states))
@@ -241,16 +242,28 @@ def _normals(shape: np.ndarray, k: int, tree: cKDTree | None = None, rows: np.nd
     return _smallest_eigenvectors(*_neighbour_covariances(shape, k, tree or cKDTree(shape), rows))
 
 
+_COV_A, _COV_B = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2])  # xx, yy, zz, xy, xz, yz
+
+
 def _neighbour_covariances(shape: np.ndarray, k: int, tree: cKDTree, rows: np.ndarray | None = None
                            ) -> tuple[np.ndarray, ...]:
     """The six entries (xx, yy, zz, xy, xz, yz) of the covariance of each point's k nearest neighbours in
     ``shape`` (k <= len(shape), at least 3); ``rows``: only these points."""
     k = int(min(k, len(shape)))
     _, idx = tree.query(shape if rows is None else shape[rows], k=k)
-    nb = shape[idx]
-    nb -= nb.mean(axis=1, keepdims=True)
-    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
-    return tuple(np.einsum("mk,mk->m", nb[:, :, a], nb[:, :, b]) / k for a, b in pairs)
+    # the neighbours' coordinates as (3, k, M) rows, summed over k one row at a time: the mean and the products'
+    # sums in the order numpy sums them over the neighbour axis of shape[idx] (mean(axis=1), and einsum
+    # "mk,mk->m" of two of its strided coordinates, from 0), in whole-array operations
+    nb = shape.T[:, idx.T]
+    mean = nb[:, 0].copy()
+    for j in range(1, k):
+        mean += nb[:, j]
+    nb -= (mean / k)[:, None]
+    products = nb[_COV_A] * nb[_COV_B]
+    sums = np.zeros((6, len(idx)))
+    for j in range(k):
+        sums += products[:, j]
+    return tuple(sums / k)
 
 
 def _smallest_eigenvectors(xx: np.ndarray, yy: np.ndarray, zz: np.ndarray, xy: np.ndarray, xz: np.ndarray,
@@ -270,19 +283,26 @@ def _smallest_eigenvectors(xx: np.ndarray, yy: np.ndarray, zz: np.ndarray, xy: n
     phi = np.arccos(np.clip(det / 2.0, -1.0, 1.0)) / 3.0
     lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
     r0, r1, r2 = (xx - lam, xy, xz), (xy, yy - lam, yz), (xz, yz, zz - lam)  # rows of A - lambda I
-    crosses = np.empty((len(xx), 3, 3))
+    crosses = np.empty((3, 3, len(xx)))  # (pair, component, point)
     for j, (u, v) in enumerate(((r0, r1), (r0, r2), (r1, r2))):  # u x v, written out (as numpy.cross computes it)
-        crosses[:, j, 0] = u[1] * v[2] - u[2] * v[1]
-        crosses[:, j, 1] = u[2] * v[0] - u[0] * v[2]
-        crosses[:, j, 2] = u[0] * v[1] - u[1] * v[0]
-    norms = np.sqrt(np.add.reduce(crosses * crosses, axis=2))
-    best = np.argmax(norms, axis=1)
-    length = norms[np.arange(len(best)), best]
-    out = crosses[np.arange(len(best)), best] / np.maximum(length, 1e-300)[:, None]
+        crosses[j, 0] = u[1] * v[2] - u[2] * v[1]
+        crosses[j, 1] = u[2] * v[0] - u[0] * v[2]
+        crosses[j, 2] = u[0] * v[1] - u[1] * v[0]
+    squares = crosses * crosses
+    norms = np.sqrt((squares[:, 0] + squares[:, 1]) + squares[:, 2])  # (3, M); numpy's order for a row of 3
+    if np.isnan(norms).any():
+        best = np.argmax(norms, axis=0)
+    else:  # argmax over the 3 pairs (the first of equal ones), without numpy's slow reduction over a short axis
+        best = np.where(norms[1] > norms[0], 1, 0)
+        best = np.where(norms[2] > np.maximum(norms[0], norms[1]), 2, best)
+    every = np.arange(len(best))
+    length = norms[best, every]
+    out = crosses[best, :, every] / np.maximum(length, 1e-300)[:, None]
     # the cross product's length is ~ the product of the other two eigenvalue gaps (times |A|^2 scale)
     bad = ~(length > 1e-6 * np.maximum(p, 1e-300) ** 2)
     if bad.any():
-        a = np.stack([np.stack([xx, xy, xz], 1), np.stack([xy, yy, yz], 1), np.stack([xz, yz, zz], 1)], 1)[bad]
+        bxx, byy, bzz, bxy, bxz, byz = (v[bad] for v in (xx, yy, zz, xy, xz, yz))
+        a = np.stack([np.stack([bxx, bxy, bxz], 1), np.stack([bxy, byy, byz], 1), np.stack([bxz, byz, bzz], 1)], 1)
         out[bad] = np.linalg.eigh(a)[1][:, :, 0]
     return out
 
@@ -353,7 +373,7 @@ class _Solver:
             self.z_weight = np.full(self.k - 1, 1.0 / params.z_trend_sigma**2)
             if params.z_trend_points > 0:
                 local = _to_object_per_point(self.stacked[0], online, self.stacked[1])
-                inside = np.all(np.abs(local) <= size / 2.0, axis=1)
+                inside = inside3(local, size / 2.0)
                 n = np.bincount(self.stacked[1][inside], minlength=self.k).astype(np.float64)
                 self.z_weight *= params.z_trend_points / (params.z_trend_points + 0.5 * (n[1:] + n[:-1]))
             self.h_prior[_BANDS, 2::4] += np.r_[self.z_weight, 0.0] + np.r_[0.0, self.z_weight]
@@ -443,7 +463,7 @@ class _Solver:
         p = self.params
         raw, raw_frame = self.stacked
         local = self._object_frame(states)
-        inside = np.all(np.abs(local) <= self.size * p.crop_scale / 2.0, axis=1)
+        inside = inside3(local, self.size * p.crop_scale / 2.0)
         counts = np.bincount(raw_frame[inside], minlength=self.k)
         self.any_points = bool(inside.any())
         keep = inside & (raw_frame >= self.fixed)
@@ -485,9 +505,9 @@ class _Solver:
             dist, m, n = self._match(local)
             self._matched = (states.copy(), (dist, m, n))
         e = local - m
-        ne = np.sum(n * e, axis=1)
+        ne = sum3(n * e)
         r = (1.0 - beta) * n * ne[:, None] + beta * e
-        norm = np.linalg.norm(r, axis=1)
+        norm = norm3(r)
         delta = p.huber_delta
         rho = np.where(norm <= delta, norm**2, 2 * delta * norm - delta**2)
         weight = self.point_scale * (dist <= p.max_pair_distance)

@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .rows import all3
+
 __all__ = ["VoxelNearest"]
 
 _MAX_CELLS = 1 << 23     # a larger grid (a long, sparse shape): the kd-tree answers every query
@@ -67,7 +69,7 @@ class VoxelNearest:
             np.abs(scaled, out=scaled)
             keys -= self.low
             # inside the grid and clear of the cell's borders (NaN: neither)
-            clear = np.all((scaled <= 0.5 - _BORDER) & (keys >= 0) & (keys < self.dims), axis=1)
+            clear = all3((scaled <= 0.5 - _BORDER) & (keys >= 0) & (keys < self.dims))
         rows = np.flatnonzero(clear)
         cells = keys[rows] @ self.strides.astype(np.float64)    # exact: integers below 2**23
         cand = self.table[cells.astype(np.int64)]
