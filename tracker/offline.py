@@ -642,6 +642,11 @@ def _regauge(states: np.ndarray, given_first: np.ndarray, heading_share: float =
     c, s = np.cos(states[0, 3]), np.sin(states[0, 3])
     diff = given_first[:3] - states[0, :3]
     d_t = np.array([c * diff[0] + s * diff[1], -s * diff[0] + c * diff[1], diff[2]])
+    return _composed(states, d_t, d_theta)
+
+
+def _composed(states: np.ndarray, d_t: np.ndarray, d_theta: float) -> np.ndarray:
+    """Every pose composed with one object-frame correction: translation ``d_t`` (along, left, up), then turn."""
     out = states.copy()
     ck, sk = np.cos(states[:, 3]), np.sin(states[:, 3])
     out[:, 0] += ck * d_t[0] - sk * d_t[1]
@@ -665,12 +670,8 @@ def _window_gauge(states: np.ndarray, window: np.ndarray, frames: int, max_offse
     d_theta = float(np.angle(np.exp(1j * wrap_angle(w[:, 3] - s[:, 3])).mean()))
     if np.linalg.norm(d_t) >= max_offset:
         return states
-    out = states.copy()
-    ck, sk = np.cos(states[:, 3]), np.sin(states[:, 3])
-    out[:, 0] += ck * d_t[0] - sk * d_t[1]
-    out[:, 1] += sk * d_t[0] + ck * d_t[1]
-    out[:, 2] += d_t[2]
-    out[:, 3] = wrap_angle(out[:, 3] + d_theta)
+    out = _composed(states, d_t, d_theta)
+    out[:, 3] = wrap_angle(out[:, 3])
     out[0] = states[0]
     return out
 
