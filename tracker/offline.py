@@ -46,6 +46,12 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    solution is kept when its boxes hold more than ``window_start_margin`` × the points the first one's hold
    (summed over frames, on the same points); a start from the window alone is no good where the online offset
    is one rigid shift, which the gauge removes but the window, part-corrected, no longer is.
+7. gauge from the window (``gauge_window`` = M > 0, with ``window_start``; off by default): the regauge of step 4
+   moves every frame by frame 0's own registration error (frame 0 pins the gauge alone; on a sparse start that is
+   centimetres, on every frame). The window holds frame 0 at the start box and registers the next frames to it, so
+   its first frames average that error out: the kept solution is moved by the mean object-frame correction onto
+   the window's states over frames 1..M (frame 0 stays exact; none when its centre part is ``gauge_window_max`` or
+   more: the two disagree by more than registration noise) and the shape rebuilt.
 
 The result is a new TrackResult (same frames, sizes and per-frame online ``time_ms``; ``points`` and
 ``num_points`` recomputed; flag ``"offline"`` added). Deterministic for a given ``config.seed``.
@@ -656,12 +662,37 @@ def _regauge(states: np.ndarray, given_first: np.ndarray, heading_share: float =
     c, s = np.cos(states[0, 3]), np.sin(states[0, 3])
     diff = given_first[:3] - states[0, :3]
     d_t = np.array([c * diff[0] + s * diff[1], -s * diff[0] + c * diff[1], diff[2]])
+    return _composed(states, d_t, d_theta)
+
+
+def _composed(states: np.ndarray, d_t: np.ndarray, d_theta: float) -> np.ndarray:
+    """Every pose composed with one object-frame correction: translation ``d_t`` (along, left, up), then turn."""
     out = states.copy()
     ck, sk = np.cos(states[:, 3]), np.sin(states[:, 3])
     out[:, 0] += ck * d_t[0] - sk * d_t[1]
     out[:, 1] += sk * d_t[0] + ck * d_t[1]
     out[:, 2] += d_t[2]
     out[:, 3] += d_theta
+    return out
+
+
+def _window_gauge(states: np.ndarray, window: np.ndarray, frames: int, max_offset: float) -> np.ndarray:
+    """``states`` moved by one object-frame correction: the mean over frames 1..``frames`` of the correction that
+    maps each refined pose onto the window pass's (frame 0, the start box, stays exact); unchanged when its centre
+    part is ``max_offset`` or more (the window and the solve disagree by more than registration noise)."""
+    n = min(frames, len(states) - 1)
+    if n < 1:
+        return states
+    s, w = states[1:n + 1], window[1:n + 1]
+    c, si = np.cos(s[:, 3]), np.sin(s[:, 3])
+    diff = w[:, :3] - s[:, :3]
+    d_t = np.c_[c * diff[:, 0] + si * diff[:, 1], -si * diff[:, 0] + c * diff[:, 1], diff[:, 2]].mean(axis=0)
+    d_theta = float(np.angle(np.exp(1j * wrap_angle(w[:, 3] - s[:, 3])).mean()))
+    if np.linalg.norm(d_t) >= max_offset:
+        return states
+    out = _composed(states, d_t, d_theta)
+    out[:, 3] = wrap_angle(out[:, 3])
+    out[0] = states[0]
     return out
 
 
@@ -722,14 +753,13 @@ def _support(points: list[np.ndarray], states: np.ndarray, size: np.ndarray) -> 
 
 
 def _window_start(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
-                  points: list[np.ndarray], online: np.ndarray, states: np.ndarray, shape: np.ndarray | None
+                  points: list[np.ndarray], online: np.ndarray, window: np.ndarray, states: np.ndarray,
+                  shape: np.ndarray | None
                   ) -> tuple[np.ndarray, np.ndarray | None, list[np.ndarray]]:
-    """Step 6 of the module docstring: the solve from the fixed-lag window's states, kept when its boxes hold
-    more of the points than the solve from the online states; returns (states, shape, points) of the one kept."""
-    from .fixed_lag import window_states
-
+    """Step 6 of the module docstring: the solve from the fixed-lag window's states (``window``), kept when its
+    boxes hold more of the points than the solve from the online states; returns (states, shape, points) of the
+    one kept."""
     size = np.asarray(result.size)
-    window = window_states(points, result, params.window_start, config)
     if np.max(np.hypot(window[:, 0] - online[:, 0], window[:, 1] - online[:, 1])) <= params.window_start_moved:
         return states, shape, points
     both = points
@@ -765,7 +795,14 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
     online = np.array([e.state.to_array() for e in result.estimates])
     states, shape = refine_states(points, online, np.asarray(result.size), params, seed=config.seed)
     if params.window_start > 0 and len(online) > 2:
-        states, shape, points = _window_start(source, result, config, params, points, online, states, shape)
+        from .fixed_lag import window_states
+
+        window = window_states(points, result, params.window_start, config)
+        states, shape, points = _window_start(source, result, config, params, points, online, window, states, shape)
+        if params.gauge_window > 0:
+            gauged = _window_gauge(states, window, params.gauge_window, params.gauge_window_max)
+            if gauged is not states:
+                states, shape = gauged, _rebuild_shape(points, gauged, np.asarray(result.size), params.voxel)
     assert shape is not None   # with_shape=True
     estimates: list[FrameEstimate] = []
     for est, pts, s in zip(result.estimates, points, states, strict=True):
