@@ -64,7 +64,7 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
             sections.append(Section(f"{s.name}: tracking", [f"No object of {html.escape(s.name)} was tracked."]))
             continue
         dirs = [track_dir(out, s.name, o) for o in tracked]
-        tracks = [read_track(d) for d in dirs]
+        tracks = [read_track(d)[1] for d in dirs]
         scores = score_tracks(seq, tracks)
         sec = Section(f"{s.name}: tracks against ground truth")
         health = {h["object"]: h for h in result.track_health if h["sequence"] == s.name}
