@@ -38,6 +38,7 @@ class BankApp(AppBase):
         for object_id in object_ids:
             header, track = read_track(track_dir(out, sequence, object_id))
             shape = track.shape_points
+            assert shape is not None   # read_track always reads the shape
             quality = track.mean_score if len(track) else 0.0
             if len(shape) < config.min_points or quality < config.min_quality:
                 skipped.append({"object": object_id, "shape_points": int(len(shape)), "quality": round(quality, 4)})

@@ -33,6 +33,7 @@ import argparse
 import sys
 from collections import defaultdict
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -49,14 +50,22 @@ SINGLE_ROWS = ("single box", "single box + offline")
 
 @dataclass(frozen=True)
 class KeyframeBenchTrack:
-    """One evaluated track: where it comes from, its frames and ground-truth boxes."""
+    """One evaluated track: where it comes from and ``truth``, its annotated rows over its span (every frame; an
+    :class:`~sot_apps.io.object_track.ObjectTrack`, ``frames`` and ``boxes`` are views of it)."""
 
     source: str
     key: str
     profile: str | None
     sequence: Any
-    frames: tuple[int, ...]
-    boxes: tuple[Any, ...]
+    truth: Any
+
+    @cached_property
+    def frames(self) -> tuple[int, ...]:
+        return tuple(int(k) for k in self.truth.frames)
+
+    @cached_property
+    def boxes(self) -> tuple[Any, ...]:
+        return tuple(self.truth.box(i) for i in range(len(self.truth)))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -104,16 +113,16 @@ def _tracks(source: str, first: int | None, track_ids: list[str] | None) -> list
             tracks = seq.tracks()
             if t.id not in tracks:
                 raise InputError(seq.root, f"tracklet {t.id}: no annotated object with this id")
-            frames = tuple(range(t.frame_range[0], t.frame_range[1] + 1))
-            boxes = tuple(tracks[t.id].box_at(k) for k in frames)
-            if any(b is None for b in boxes):
-                raise InputError(seq.root, f"tracklet {t.id}: a frame of {frames[0]}..{frames[-1]} has no box")
-            out.append(KeyframeBenchTrack(source, t.key, t.profile, seq, frames, boxes))
+            first, last = t.frame_range
+            truth = tracks[t.id].between(first, last)
+            if len(truth) != last - first + 1:
+                raise InputError(seq.root, f"tracklet {t.id}: a frame of {first}..{last} has no box")
+            out.append(KeyframeBenchTrack(source, t.key, t.profile, seq, truth))
         return out
     seq = open_sequence(path)
     ids = track_ids or select_moving_vehicle_tracks(seq, source=CachedSource(seq))
     for spec in prepare_tracks(seq, ids, CachedSource(seq), with_shape=False):
-        out.append(KeyframeBenchTrack(source, spec.track_id, None, seq, spec.frames, spec.boxes))
+        out.append(KeyframeBenchTrack(source, spec.track_id, None, seq, spec.truth))
     return out
 
 

@@ -171,6 +171,10 @@ class ObjectTrack:
         return replace(self, frames=self.frames[pick], boxes=self.boxes[pick], flags=tuple(self.flags[i] for i in pick),
                        **columns)
 
+    def between(self, first: int, last: int) -> "ObjectTrack":
+        """The rows at frames ``first``..``last`` (inclusive), every column with them."""
+        return self.select((self.frames >= first) & (self.frames <= last))
+
     def restamped(self, times_ns: Any) -> "ObjectTrack":
         """The track with ``times_ns`` (one per row, e.g. the capture time of each box's points) as its
         ``timestamps_ns``; a row whose time is not after the previous kept row's is dropped (times must increase)."""

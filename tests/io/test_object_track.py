@@ -36,6 +36,8 @@ def test_states_rows_with_nan_are_invalid_and_rows_must_increase():
     assert picked.flags == ((), ())
     with pytest.raises(ValueError, match="strictly increasing"):
         ObjectTrack.from_states("a", "Car", (4.0, 2.0, 1.5), [0, 0], [0, 100], states[:2], [True, True])
+    assert track.between(1, 5).frames.tolist() == [1, 2] and track.between(1, 5).flags == (("no_points",), ())
+    assert len(track.between(3, 9)) == 0
     with pytest.raises(ValueError, match="scores has 1 entries for 3 frames"):
         ObjectTrack.from_states("a", "Car", (4.0, 2.0, 1.5), [0, 1, 2], [0, 1, 2], states, [True] * 3, scores=[1.0])
 
