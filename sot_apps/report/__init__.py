@@ -82,7 +82,7 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
                                               "boxes (green) and the ego, bird's-eye view"))
         sections.append(sec)
 
-        recorded = [(len(shape), t.object_id, d) for (t, shape), d in zip(tracks, dirs, strict=True)]
+        recorded = [(len(t.shape_points), t.object_id, d) for t, d in zip(tracks, dirs, strict=True)]
         growth = next((g for _, _, d in sorted(recorded, reverse=True) if (g := read_shape_growth(d)) is not None), None)
         if growth is not None:
             name = f"{s.name}_shape_growth.png"
