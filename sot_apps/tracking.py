@@ -34,12 +34,13 @@ from tracker import (
 
 from .errors import InputError
 from .io.atomic import write_text
+from .io.object_track import ObjectTrack
 from .io.sequence import Sequence
-from .io.tracks import FrameRecord, Size, TrackFile, write_track
+from .io.tracks import TrackHeader, frame_is_valid, write_track
 
 __all__ = ["ShapeGrowth", "track_with_shape_growth", "write_shape_growth", "read_shape_growth", "parse_init_box",
            "VEHICLE_SIZE_RANGE_M", "implausible_size", "check_vehicle_size", "resolve_span", "track_sequence",
-           "refine_track_fixed_lag", "refine_track_offline", "track_result_to_trackfile",
+           "refine_track_fixed_lag", "refine_track_offline", "track_result_to_track",
            "write_track_result", "first_box_with_points", "TrackStart", "annotated_track_start",
            "TrackingFailed", "MIN_INIT_POINTS", "StartSearch",
            "ShapeRecorder", "ObjectRequest", "TrackOutcome", "PassTimes", "track_objects", "sweep_ground_once"]
@@ -204,23 +205,30 @@ def annotated_track_start(seq: Sequence, track_id: str, config: TrackerConfig, s
     return TrackStart(object_id, annotated.label, init_box, first, last)
 
 
-def track_result_to_trackfile(seq: Sequence, result: TrackResult, object_id: str, init_box: Box,
-                              label: str | None = None, config_extra: dict[str, Any] | None = None,
-                              with_time_ms: bool = True) -> TrackFile:
-    """The track file record of ``result`` (world states, per-frame diagnostics, the config used). Quality is
-    clipped to [0, 1] (the schema's range). ``with_time_ms=False`` leaves out the per-frame tracker time (it
-    differs run to run), so the file is reproducible byte for byte (the pipeline)."""
-    records = [FrameRecord(frame=e.frame, timestamp_ns=int(seq.frames[e.frame].timestamp_ns), state=e.state,
-                           num_points=int(e.num_points), quality=float(np.clip(e.quality, 0.0, 1.0)),
-                           flags=list(e.flags), time_ms=float(e.time_ms) if with_time_ms else None)
-               for e in result.estimates]
+def track_result_to_track(seq: Sequence, result: TrackResult, object_id: str, init_box: Box,
+                          label: str | None = None, config_extra: dict[str, Any] | None = None,
+                          with_time_ms: bool = True) -> tuple[TrackHeader, ObjectTrack]:
+    """The track file of ``result``: its header and its rows (world states at the frames' timestamps, per-frame
+    diagnostics, the shape, the config used). Quality (``scores``) is clipped to [0, 1] (the schema's range).
+    ``with_time_ms=False`` leaves out the per-frame tracker time (it differs run to run), so the file is
+    reproducible byte for byte (the pipeline)."""
+    estimates = result.estimates
     config = result.config.to_dict()
     if config_extra:
         config.update(config_extra)
-    length, width, height = (float(v) for v in result.size)
-    return TrackFile(sequence=seq.id, object_id=object_id, size=Size(length, width, height),
-                     start_frame=result.frames[0], end_frame=result.frames[-1], init_box=init_box, config=config,
-                     frames=records, label=label)
+    frames = [e.frame for e in estimates]
+    flags = [tuple(e.flags) for e in estimates]
+    track = ObjectTrack.from_states(
+        object_id, label or "", tuple(float(v) for v in result.size), frames,
+        [int(seq.frames[k].timestamp_ns) for k in frames],
+        np.array([e.state.to_array() for e in estimates], dtype=np.float64).reshape(-1, 4),
+        [frame_is_valid(f) for f in flags], flags, scores=np.clip([float(e.quality) for e in estimates], 0.0, 1.0),
+        num_points=[int(e.num_points) for e in estimates],
+        time_ms=[float(e.time_ms) for e in estimates] if with_time_ms else None,
+        shape_points=result.shape, config={"tracker": config})
+    header = TrackHeader(sequence=seq.id, start_frame=result.frames[0], end_frame=result.frames[-1],
+                         init_box=init_box, config=config)
+    return header, track
 
 
 def refine_track_fixed_lag(seq: Sequence, result: TrackResult, lag: int) -> TrackResult:
@@ -251,9 +259,9 @@ def write_track_result(directory: str | Path, seq: Sequence, result: TrackResult
         extra["refined"] = True
     if mode == "lag":
         extra["lag"] = int(result.lag)
-    trackfile = track_result_to_trackfile(seq, result, object_id, init_box, label, config_extra=extra,
+    header, track = track_result_to_track(seq, result, object_id, init_box, label, config_extra=extra,
                                           with_time_ms=with_time_ms)
-    return write_track(directory, trackfile, result.shape)
+    return write_track(directory, header, track)
 
 
 def init_points(seq: Sequence, frame: int, box: Box) -> int:

@@ -38,7 +38,7 @@ class AutoLabelsApp(AppBase):
         from ..io.label_export import export_labels, label_paths
         from ..io.labels import kitti_camera
         from ..io.opened import open_cached
-        from ..io.tracks import object_track, read_track
+        from ..io.tracks import read_track
 
         unknown = sorted(set(config.formats) - {"av2", "kitti"})
         if unknown:
@@ -46,7 +46,7 @@ class AutoLabelsApp(AppBase):
         seq = open_cached(path, format)
         labels = []
         for object_id in object_ids:
-            track = object_track(read_track(track_dir(out, sequence, object_id))[0])
+            track = read_track(track_dir(out, sequence, object_id))[1]
             kept = track.select(np.asarray(track.scores) >= config.min_quality)   # scores: the tracker's quality
             if not len(kept):
                 continue

@@ -29,7 +29,6 @@ class BankApp(AppBase):
 
     def run(self, config: BankConfig, out: Path, sequence: str, object_ids: list[str]) -> UnitOutput:
         """Bank entries from one sequence's tracked shapes; the index over all sequences is written by finish."""
-        import numpy as np
 
         from ..io.tracks import read_track
         from ..objects.bank import entry_from_points
@@ -37,16 +36,17 @@ class BankApp(AppBase):
         bank_root = Path(out) / "bank"
         entries, skipped, files = [], [], []
         for object_id in object_ids:
-            track, shape = read_track(track_dir(out, sequence, object_id))
-            quality = float(np.mean([r.quality for r in track.frames])) if track.frames else 0.0
+            header, track = read_track(track_dir(out, sequence, object_id))
+            shape = track.shape_points
+            assert shape is not None   # read_track always reads the shape
+            quality = track.mean_score if len(track) else 0.0
             if len(shape) < config.min_points or quality < config.min_quality:
                 skipped.append({"object": object_id, "shape_points": int(len(shape)), "quality": round(quality, 4)})
                 continue
-            size = (track.size.length, track.size.width, track.size.height)
-            source = {"kind": "track", "sequence": track.sequence, "object_id": object_id,
+            source = {"kind": "track", "sequence": header.sequence, "object_id": object_id,
                       "track": str(Path(sequence) / "tracks" / object_id)}
-            entry = entry_from_points(bank_root, f"{sequence}__{object_id}", shape, source, quality, label=track.label,
-                                      mirror=config.mirror, size=size)
+            entry = entry_from_points(bank_root, f"{sequence}__{object_id}", shape, source, quality,
+                                      label=track.label or None, mirror=config.mirror, size=track.size)
             entry.build_seconds = None   # keep index.json reproducible
             entries.append(entry.to_json())
             files += [bank_root / entry.mesh] + ([bank_root / entry.points] if entry.points else [])

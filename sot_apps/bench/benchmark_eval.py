@@ -131,16 +131,17 @@ def _spec(seq, source: CachedSource, t: Tracklet, config: EvalConfig) -> TrackSp
     a, b = t.frame_range
     if b >= len(seq):
         raise InputError(seq.root, f"tracklet {t.id}: frame_range {a}..{b} beyond the sequence's {len(seq)} frames")
+    truth = tracks[t.id].between(a, b)
     frames = tuple(range(a, b + 1))
-    boxes = tuple(tracks[t.id].box_at(k) for k in frames)
-    if any(box is None for box in boxes):
-        missing = [k for k, box in zip(frames, boxes, strict=True) if box is None]
+    if len(truth) != len(frames):
+        missing = sorted(set(frames) - set(truth.frames.tolist()))
         raise InputError(seq.root, f"tracklet {t.id}: no box at frame {missing[0]} of {a}..{b}")
+    boxes = tuple(truth.box(i) for i in range(len(truth)))
     n = min(config.selection.difficulty_frames, len(frames))
     mean10 = mean_points_in_boxes(source, frames[:n], boxes[:n])
     level = t.difficulty or difficulty(mean10, DIFFICULTY_THRESHOLDS)
     pgt = pseudo_gt_shape(source, frames, boxes, eval_ground_params(), config.shape_voxel_m, config.pgt_ground_margin_m)
-    return TrackSpec(t.id, tracks[t.id].label, frames, boxes, mean10, level, pgt)
+    return TrackSpec(truth, mean10, level, pgt)
 
 
 def evaluate_tracklets(tracklets: list[Tracklet], resolve: SequenceResolver, presets: Iterable[str],

@@ -49,14 +49,14 @@ SINGLE_ROWS = ("single box", "single box + offline")
 
 @dataclass(frozen=True)
 class KeyframeBenchTrack:
-    """One evaluated track: where it comes from, its frames and ground-truth boxes."""
+    """One evaluated track: where it comes from and ``truth``, its annotated rows over its span (every frame; an
+    :class:`~sot_apps.io.object_track.ObjectTrack`)."""
 
     source: str
     key: str
     profile: str | None
     sequence: Any
-    frames: tuple[int, ...]
-    boxes: tuple[Any, ...]
+    truth: Any
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -104,16 +104,16 @@ def _tracks(source: str, first: int | None, track_ids: list[str] | None) -> list
             tracks = seq.tracks()
             if t.id not in tracks:
                 raise InputError(seq.root, f"tracklet {t.id}: no annotated object with this id")
-            frames = tuple(range(t.frame_range[0], t.frame_range[1] + 1))
-            boxes = tuple(tracks[t.id].box_at(k) for k in frames)
-            if any(b is None for b in boxes):
-                raise InputError(seq.root, f"tracklet {t.id}: a frame of {frames[0]}..{frames[-1]} has no box")
-            out.append(KeyframeBenchTrack(source, t.key, t.profile, seq, frames, boxes))
+            first, last = t.frame_range
+            truth = tracks[t.id].between(first, last)
+            if len(truth) != last - first + 1:
+                raise InputError(seq.root, f"tracklet {t.id}: a frame of {first}..{last} has no box")
+            out.append(KeyframeBenchTrack(source, t.key, t.profile, seq, truth))
         return out
     seq = open_sequence(path)
     ids = track_ids or select_moving_vehicle_tracks(seq, source=CachedSource(seq))
     for spec in prepare_tracks(seq, ids, CachedSource(seq), with_shape=False):
-        out.append(KeyframeBenchTrack(source, spec.track_id, None, seq, spec.frames, spec.boxes))
+        out.append(KeyframeBenchTrack(source, spec.track_id, None, seq, spec.truth))
     return out
 
 
@@ -121,8 +121,9 @@ def _ious(result_boxes: dict[int, Any], track: KeyframeBenchTrack) -> np.ndarray
 
     from tracker import score_tracklet
 
-    predicted = [result_boxes[k] for k in track.frames]
-    return score_tracklet(track.key, predicted, list(track.boxes)).ious
+    truth = track.truth.boxes_by_frame()
+    predicted = [result_boxes[k] for k in truth]
+    return score_tracklet(track.key, predicted, list(truth.values())).ious
 
 
 def evaluate_track(track: KeyframeBenchTrack, source, every: list[int], config, ablations: bool = False
@@ -142,9 +143,9 @@ def evaluate_track(track: KeyframeBenchTrack, source, every: list[int], config, 
     )
     from tracker import track as track_online
 
-    frames = list(track.frames)
-    boxes = dict(zip(frames, track.boxes, strict=True))
-    online = track_online(source, track.boxes[0], frames[0], frames[-1], config)
+    boxes = track.truth.boxes_by_frame()
+    frames = list(boxes)
+    online = track_online(source, boxes[frames[0]], frames[0], frames[-1], config)
     refined = refine_offline(source, online, config)
     record: dict[str, Any] = {"single": {"single box": _ious({e.frame: e.box for e in online.estimates}, track),
                                          "single box + offline": _ious({e.frame: e.box for e in refined.estimates},
@@ -278,7 +279,7 @@ def run(args: argparse.Namespace) -> int:
         summary = summarise(group, every)
         tables[name] = {row: {str(n): list(v) for n, v in cells.items()} for row, cells in summary.items()}
         n_tracks = len({id(t) for t, _, _ in group})
-        n_frames = sum(len(t.frames) - 1 for t in {id(t): t for t, _, _ in group}.values())
+        n_frames = sum(len(t.truth) - 1 for t in {id(t): t for t, _, _ in group}.values())
         out += ["", format_summary(name, summary, every, n_tracks, n_frames, len(seeds))]
     profiles = format_profiles(records, every)
     if profiles:
@@ -289,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
             "preset": args.preset, "seeds": seeds, "every": every, "tables": tables,
             "table_columns": ["acc", "acc_std_over_seeds", "acc_between_keyframes"],
             "tracks": [{"source": t.source, "key": t.key, "profile": t.profile, "seed": seed,
-                        "frames": [t.frames[0], t.frames[-1]],
+                        "frames": [int(t.truth.frames[0]), int(t.truth.frames[-1])],
                         "single": {k: v.tolist() for k, v in r["single"].items()},
                         "every": {str(n): {"keys": e["keys"], "ious": {k: v.tolist() for k, v in e["ious"].items()}}
                                   for n, e in r["every"].items()}} for t, seed, r in records]}))

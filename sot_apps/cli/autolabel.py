@@ -138,7 +138,7 @@ def _run_keyframes(args: argparse.Namespace, sequence, progress) -> int:
         result = track_keyframes(source, keyframes, config=config, params=params)
         frames = sorted(keyframes)
         given = ObjectTrack(track_id, "", frames, [keyframes[k].to_array() for k in frames], scores=[1.0] * len(frames))
-        labels.append(AutoLabel(track_id, {e.frame: e.box for e in result.estimates}, 1.0, result.shape, given))
+        labels.append(AutoLabel.of(track_id, {e.frame: e.box for e in result.estimates}, 1.0, result.shape, given))
     for line in write_autolabels(args.out, sequence, labels, with_sequence=not args.no_sequence):
         print(line)
     print(f"{len(labels)} labelled tracks ({sum(len(lbl.boxes) for lbl in labels)} boxes) from "

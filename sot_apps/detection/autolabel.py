@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -80,13 +81,31 @@ def _scores_by_frame(detection_track: ObjectTrack) -> dict[int, float]:
 
 @dataclass(frozen=True)
 class AutoLabel:
-    """One auto-labelled object: a box per frame of its span, its score, and the shape of the refinement."""
+    """One auto-labelled object: ``track`` its box per frame of its span (an ObjectTrack with the refinement's
+    shape as ``shape_points``; ``boxes`` is a view of it), its score, and the detections associated over time."""
 
-    track_id: str
-    boxes: dict[int, Box]
+    track: ObjectTrack
     score: float
-    shape: np.ndarray
     detections: ObjectTrack    # the detections associated over time (boxes and their scores)
+
+    @classmethod
+    def of(cls, track_id: str, boxes: dict[int, Box], score: float, shape: np.ndarray,
+           detections: ObjectTrack) -> "AutoLabel":
+        """The label of ``boxes`` by frame with its ``score`` and ``shape`` (object frame)."""
+        return cls(ObjectTrack.from_boxes(track_id, "", boxes, shape_points=shape), score, detections)
+
+    @property
+    def track_id(self) -> str:
+        return self.track.object_id
+
+    @property
+    def shape(self) -> np.ndarray:
+        return self.track.shape_points
+
+    @cached_property
+    def boxes(self) -> dict[int, Box]:
+        """Box by frame, in frame order."""
+        return self.track.boxes_by_frame()
 
 
 def associate_tracks(detections: dict[int, FrameDetections], n_frames: int,
@@ -463,7 +482,7 @@ def label_from_result(source: FrameSource, result: TrackResult, detection_track:
     boxes = anchor_to_detections({e.frame: e.box for e in result.estimates}, detection_track)
     if fit is not None:
         boxes = fit_to_points(source, boxes, fit, detection_track)
-    return AutoLabel(detection_track.object_id, boxes, detection_track.mean_score, result.shape, detection_track)
+    return AutoLabel.of(detection_track.object_id, boxes, detection_track.mean_score, result.shape, detection_track)
 
 
 def label_config_tracker(config: TrackerConfig, label_config: LabelConfig) -> TrackerConfig:
@@ -553,8 +572,8 @@ def write_autolabels(out_dir, sequence, labels: list[AutoLabel], category: str =
     from ..io.sequence import BoxAnnotation
 
     out_dir = Path(out_dir)
-    tracks = [ObjectTrack.from_boxes(label.track_id, category, label.boxes,
-                                     scores=dict.fromkeys(label.boxes, label.score)) for label in labels]
+    tracks = [dataclasses.replace(label.track, label=category, scores=np.full(len(label.track), label.score),
+                                  shape_points=None) for label in labels]
     lines = []
     if kitti_camera(sequence) is not None:
         lines += export_labels(sequence, "kitti", out_dir / "kitti", tracks)

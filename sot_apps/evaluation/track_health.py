@@ -23,7 +23,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..io.tracks import TrackFile, frame_is_valid
+from ..io.object_track import ObjectTrack
+from ..io.tracks import frame_is_valid
 
 __all__ = ["TrackHealth", "track_health", "LOST_BELOW", "WEAK_BELOW"]
 
@@ -53,11 +54,11 @@ class TrackHealth:
         return text + (f", on the motion prior from frame {self.lost_from}" if self.lost_from is not None else "")
 
 
-def track_health(track: TrackFile) -> TrackHealth:
-    """The tracker's own evidence on ``track`` and the rule's verdict (module doc)."""
-    records = sorted(track.frames, key=lambda r: r.frame)[1:]
-    valid = np.array([frame_is_valid(r.flags) for r in records], dtype=bool)
-    n = len(records)
+def track_health(track: ObjectTrack) -> TrackHealth:
+    """The tracker's own evidence on ``track`` (a track file's rows: their ``flags`` and ``scores``, the tracker's
+    quality) and the rule's verdict (module doc)."""
+    valid = np.array([frame_is_valid(f) for f in track.flags[1:]], dtype=bool)
+    n = len(valid)
     measured = int(valid.sum())
     share = measured / n if n else 1.0
     longest = run = 0
@@ -67,7 +68,7 @@ def track_health(track: TrackFile) -> TrackHealth:
     lost_from = None
     if n and not valid[-1]:
         last_measured = np.flatnonzero(valid)
-        lost_from = records[int(last_measured[-1]) + 1 if len(last_measured) else 0].frame
+        lost_from = int(track.frames[1 + (int(last_measured[-1]) + 1 if len(last_measured) else 0)])
     status = "lost" if share < LOST_BELOW else ("weak" if share < WEAK_BELOW else "ok")
-    quality = float(np.mean([r.quality for r in records])) if n else 1.0
+    quality = float(np.mean(track.scores[1:])) if n and track.scores is not None else 1.0
     return TrackHealth(track.object_id, n, measured, round(share, 3), round(quality, 3), longest, lost_from, status)

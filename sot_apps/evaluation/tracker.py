@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Iterable, Sequence
 
 import numpy as np
@@ -48,6 +49,7 @@ from tracker import (
 from ..errors import InputError
 from ..io.cached_source import CachedSource
 from ..io.jsonable import json_safe
+from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence as LidarSequence
 from ..objects.selection import DEFAULT_SELECTION, Selection, annotated_span
 from ..text_table import format_table
@@ -92,15 +94,29 @@ class EvalConfig:
 
 @dataclass(frozen=True)
 class TrackSpec:
-    """One evaluated ground-truth track: its span, boxes, difficulty and pseudo-ground-truth shape."""
+    """One evaluated ground-truth track: ``truth``, the annotated rows of its span (every frame of it, an
+    :class:`ObjectTrack`; ``frames`` and ``boxes`` are views of it), its difficulty and pseudo-ground-truth shape."""
 
-    track_id: str
-    label: str
-    frames: tuple[int, ...]
-    boxes: tuple[Box, ...]
+    truth: ObjectTrack = field(repr=False)
     mean_points_first10: float
     difficulty: str
     pgt_shape: np.ndarray = field(repr=False)
+
+    @property
+    def track_id(self) -> str:
+        return self.truth.object_id
+
+    @property
+    def label(self) -> str:
+        return self.truth.label
+
+    @cached_property
+    def frames(self) -> tuple[int, ...]:
+        return tuple(int(k) for k in self.truth.frames)
+
+    @cached_property
+    def boxes(self) -> tuple[Box, ...]:
+        return tuple(self.truth.box(i) for i in range(len(self.truth)))
 
     def summary(self) -> dict[str, Any]:
         return {"track_id": self.track_id, "label": self.label, "start_frame": self.frames[0],
@@ -143,14 +159,13 @@ def prepare_tracks(sequence: LidarSequence, track_ids: Iterable[str], source: Ca
         if end <= start:
             raise InputError(sequence.root, f"track {tid} has no frame to evaluate after its start frame {start}"
                                             + (f" up to --end-frame {end_frame}" if end_frame is not None else ""))
-        frames = tuple(range(start, end + 1))
-        boxes = tuple(trk.box_at(k) for k in frames)
+        truth = trk.between(start, end)   # every frame: the span is a contiguous run of annotated frames
+        frames, boxes = tuple(range(start, end + 1)), tuple(truth.box(i) for i in range(len(truth)))
         n = min(config.selection.difficulty_frames, len(frames))
         mean_pts = mean_points_in_boxes(source, frames[:n], boxes[:n])
         pgt = (pseudo_gt_shape(source, frames, boxes, ground, config.shape_voxel_m, config.pgt_ground_margin_m)
                if with_shape else np.zeros((0, 3)))
-        specs.append(TrackSpec(tid, trk.label, frames, boxes, mean_pts,
-                               difficulty(mean_pts, config.difficulty_thresholds), pgt))
+        specs.append(TrackSpec(truth, mean_pts, difficulty(mean_pts, config.difficulty_thresholds), pgt))
     return specs
 
 

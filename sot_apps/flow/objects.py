@@ -126,19 +126,20 @@ def objects_from_tracks(track_dirs: Iterable[str | Path], mesh_method: str = "hu
     motion is not compensated, so its state at frame k describes the object when the beam passed it,
     while track.json records the frame timestamp. ``"frame"`` keeps track.json's ``timestamp_ns``.
     """
-    from ..io.tracks import check_track_belongs, object_track, read_track
+    from ..io.tracks import check_track_belongs, read_track
 
     if box_time not in ("points", "frame"):
         raise ValueError(f"box_time must be 'points' or 'frame', not {box_time!r}")
     wanted = None if frames is None else set(frames)
     out = []
     for directory in track_dirs:
-        track, shape = read_track(directory)
-        if not track.frames:
+        header, rows = read_track(directory)
+        if not len(rows):
             raise InputError(directory, "track has no frames")
         if seq is not None:
-            check_track_belongs(track, seq, Path(directory) / "track.json")
-        rows = object_track(track, shape, f"track ({track.mode}):{Path(directory)}")
+            check_track_belongs(header, rows, seq, Path(directory) / "track.json")
+        rows = replace(rows, source=f"track ({header.mode}):{Path(directory)}")
+        shape = rows.shape_points
         times = rows.timestamps_ns.copy()
         if box_time == "points" and seq is not None:
             for i, frame in enumerate(int(k) for k in rows.frames):

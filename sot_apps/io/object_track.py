@@ -10,7 +10,8 @@ associated over time. Its columns, one row per frame:
   boxes that are not level in the world; a row of an invalid frame may hold NaN;
 - optional: ``timestamps_ns`` (N,) int64 strictly increasing, ``valid`` (N,) bool (default: every frame whose box
   is finite; ``flags[i]`` says why a frame is not), ``scores`` (N,) float (a detector's or label's confidence),
-  ``num_points`` (N,) int64 (the source's own count of points in the box, -1 where unknown);
+  ``num_points`` (N,) int64 (the source's own count of points in the box, -1 where unknown), ``time_ms`` (N,)
+  float (the tracker's computing time for the frame, ms; NaN where not recorded);
 - optional kinematics (the motion smoother's output, :func:`sot_apps.objects.smoother.smooth_track`): ``velocity``
   (N, 2) WORLD ``[vx, vy]`` m/s, ``speed`` (N,) m/s, ``acceleration`` (N,) m/s^2 along the heading, ``yaw_rate``
   (N,) rad/s, and their 1-sigma ``position_std`` (m), ``heading_std`` (rad), ``speed_std`` (m/s), ``yaw_rate_std``
@@ -18,7 +19,8 @@ associated over time. Its columns, one row per frame:
 
 Per object: ``object_id``, ``label``, ``size`` (length, width, height; default the per-dimension median of the
 boxes), ``source`` (where it came from), ``shape_points`` (M, 3) object frame and ``config`` (how it was made).
-:func:`sot_apps.io.tracks.object_track` turns a track file into one (its per-frame quality as ``scores``).
+:func:`sot_apps.io.tracks.read_track` reads a track file as one (the tracker's per-frame quality as ``scores``) and
+:func:`sot_apps.io.tracks.write_track` writes one.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ __all__ = ["ObjectTrack", "KINEMATICS"]
 KINEMATICS: tuple[str, ...] = ("velocity", "speed", "acceleration", "yaw_rate", "position_std", "heading_std",
                                "speed_std", "yaw_rate_std")
 # Every per-frame column besides ``frames``/``boxes``/``flags`` (``select`` cuts them all).
-_COLUMNS: tuple[str, ...] = ("timestamps_ns", "valid", "scores", "num_points") + KINEMATICS
+_COLUMNS: tuple[str, ...] = ("timestamps_ns", "valid", "scores", "num_points", "time_ms") + KINEMATICS
 
 
 def _column(values: Any, n: int, dtype: Any, name: str, object_id: str, width: int = 0) -> np.ndarray | None:
@@ -61,6 +63,7 @@ class ObjectTrack:
     flags: tuple[tuple[str, ...], ...] = ()
     scores: np.ndarray | None = None
     num_points: np.ndarray | None = None
+    time_ms: np.ndarray | None = None
     velocity: np.ndarray | None = None
     speed: np.ndarray | None = None
     acceleration: np.ndarray | None = None
@@ -95,6 +98,7 @@ class ObjectTrack:
         for name, value in (("frames", frames), ("boxes", boxes), ("timestamps_ns", stamps), ("valid", valid),
                             ("flags", flags), ("scores", _column(self.scores, n, np.float64, "scores", oid)),
                             ("num_points", _column(self.num_points, n, np.int64, "num_points", oid)),
+                            ("time_ms", _column(self.time_ms, n, np.float64, "time_ms", oid)),
                             ("size", tuple(float(v) for v in size))):
             object.__setattr__(self, name, value)
         for name in KINEMATICS:
@@ -166,6 +170,10 @@ class ObjectTrack:
         columns = {name: None if getattr(self, name) is None else getattr(self, name)[pick] for name in _COLUMNS}
         return replace(self, frames=self.frames[pick], boxes=self.boxes[pick], flags=tuple(self.flags[i] for i in pick),
                        **columns)
+
+    def between(self, first: int, last: int) -> "ObjectTrack":
+        """The rows at frames ``first``..``last`` (inclusive), every column with them."""
+        return self.select((self.frames >= first) & (self.frames <= last))
 
     def restamped(self, times_ns: Any) -> "ObjectTrack":
         """The track with ``times_ns`` (one per row, e.g. the capture time of each box's points) as its

@@ -1,18 +1,21 @@
 """Track files: ``DIR/track.json`` (data_schema/track.schema.json) + ``DIR/shape.ply`` (object frame).
 
-``write_track`` validates, writes ``shape.ply`` and then ``track.json`` (both atomically), so a
-``track.json`` never names a missing or half-written shape. ``read_track`` validates again.
+In memory a track file is a :class:`TrackHeader` (sequence, span, initial box, tracker config, shape file) and an
+:class:`~sot_apps.io.object_track.ObjectTrack` (its frames' rows and shape points). ``write_track`` validates,
+writes ``shape.ply`` and then ``track.json`` (both atomically), so a ``track.json`` never names a missing or
+half-written shape. ``read_track`` validates again.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterable
+from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
 import numpy as np
 
-from tracker.geometry import Box, State
+from tracker.geometry import Box
 
 from ..errors import InputError
 from ..schemas import load_json_validated, validate
@@ -24,8 +27,8 @@ from .ply import read_ply_points, write_ply_points
 if TYPE_CHECKING:
     from .sequence import Sequence
 
-__all__ = ["DEFAULT_INVALID_FLAGS", "TRACKER_FLAGS", "frame_is_valid", "Size", "FrameRecord", "TrackFile", "read_track",
-           "write_track", "check_track_belongs", "object_track", "SCHEMA_VERSION"]
+__all__ = ["DEFAULT_INVALID_FLAGS", "TRACKER_FLAGS", "frame_is_valid", "TrackHeader", "track_json", "read_track",
+           "write_track", "check_track_belongs", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 1
 
@@ -45,60 +48,16 @@ def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_
 
 
 @dataclass(frozen=True)
-class Size:
-    length: float
-    width: float
-    height: float
-
-    def to_array(self) -> np.ndarray:
-        return np.array([self.length, self.width, self.height], dtype=np.float64)
-
-
-@dataclass
-class FrameRecord:
-    """The tracker's result at one frame: WORLD state, support and quality."""
-
-    frame: int
-    timestamp_ns: int
-    state: State
-    num_points: int
-    quality: float
-    flags: list[str] = field(default_factory=list)
-    time_ms: float | None = None
-
-    def to_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "frame": int(self.frame), "timestamp_ns": int(self.timestamp_ns),
-            "state": {"x": float(self.state.x), "y": float(self.state.y), "z": float(self.state.z),
-                      "heading": float(self.state.heading)},
-            "num_points": int(self.num_points), "quality": float(self.quality), "flags": [str(f) for f in self.flags],
-        }
-        if self.time_ms is not None:
-            out["time_ms"] = float(self.time_ms)
-        return out
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> "FrameRecord":
-        s = data["state"]
-        return cls(frame=int(data["frame"]), timestamp_ns=int(data["timestamp_ns"]),
-                   state=State(float(s["x"]), float(s["y"]), float(s["z"]), float(s["heading"])),
-                   num_points=int(data["num_points"]), quality=float(data["quality"]), flags=list(data["flags"]),
-                   time_ms=None if data.get("time_ms") is None else float(data["time_ms"]))
-
-
-@dataclass
-class TrackFile:
-    """One tracked object (see docs/data-formats.md, "track")."""
+class TrackHeader:
+    """What ``track.json`` says about a track besides its rows (those are the :class:`ObjectTrack`): the sequence
+    it was made from, the span (``start_frame`` = the initial box's frame), the initial WORLD box, the tracker's
+    configuration (``config``, with ``preset`` and ``mode``) and the shape file's name next to ``track.json``."""
 
     sequence: str
-    object_id: str
-    size: Size
     start_frame: int
     end_frame: int
     init_box: Box
-    config: dict[str, Any]
-    frames: list[FrameRecord]
-    label: str | None = None
+    config: Mapping[str, Any]
     shape: str = "shape.ply"
 
     @property
@@ -107,65 +66,66 @@ class TrackFile:
         mode = str(self.config.get("mode", "online"))
         return f"lag {self.config.get('lag')}" if mode == "lag" else mode
 
-    def box_at_record(self, record: FrameRecord) -> Box:
-        """The WORLD box of a frame record (state + the track's size)."""
-        return Box(record.state.x, record.state.y, record.state.z, record.state.heading,
-                   self.size.length, self.size.width, self.size.height)
 
-    def record(self, frame: int) -> FrameRecord | None:
-        for rec in self.frames:
-            if rec.frame == frame:
-                return rec
-        return None
-
-    def boxes(self) -> dict[int, Box]:
-        """WORLD box per frame index."""
-        return {rec.frame: self.box_at_record(rec) for rec in self.frames}
-
-    def to_json(self) -> dict[str, Any]:
-        b = self.init_box
-        out: dict[str, Any] = {
-            "schema_version": SCHEMA_VERSION, "sequence": self.sequence, "object_id": self.object_id,
-        }
-        if self.label is not None:
-            out["label"] = self.label
-        out.update({
-            "size": {"length": float(self.size.length), "width": float(self.size.width), "height": float(self.size.height)},
-            "start_frame": int(self.start_frame), "end_frame": int(self.end_frame),
-            "init_box": {"x": b.x, "y": b.y, "z": b.z, "heading": b.heading, "length": b.length, "width": b.width,
-                         "height": b.height},
-            "config": json_safe(self.config), "shape": self.shape,
-            "frames": [r.to_json() for r in self.frames],
-        })
-        return out
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> "TrackFile":
-        s, b = data["size"], data["init_box"]
-        return cls(sequence=data["sequence"], object_id=data["object_id"],
-                   size=Size(float(s["length"]), float(s["width"]), float(s["height"])),
-                   start_frame=int(data["start_frame"]), end_frame=int(data["end_frame"]),
-                   init_box=Box(*(float(b[k]) for k in ("x", "y", "z", "heading", "length", "width", "height"))),
-                   config=dict(data["config"]), frames=[FrameRecord.from_json(f) for f in data["frames"]],
-                   label=data.get("label"), shape=data.get("shape", "shape.ply"))
+def _header_from_json(data: dict[str, Any]) -> TrackHeader:
+    b = data["init_box"]
+    return TrackHeader(sequence=data["sequence"], start_frame=int(data["start_frame"]),
+                       end_frame=int(data["end_frame"]),
+                       init_box=Box(*(float(b[k]) for k in ("x", "y", "z", "heading", "length", "width", "height"))),
+                       config=dict(data["config"]), shape=data.get("shape", "shape.ply"))
 
 
-def object_track(track: TrackFile, shape_points: np.ndarray | None = None, source: str = "",
-                 invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> ObjectTrack:
-    """A track file as an :class:`ObjectTrack` (the one conversion): its records in frame order, the track's size,
-    ``valid`` where :func:`frame_is_valid` (``invalid_flags``), the tracker's quality as ``scores``, its
-    ``num_points``, and the tracker's config as ``config["tracker"]``. ValueError on frames or timestamps that do
-    not increase."""
-    records = sorted(track.frames, key=lambda r: r.frame)
-    flags = [list(r.flags) for r in records]
+def _track_from_json(data: dict[str, Any], header: TrackHeader, shape_points: np.ndarray, source: str,
+                     invalid_flags: Iterable[str]) -> ObjectTrack:
+    """The rows of a track.json document in frame order (ValueError on frames or timestamps that do not increase)."""
+    rows = sorted(data["frames"], key=lambda r: r["frame"])
+    times = [r.get("time_ms") for r in rows]
+    flags = [list(r["flags"]) for r in rows]
     invalid_flags = set(invalid_flags)
+    s = data["size"]
     return ObjectTrack.from_states(
-        track.object_id, track.label or "", (track.size.length, track.size.width, track.size.height),
-        [r.frame for r in records], [r.timestamp_ns for r in records],
-        np.array([r.state.to_array() for r in records], dtype=np.float64).reshape(-1, 4),
-        [frame_is_valid(f, invalid_flags) for f in flags], flags, scores=[r.quality for r in records],
-        num_points=[r.num_points for r in records], source=source, shape_points=shape_points,
-        config={"tracker": track.config})
+        data["object_id"], data.get("label", ""), (float(s["length"]), float(s["width"]), float(s["height"])),
+        [r["frame"] for r in rows], [r["timestamp_ns"] for r in rows],
+        np.array([[r["state"][k] for k in ("x", "y", "z", "heading")] for r in rows], dtype=np.float64).reshape(-1, 4),
+        [frame_is_valid(f, invalid_flags) for f in flags], flags, scores=[r["quality"] for r in rows],
+        num_points=[r["num_points"] for r in rows],
+        time_ms=None if all(t is None for t in times) else [np.nan if t is None else t for t in times],
+        source=source, shape_points=shape_points, config={"tracker": header.config})
+
+
+def track_json(header: TrackHeader, track: ObjectTrack) -> dict[str, Any]:
+    """The ``track.json`` document of ``header`` and ``track`` (level boxes of one size, ``track.size``; needs
+    ``timestamps_ns``, ``scores`` (the quality) and ``num_points``; ``time_ms`` where finite; a ``label`` when not
+    empty). The frames' validity is in their ``flags``."""
+    oid = track.object_id
+    if track.timestamps_ns is None or track.scores is None or track.num_points is None:
+        raise ValueError(f"{oid}: a track file needs timestamps_ns, scores (the quality) and num_points")
+    if track.tilts is not None or not np.array_equal(track.boxes[:, 4:7], np.broadcast_to(track.size, (len(track), 3))):
+        raise ValueError(f"{oid}: a track file holds level boxes of one size (the track's size)")
+    b = header.init_box
+    out: dict[str, Any] = {"schema_version": SCHEMA_VERSION, "sequence": header.sequence, "object_id": oid}
+    if track.label:
+        out["label"] = track.label
+    times = track.time_ms.tolist() if track.time_ms is not None else [math.nan] * len(track)
+    frames = []
+    for frame, stamp, (x, y, z, heading), points, quality, flags, time_ms in zip(
+            track.frames.tolist(), track.timestamps_ns.tolist(), track.states.tolist(), track.num_points.tolist(),
+            track.scores.tolist(), track.flags, times, strict=True):
+        row: dict[str, Any] = {"frame": frame, "timestamp_ns": stamp,
+                               "state": {"x": x, "y": y, "z": z, "heading": heading},
+                               "num_points": points, "quality": quality, "flags": list(flags)}
+        if not math.isnan(time_ms):
+            row["time_ms"] = time_ms
+        frames.append(row)
+    length, width, height = track.size
+    out.update({
+        "size": {"length": float(length), "width": float(width), "height": float(height)},
+        "start_frame": int(header.start_frame), "end_frame": int(header.end_frame),
+        "init_box": {"x": b.x, "y": b.y, "z": b.z, "heading": b.heading, "length": b.length, "width": b.width,
+                     "height": b.height},
+        "config": json_safe(dict(header.config)), "shape": header.shape, "frames": frames,
+    })
+    return out
 
 
 def _check_frames(doc: dict[str, Any], path: Path) -> None:
@@ -180,31 +140,43 @@ def _json_path(path: str | Path) -> Path:
     return path if path.suffix == ".json" else path / "track.json"
 
 
-def write_track(directory: str | Path, track: TrackFile, shape_points: np.ndarray) -> Path:
-    """Write ``directory/shape.ply`` then ``directory/track.json`` (validated); returns the json path."""
+def write_track(directory: str | Path, header: TrackHeader, track: ObjectTrack) -> Path:
+    """Write ``directory/<header.shape>`` (``track.shape_points``, object frame) then ``directory/track.json``
+    (:func:`track_json`, validated); returns the json path."""
     directory = Path(directory)
     json_path = directory / "track.json"
-    doc = track.to_json()
+    doc = track_json(header, track)
     validate("track", doc, json_path)
     _check_frames(doc, json_path)
-    shape_points = np.asarray(shape_points, dtype=np.float64).reshape(-1, 3)
+    if track.shape_points is None:
+        raise ValueError(f"{track.object_id}: a track file needs shape_points")
+    shape_points = np.asarray(track.shape_points, dtype=np.float64).reshape(-1, 3)
     if not np.isfinite(shape_points).all():
-        raise InputError(directory / track.shape, "shape points contain non-finite coordinates")
-    write_ply_points(directory / track.shape, shape_points)
+        raise InputError(directory / header.shape, "shape points contain non-finite coordinates")
+    write_ply_points(directory / header.shape, shape_points)
     write_json(json_path, doc)
     return json_path
 
 
-def read_track(path: str | Path) -> tuple[TrackFile, np.ndarray]:
-    """Read a track directory (or its track.json): (TrackFile, shape points (N,3) float64 object frame)."""
+def read_track(path: str | Path, invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS
+               ) -> tuple[TrackHeader, ObjectTrack]:
+    """Read a track directory (or its track.json): its header and its rows as an :class:`ObjectTrack` in frame order
+    (``source`` the json path; the tracker's quality as ``scores``; ``valid`` where :func:`frame_is_valid` with
+    ``invalid_flags``; the per-frame ``time_ms`` where the file has it; ``shape_points`` (N, 3) float64 object frame;
+    ``config["tracker"]`` the header's config). InputError naming the file on frames or timestamps that do not
+    increase."""
     json_path = _json_path(path)
     doc = load_json_validated(json_path, "track")
     _check_frames(doc, json_path)
-    track = TrackFile.from_json(doc)
-    return track, read_ply_points(json_path.parent / track.shape)
+    header = _header_from_json(doc)
+    shape = read_ply_points(json_path.parent / header.shape)
+    try:
+        return header, _track_from_json(doc, header, shape, str(json_path), invalid_flags)
+    except ValueError as exc:
+        raise InputError(json_path, str(exc)) from exc
 
 
-def check_track_belongs(track: TrackFile, sequence: "Sequence", path: str | Path) -> None:
+def check_track_belongs(header: TrackHeader, track: ObjectTrack, sequence: "Sequence", path: str | Path) -> None:
     """Refuse (InputError naming ``path``) a track that was not made from ``sequence``.
 
     The one belongs-to-this-sequence check of every command that takes track directories with a
@@ -212,14 +184,15 @@ def check_track_belongs(track: TrackFile, sequence: "Sequence", path: str | Path
     sequence's id or directory name, every frame index must exist and every frame's ``timestamp_ns``
     must equal the sequence's (a renamed or re-converted sequence with other timestamps is refused too).
     """
-    if track.sequence not in (sequence.id, Path(sequence.root).name):
-        raise InputError(path, f"track of sequence {track.sequence!r}, not of {sequence.id!r}")
+    if header.sequence not in (sequence.id, Path(sequence.root).name):
+        raise InputError(path, f"track of sequence {header.sequence!r}, not of {sequence.id!r}")
     n = len(sequence.frames)
-    bad = [r.frame for r in track.frames if not 0 <= r.frame < n]
+    bad = [int(k) for k in track.frames if not 0 <= k < n]
     if bad:
         raise InputError(path, f"frame {bad[0]} is outside the sequence {sequence.id!r} (frames 0..{n - 1})")
-    for r in track.frames:
-        expected = int(sequence.frames[r.frame].timestamp_ns)
-        if r.timestamp_ns != expected:
-            raise InputError(path, f"frame {r.frame}: timestamp_ns {r.timestamp_ns} differs from the sequence "
+    stamps = track.timestamps_ns if track.timestamps_ns is not None else np.zeros(len(track), dtype=np.int64)
+    for frame, stamp in zip(track.frames.tolist(), stamps.tolist(), strict=True):
+        expected = int(sequence.frames[frame].timestamp_ns)
+        if stamp != expected:
+            raise InputError(path, f"frame {frame}: timestamp_ns {stamp} differs from the sequence "
                                    f"{sequence.id!r}'s {expected}: the track was made from another sequence")

@@ -30,19 +30,16 @@ __all__ = ["DEFAULT_INVALID_FLAGS", "frame_is_valid", "track_from_dir", "tracks_
 def track_from_dir(directory: str | Path, sequence: Sequence | None = None,
                    invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> ObjectTrack:
     """Read ``directory/track.json`` + ``shape.ply`` into an ObjectTrack."""
-    from ..io.tracks import check_track_belongs, object_track, read_track
+    from ..io.tracks import check_track_belongs, read_track
 
     directory = Path(directory)
-    track, shape = read_track(directory)
+    header, track = read_track(directory, invalid_flags)
     json_path = directory if directory.suffix == ".json" else directory / "track.json"
     if sequence is not None:
-        check_track_belongs(track, sequence, json_path)
-    if not track.frames:
+        check_track_belongs(header, track, sequence, json_path)
+    if not len(track):
         raise InputError(json_path, "frames: the track has no frames")
-    try:
-        return object_track(track, shape, str(json_path), invalid_flags)
-    except ValueError as exc:
-        raise InputError(json_path, str(exc)) from exc
+    return track
 
 
 def tracks_from_dirs(directories: Seq[str | Path], sequence: Sequence | None = None,

@@ -179,15 +179,15 @@ def entry_from_track_dir(bank_root: Path, track_dir: str | Path, mirror: bool = 
                          params: SurfelParams = SurfelParams()) -> BankEntry:
     from ..io.tracks import read_track
 
-    track, shape = read_track(track_dir)
+    header, track = read_track(track_dir)
+    shape = track.shape_points
     if len(shape) < 3:
         raise InputError(track_dir, f"shape has only {len(shape)} points; cannot build a bank entry")
-    quality = float(np.mean([f.quality for f in track.frames])) if track.frames else 0.0
-    source = {"kind": "track", "sequence": track.sequence, "track": track.object_id, "path": str(track_dir),
-              "tracker_mode": track.mode}
-    return entry_from_points(bank_root, f"{track.sequence}_{track.object_id}", shape, source, quality,
-                             track.label, mirror, params,
-                             size=(track.size.length, track.size.width, track.size.height))
+    quality = track.mean_score if len(track) else 0.0
+    source = {"kind": "track", "sequence": header.sequence, "track": track.object_id, "path": str(track_dir),
+              "tracker_mode": header.mode}
+    return entry_from_points(bank_root, f"{header.sequence}_{track.object_id}", shape, source, quality,
+                             track.label or None, mirror, params, size=track.size)
 
 
 def track_points_by_frame(seq: Sequence, track_ids: list[str], exclude_frames: Iterable[int] = (),

@@ -29,7 +29,7 @@ def run_track_health(out: Path, records) -> list[dict]:
             continue
         directory = track_dir(out, r.sequence, r.object)
         if (directory / "track.json").is_file():
-            rows.append({"sequence": r.sequence, **track_health(read_track(directory)[0]).to_json()})
+            rows.append({"sequence": r.sequence, **track_health(read_track(directory)[1]).to_json()})
     return rows
 
 

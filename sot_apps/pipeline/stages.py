@@ -112,7 +112,7 @@ def _write_timed(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -
 
 def write_object(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -> dict:
     """One tracked object's outputs and completion marker; returns its summary for the manifest."""
-    from ..tracking import track_result_to_trackfile, write_shape_growth, write_track_result
+    from ..tracking import track_result_to_track, write_shape_growth, write_track_result
 
     result = track.result
     directory = track_dir(out, plan.sequence, plan.object_id)
@@ -123,8 +123,8 @@ def write_object(out: str, plan: ObjectPlan, track: TrackOutcome, digest: str) -
     growth_path = write_shape_growth(directory, track.growth)
     qualities = [float(np.clip(e.quality, 0.0, 1.0)) for e in result.estimates]
     # the run's track-health verdict from the records just written (pipeline.health: no re-reading of the file)
-    health = track_health(track_result_to_trackfile(seq, result, plan.object_id, track.init_box, plan.label,
-                                                    with_time_ms=False)).to_json()
+    health = track_health(track_result_to_track(seq, result, plan.object_id, track.init_box, plan.label,
+                                                with_time_ms=False)[1]).to_json()
     DoneMarker(Path(out), f"track/{plan.key}").mark(digest, [directory / "track.json", directory / "shape.ply",
                                                              growth_path],
                                                     extra={"frames": len(qualities), "health": health})

@@ -64,7 +64,7 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
             sections.append(Section(f"{s.name}: tracking", [f"No object of {html.escape(s.name)} was tracked."]))
             continue
         dirs = [track_dir(out, s.name, o) for o in tracked]
-        tracks = [read_track(d) for d in dirs]
+        tracks = [read_track(d)[1] for d in dirs]
         scores = score_tracks(seq, tracks)
         sec = Section(f"{s.name}: tracks against ground truth")
         health = {h["object"]: h for h in result.track_health if h["sequence"] == s.name}
@@ -82,7 +82,7 @@ def build_report(result: PipelineResult, title: str = "sot-apps pipeline report"
                                               "boxes (green) and the ego, bird's-eye view"))
         sections.append(sec)
 
-        recorded = [(len(shape), t.object_id, d) for (t, shape), d in zip(tracks, dirs, strict=True)]
+        recorded = [(len(t.shape_points), t.object_id, d) for t, d in zip(tracks, dirs, strict=True)]
         growth = next((g for _, _, d in sorted(recorded, reverse=True) if (g := read_shape_growth(d)) is not None), None)
         if growth is not None:
             name = f"{s.name}_shape_growth.png"

@@ -11,8 +11,8 @@ import numpy as np
 
 from tracker import Box
 
+from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
-from ..io.tracks import TrackFile
 from ..tracking import ShapeGrowth
 from .draw import (
     BLACK,
@@ -51,24 +51,25 @@ class TrackScore:
     shape_points: int
 
 
-def score_tracks(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]]) -> list[TrackScore]:
+def score_tracks(seq: Sequence, tracks: list[ObjectTrack]) -> list[TrackScore]:
+    """Each track file's rows (``read_track``) against the sequence's annotations."""
     from tracker import centre_errors_batch, iou_3d_batch
 
     gt_tracks = seq.tracks() if seq.annotations is not None else {}
     out = []
-    for t, shape in tracks:
+    for t in tracks:
         gt = gt_tracks.get(t.object_id)
         pred, truth = [], []
-        for r in t.frames:
-            g = gt.box_at(r.frame) if gt is not None else None
+        for i, frame in enumerate(t.frames):
+            g = gt.box_at(int(frame)) if gt is not None else None
             if g is not None:
-                pred.append(t.box_at_record(r))
+                pred.append(t.box(i))
                 truth.append(g)
         iou = float(np.mean(iou_3d_batch(pred, truth))) if pred else None
         err = float(np.mean(centre_errors_batch(pred, truth))) if pred else None
-        out.append(TrackScore(t.object_id, t.label or "", len(t.frames), iou, err,
-                              float(np.mean([r.num_points for r in t.frames])),
-                              float(np.mean([r.quality for r in t.frames])), int(len(shape))))
+        shape = t.shape_points if t.shape_points is not None else np.zeros((0, 3))
+        out.append(TrackScore(t.object_id, t.label, len(t), iou, err, float(np.mean(t.num_points)),
+                              float(np.mean(t.scores)), int(len(shape))))
     return out
 
 
@@ -90,17 +91,16 @@ def _nice_step(span_m: float, target: int = 8) -> float:
     return 200.0
 
 
-def tracks_bev_figure(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]], path: Path,
+def tracks_bev_figure(seq: Sequence, tracks: list[ObjectTrack], path: Path,
                       box_every: int = 3, width: int = 900) -> BevFigure:
     """Bird's-eye view (world frame, metre axes): LiDAR points of the middle frame (grey), the ego's path and its
     position and heading at that frame, annotated boxes (green) and each tracked object in its own colour
     (boxes every ``box_every`` frames, centre path, a numbered label), with a legend naming every object."""
     gt_tracks = seq.tracks() if seq.annotations is not None else {}
-    frames = sorted({r.frame for t, _ in tracks for r in t.frames})
+    frames = sorted({int(k) for t in tracks for k in t.frames})
     mid = frames[len(frames) // 2]
     ego_xy = np.array([seq.frames[k].world_from_ego[:2, 3] for k in frames])
-    boxes = [t.box_at_record(r) for t, _ in tracks for r in t.frames]
-    extent = np.concatenate([np.array([[b.x, b.y] for b in boxes]), ego_xy])
+    extent = np.concatenate([np.concatenate([t.states[:, :2] for t in tracks]), ego_xy])
     canvas = BevCanvas.fit(extent.min(axis=0), extent.max(axis=0), width=width, margin=8.0, max_height=760)
     step = _nice_step(max(canvas.x1 - canvas.x0, canvas.y1 - canvas.y0))
     canvas.grid(step)
@@ -110,22 +110,21 @@ def tracks_bev_figure(seq: Sequence, tracks: list[tuple[TrackFile, np.ndarray]],
     canvas.points(above[:, :2], (205, 205, 205))
     canvas.polyline(ego_xy, EGO_COLOR, 1)
     anchors, colours, numbers, labels = [], [], [], []
-    for i, (t, _) in enumerate(tracks):
+    for i, t in enumerate(tracks):
         colour = colour_for(i)
         gt = gt_tracks.get(t.object_id)
         if gt is not None:
-            gt_frames = [k for k in gt.frames if t.start_frame <= k <= t.end_frame]
+            gt_frames = [k for k in gt.frames if t.frames[0] <= k <= t.frames[-1]]
             canvas.polyline(np.array([[gt.box_at(k).x, gt.box_at(k).y] for k in gt_frames]), GT_COLOR, 1)
             for k in gt_frames[::box_every]:
                 canvas.box(gt.box_at(k), GT_COLOR, 1)
-        records = t.frames
-        canvas.polyline(np.array([[r.state.x, r.state.y] for r in records]), colour, 2)
-        for r in records[::box_every]:
-            canvas.box(t.box_at_record(r), colour, 2 if r is records[0] else 1)
-        anchors.append(canvas.px([records[-1].state.x, records[-1].state.y])[0])
+        canvas.polyline(t.states[:, :2], colour, 2)
+        for row in range(0, len(t), box_every):
+            canvas.box(t.box(row), colour, 2 if row == 0 else 1)
+        anchors.append(canvas.px(t.states[-1, :2])[0])
         colours.append(colour)
         numbers.append(str(i + 1))
-        labels.append(f"{i + 1}: {t.object_id[:10]} {t.label or ''} ({len(records)} fr)".rstrip())
+        labels.append(f"{i + 1}: {t.object_id[:10]} {t.label} ({len(t)} fr)".rstrip())
     canvas.ego(seq.frames[mid].world_from_ego)
     scale = 0.5
     sizes = [(text_size(n, scale, 2)[0] + 8, text_size(n, scale, 2)[1] + 8) for n in numbers]

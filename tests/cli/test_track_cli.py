@@ -17,17 +17,17 @@ def test_track_by_id_prefix_writes_track_and_shape(pandaset_root, tmp_path, caps
     code = main(["track", str(pandaset_root), "--track-id", "8ac00bad", "--end-frame", "4", "--quiet",
                  "--out", str(out)])
     assert code == 0, capsys.readouterr().err
-    track, shape = read_track(out)
+    header, track = read_track(out)
     assert track.object_id.startswith("8ac00bad") and track.label == "Car"
-    assert [r.frame for r in track.frames] == [0, 1, 2, 3, 4]
-    assert track.config["preset"] == "full" and track.config["seed"] == 0
-    assert "init" in track.frames[0].flags and len(shape) > 100
+    assert track.frames.tolist() == [0, 1, 2, 3, 4]
+    assert header.config["preset"] == "full" and header.config["seed"] == 0
+    assert "init" in track.flags[0] and len(track.shape_points) > 100
     # world states near the annotations (an independent reader: the csv file)
     from sot_apps.io import open_sequence
     truth = open_sequence(pandaset_root).tracks()[track.object_id]
-    for rec in track.frames:
-        box = truth.box_at(rec.frame)
-        assert np.hypot(rec.state.x - box.x, rec.state.y - box.y) < 0.5
+    for frame, (x, y, _, _) in zip(track.frames, track.states, strict=True):
+        box = truth.box_at(int(frame))
+        assert np.hypot(x - box.x, y - box.y) < 0.5
 
 
 @pytest.mark.slow
@@ -36,19 +36,21 @@ def test_offline_refinement_is_recorded_and_stays_on_the_vehicle(pandaset_root, 
     base = ["track", str(pandaset_root), "--track-id", "91aa5b5c", "--end-frame", "12", "--quiet"]
     assert main(base + ["--out", str(online)]) == 0, capsys.readouterr().err
     assert main(base + ["--offline", "--out", str(offline)]) == 0, capsys.readouterr().err
-    on, _ = read_track(online)
-    off, shape = read_track(offline)
-    assert off.config["mode"] == "offline" and off.config["refined"] is True and on.config["mode"] == "online"
-    assert all("offline" in r.flags for r in off.frames) and len(shape) > 50
+    on_header, on = read_track(online)
+    off_header, off = read_track(offline)
+    assert off_header.config["mode"] == "offline" and off_header.config["refined"] is True
+    assert on_header.config["mode"] == "online"
+    assert all("offline" in f for f in off.flags) and len(off.shape_points) > 50
     from sot_apps.io import open_sequence
     truth = open_sequence(pandaset_root).tracks()[off.object_id]
 
     def mean_error(track):
-        return np.mean([np.hypot(r.state.x - truth.box_at(r.frame).x, r.state.y - truth.box_at(r.frame).y)
-                        for r in track.frames])
+        return np.mean([np.hypot(x - truth.box_at(int(k)).x, y - truth.box_at(int(k)).y)
+                        for k, (x, y, _, _) in zip(track.frames, track.states, strict=True)])
 
     # the refined states differ from the online ones, and stay on the annotated vehicle
-    assert max(abs(a.state.x - b.state.x) for a, b in zip(on.frames, off.frames, strict=True)) > 1e-4
+    assert on.frames.tolist() == off.frames.tolist()
+    assert np.abs(on.states[:, 0] - off.states[:, 0]).max() > 1e-4
     assert mean_error(off) < 0.3
 
 
@@ -58,9 +60,10 @@ def test_fixed_lag_mode_is_recorded(pandaset_root, tmp_path, capsys):
     code = main(["track", str(pandaset_root), "--track-id", "91aa5b5c", "--end-frame", "6", "--lag", "3", "--quiet",
                  "--out", str(out)])
     assert code == 0, capsys.readouterr().err
-    track, _ = read_track(out)
-    assert track.config["mode"] == "lag" and track.config["lag"] == 3 and track.config["refined"] is True
-    assert [r.frame for r in track.frames] == list(range(7)) and all("lag3" in r.flags for r in track.frames[1:])
+    header, track = read_track(out)
+    assert header.config["mode"] == "lag" and header.config["lag"] == 3 and header.config["refined"] is True
+    assert header.mode == "lag 3"
+    assert track.frames.tolist() == list(range(7)) and all("lag3" in f for f in track.flags[1:])
     with pytest.raises(SystemExit) as usage:   # a usage error: argparse's one line, exit code 2
         main(["track", str(pandaset_root), "--track-id", "91aa5b5c", "--lag", "0", "--out", str(tmp_path / "x")])
     assert usage.value.code == 2 and "--lag" in capsys.readouterr().err
@@ -100,8 +103,8 @@ def test_empty_init_box_is_flagged_not_fatal(pandaset_root, tmp_path, capsys):
     captured = capsys.readouterr()
     assert code == 0
     assert "no points" in captured.err
-    track, shape = read_track(out)
-    assert all("no_points" in r.flags for r in track.frames) and len(shape) == 0
+    _, track = read_track(out)
+    assert all("no_points" in f for f in track.flags) and len(track.shape_points) == 0
 
 
 def test_implausible_init_box_size_is_refused_unless_allowed(pandaset_root, tmp_path, capsys):

@@ -11,9 +11,10 @@ from sot_apps.flow.annotate import _lidar_occluders
 from sot_apps.flow.camera import CameraModel
 from sot_apps.flow.objects import objects_from_tracks
 from sot_apps.flow.occlusion import project_lidar
+from sot_apps.io.object_track import ObjectTrack
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
-from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
-from tracker.geometry import Box, State, invert_transform, make_transform, points_in_box, transform_points
+from sot_apps.io.tracks import TrackHeader, write_track
+from tracker.geometry import Box, invert_transform, make_transform, points_in_box, transform_points
 
 K = np.array([[1970.0, 0.0, 960.0], [0.0, 1970.0, 540.0], [0.0, 0.0, 1.0]])
 MODEL = CameraModel(K, np.zeros(5), 1920, 1080)
@@ -78,9 +79,9 @@ def test_restamped_box_times_equal_the_box_test_over_every_point(tmp_path):
     ego = np.concatenate([transform_points(invert_transform(WORLD_FROM_EGO), world), rng.uniform(-60, 60, (30_000, 3))])
     offsets = rng.integers(-100_000_000, 0, len(ego))
     seq = _sequence(ego, offsets)
-    record = FrameRecord(0, 1_000_000_000, State(box.x, box.y, box.z, box.heading), 100, 0.9, [])
-    write_track(tmp_path / "car", TrackFile("s", "car", Size(4.5, 2.0, 1.6), 0, 0, box, {"preset": "test"}, [record]),
-                rng.uniform(-1, 1, (50, 3)))
+    track = ObjectTrack.from_states("car", "", (4.5, 2.0, 1.6), [0], [1_000_000_000], [box.to_array()[:4]], None,
+                                    scores=[0.9], num_points=[100], shape_points=rng.uniform(-1, 1, (50, 3)))
+    write_track(tmp_path / "car", TrackHeader("s", 0, 0, box, {"preset": "test"}), track)
     [stamped] = objects_from_tracks([tmp_path / "car"], box_time="points", seq=seq)
     inside = points_in_box(transform_points(WORLD_FROM_EGO, ego.astype(np.float32)), box)
     assert 1000 < inside.sum() < 4000

@@ -7,16 +7,18 @@ import pytest
 
 from sot_apps.cli.main import main
 from sot_apps.errors import InputError
-from sot_apps.io.tracks import FrameRecord, Size, TrackFile, read_track, write_track
-from tracker.geometry import Box, State
+from sot_apps.io.object_track import ObjectTrack
+from sot_apps.io.tracks import TrackHeader, read_track, write_track
+from tracker.geometry import Box
 
 
 def _track_of(directory, sequence_id: str, timestamps: list[int]):
-    records = [FrameRecord(k, t, State(10.0, 0.0, 1.0, 0.0), 50, 0.9, ["init"] if k == 0 else [])
-               for k, t in enumerate(timestamps)]
+    n = len(timestamps)
+    track = ObjectTrack.from_states("car", "", (4.0, 2.0, 1.5), range(n), timestamps, [[10.0, 0.0, 1.0, 0.0]] * n,
+                                    None, [["init"]] + [[]] * (n - 1), scores=[0.9] * n, num_points=[50] * n,
+                                    shape_points=np.random.default_rng(0).uniform(-1, 1, (50, 3)))
     box = Box(10.0, 0.0, 1.0, 0.0, 4.0, 2.0, 1.5)
-    track = TrackFile(sequence_id, "car", Size(4.0, 2.0, 1.5), 0, len(timestamps) - 1, box, {"preset": "test"}, records)
-    write_track(directory, track, np.random.default_rng(0).uniform(-1, 1, (50, 3)))
+    write_track(directory, TrackHeader(sequence_id, 0, n - 1, box, {"preset": "test"}), track)
     return directory
 
 
@@ -37,10 +39,10 @@ def test_check_track_belongs_names_the_mismatch(tmp_path, pandaset):
 
     n = len(pandaset.frames)
     ok = _track_of(tmp_path / "ok", pandaset.id, [int(pandaset.frames[k].timestamp_ns) for k in range(3)])
-    check_track_belongs(read_track(ok)[0], pandaset, ok / "track.json")
+    check_track_belongs(*read_track(ok), pandaset, ok / "track.json")
     beyond = _track_of(tmp_path / "beyond", pandaset.id, [int(pandaset.frames[0].timestamp_ns) + k for k in range(n + 1)])
     with pytest.raises(InputError, match="outside the sequence"):
-        check_track_belongs(read_track(beyond)[0], pandaset, beyond / "track.json")
+        check_track_belongs(*read_track(beyond), pandaset, beyond / "track.json")
     other = _track_of(tmp_path / "other", "world_7", [int(pandaset.frames[k].timestamp_ns) for k in range(3)])
     with pytest.raises(InputError, match="world_7"):
-        check_track_belongs(read_track(other)[0], pandaset, other / "track.json")
+        check_track_belongs(*read_track(other), pandaset, other / "track.json")

@@ -9,9 +9,10 @@ from test_occlusion_timing import _sequence
 
 from sot_apps.flow.annotate import FlowOptions, build_pair, compute_pair
 from sot_apps.flow.objects import objects_from_tracks
+from sot_apps.io.object_track import ObjectTrack
 from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
-from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
-from tracker.geometry import Box, State
+from sot_apps.io.tracks import TrackHeader, write_track
+from tracker.geometry import Box
 
 
 def test_track_directory_drives_the_flow(tmp_path):
@@ -19,11 +20,11 @@ def test_track_directory_drives_the_flow(tmp_path):
     g = np.linspace(-0.5, 0.5, 9)
     shape = np.stack(np.meshgrid(g * 4.0, g * 2.0, g * 1.5, indexing="ij"), -1).reshape(-1, 3)
     times = [1_000_000_000 + k * 100_000_000 for k in range(3)]
-    records = [FrameRecord(k, t, State(20.0, -1.0 + 0.5 * k, 1.5, np.pi / 2), 100, 0.9, [])
-               for k, t in enumerate(times)]
+    track = ObjectTrack.from_states("car_1", "Car", (4.0, 2.0, 1.5), range(3), times,
+                                    [[20.0, -1.0 + 0.5 * k, 1.5, np.pi / 2] for k in range(3)], None,
+                                    scores=[0.9] * 3, num_points=[100] * 3, shape_points=shape)
     box = Box(20.0, -1.0, 1.5, np.pi / 2, 4.0, 2.0, 1.5)
-    track = TrackFile("synthetic", "car_1", Size(4.0, 2.0, 1.5), 0, 2, box, {"preset": "test"}, records, label="Car")
-    write_track(tmp_path / "car_1", track, shape)
+    write_track(tmp_path / "car_1", TrackHeader("synthetic", 0, 2, box, {"preset": "test"}), track)
     [obj] = objects_from_tracks([tmp_path / "car_1"])
     assert obj.object_id == "car_1" and obj.label == "Car"
     np.testing.assert_array_equal(obj.trajectory.times_ns, times)
@@ -41,10 +42,11 @@ def test_track_directory_drives_the_flow(tmp_path):
 
 def test_track_states_are_restamped_with_the_capture_time_of_their_points(tmp_path):
     times = [1_000_000_000 + k * 100_000_000 for k in range(2)]
-    records = [FrameRecord(k, t, State(10.0 + k, 0.0, 1.0, 0.0), 50, 0.9, []) for k, t in enumerate(times)]
+    track = ObjectTrack.from_states("car", "", (4.0, 2.0, 1.5), range(2), times,
+                                    [[10.0 + k, 0.0, 1.0, 0.0] for k in range(2)], None, scores=[0.9] * 2,
+                                    num_points=[50] * 2, shape_points=np.random.default_rng(0).uniform(-1, 1, (50, 3)))
     box = Box(10.0, 0.0, 1.0, 0.0, 4.0, 2.0, 1.5)
-    write_track(tmp_path / "car", TrackFile("s", "car", Size(4.0, 2.0, 1.5), 0, 1, box, {"preset": "test"}, records),
-                np.random.default_rng(0).uniform(-1, 1, (50, 3)))
+    write_track(tmp_path / "car", TrackHeader("s", 0, 1, box, {"preset": "test"}), track)
     # Sweeps (ego = world): 30 points on the car captured 40 ms (frame 0) / 70 ms (frame 1) before the frame
     # time, 30 points elsewhere captured 5 ms before it.
     def sweep(k):

@@ -118,15 +118,15 @@ def test_track_keyframes_cli_reproduces_the_keyframes(tiny_dir, tmp_path, capsys
     out = tmp_path / "track"
     assert main(["track", str(tiny_dir), "--keyframes", str(path), "--quiet", "--out", str(out)]) == 0, \
         capsys.readouterr().err
-    track, _ = read_track(out)
+    header, track = read_track(out)
     truth = open_sequence(tiny_dir).tracks()["car-move"]
-    assert track.object_id == "car-move" and track.config["mode"] == "offline"
-    assert [r.frame for r in track.frames] == list(range(20))
-    for r in track.frames:
-        box = truth.box_at(r.frame)
-        if r.frame in (0, 10, 19):
-            assert (r.state.x, r.state.y, r.state.z) == (box.x, box.y, box.z) and "keyframe" in r.flags
-        assert np.hypot(r.state.x - box.x, r.state.y - box.y) < 0.3
+    assert track.object_id == "car-move" and header.config["mode"] == "offline"
+    assert track.frames.tolist() == list(range(20))
+    for frame, (x, y, z, _), flags in zip(track.frames.tolist(), track.states, track.flags, strict=True):
+        box = truth.box_at(frame)
+        if frame in (0, 10, 19):
+            assert (x, y, z) == (box.x, box.y, box.z) and "keyframe" in flags
+        assert np.hypot(x - box.x, y - box.y) < 0.3
 
 
 def test_autolabel_keyframes_writes_labels_through_the_keyframes(tiny_dir, tmp_path, capsys):

@@ -82,16 +82,13 @@ def gap_track(gap_copy, tmp_path_factory) -> Path:
 
 def test_track_across_a_4_frame_gap_keeps_the_vehicle(gap_track, pandaset):
     from sot_apps.io.tracks import read_track
-    from tracker.geometry import Box
 
-    track, _ = read_track(gap_track)
+    _, track = read_track(gap_track)
     truth = pandaset.tracks()[track.object_id]
-    flags = {r.frame: r.flags for r in track.frames}
+    flags = dict(zip(track.frames.tolist(), track.flags, strict=True))
     assert [k for k, f in flags.items() if "no_sweep" in f] == [20, 21, 22, 23]
-    assert all(r.num_points == 0 for r in track.frames if 20 <= r.frame <= 23)
-    size = track.size
-    ious = {r.frame: iou_3d(Box(r.state.x, r.state.y, r.state.z, r.state.heading, size.length, size.width, size.height),
-                            truth.box_at(r.frame)) for r in track.frames}
+    assert all(n == 0 for k, n in zip(track.frames, track.num_points, strict=True) if 20 <= k <= 23)
+    ious = {k: iou_3d(box, truth.box_at(k)) for k, box in track.boxes_by_frame().items()}
     assert min(ious[k] for k in range(24, 31)) > 0.5, ious
 
 

@@ -9,9 +9,7 @@ import numpy as np
 import pytest
 
 from sot_apps.errors import InputError
-from sot_apps.io.tracks import FrameRecord, Size, TrackFile
 from sot_apps.schemas import load_json_validated, schema_names, validate
-from tracker.geometry import Box, State
 
 
 @pytest.fixture(scope="module")
@@ -20,12 +18,14 @@ def sequence_doc(tiny_dir) -> dict:
 
 
 def track_doc() -> dict:
-    track = TrackFile(sequence="tiny", object_id="car-move", size=Size(4.5, 1.8, 1.5), start_frame=0, end_frame=1,
-                      init_box=Box(1.0, 2.0, 0.7, 0.1, 4.5, 1.8, 1.5), config={"preset": "default", "mode": "online"},
-                      frames=[FrameRecord(0, 10, State(1.0, 2.0, 0.7, 0.1), 120, 0.9, [], 3.5),
-                              FrameRecord(1, 20, State(1.8, 2.0, 0.7, 0.1), 0, 0.0, ["no_points", "prior_only"])],
-                      label="Car")
-    return track.to_json()
+    return {"schema_version": 1, "sequence": "tiny", "object_id": "car-move", "label": "Car",
+            "size": {"length": 4.5, "width": 1.8, "height": 1.5}, "start_frame": 0, "end_frame": 1,
+            "init_box": {"x": 1.0, "y": 2.0, "z": 0.7, "heading": 0.1, "length": 4.5, "width": 1.8, "height": 1.5},
+            "config": {"preset": "default", "mode": "online"}, "shape": "shape.ply",
+            "frames": [{"frame": 0, "timestamp_ns": 10, "state": {"x": 1.0, "y": 2.0, "z": 0.7, "heading": 0.1},
+                        "num_points": 120, "quality": 0.9, "flags": [], "time_ms": 3.5},
+                       {"frame": 1, "timestamp_ns": 20, "state": {"x": 1.8, "y": 2.0, "z": 0.7, "heading": 0.1},
+                        "num_points": 0, "quality": 0.0, "flags": ["no_points", "prior_only"]}]}
 
 
 def _set(doc: dict, path: list, value) -> dict:

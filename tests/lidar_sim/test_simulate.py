@@ -176,18 +176,18 @@ def test_bank_from_annotations_recovers_the_true_shape(tmp_path):
 
 
 def test_bank_build_from_tracker_output_dir(tmp_path, capsys):
-    from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
+    from sot_apps.io.object_track import ObjectTrack
+    from sot_apps.io.tracks import TrackHeader, write_track
     from sot_apps.synth.vehicles import make_vehicle
-    from tracker.geometry import State
 
     vehicle = make_vehicle("suv", 4.6, 1.9, 1.7)
     shape, _ = trimesh.sample.sample_surface(trimesh.Trimesh(vehicle.vertices, vehicle.faces, process=False), 5000, seed=0)
     shape = shape[shape[:, 1] > -0.2]          # one side seen only
-    frames = [FrameRecord(k, 1_000_000_000 + k * 100_000_000, State(10.0 + k, 2.0, 0.85, 0.0), 300, q, [])
-              for k, q in enumerate((0.9, 0.7))]
-    track = TrackFile("seqA", "car7", Size(4.6, 1.9, 1.7), 0, 1, Box(10.0, 2.0, 0.85, 0.0, 4.6, 1.9, 1.7),
-                      {"preset": "default"}, frames, label="Car")
-    write_track(tmp_path / "track_car7", track, shape)
+    track = ObjectTrack.from_states("car7", "Car", (4.6, 1.9, 1.7), [0, 1], [1_000_000_000, 1_100_000_000],
+                                    [[10.0, 2.0, 0.85, 0.0], [11.0, 2.0, 0.85, 0.0]], None, scores=[0.9, 0.7],
+                                    num_points=[300, 300], shape_points=shape)
+    write_track(tmp_path / "track_car7", TrackHeader("seqA", 0, 1, Box(10.0, 2.0, 0.85, 0.0, 4.6, 1.9, 1.7),
+                                                     {"preset": "default"}), track)
     bank_dir = tmp_path / "bank"
     assert main(["bank", "build", str(tmp_path / "track_car7"), "--mirror", "--out", str(bank_dir)]) == 0
     bank = read_bank(bank_dir)

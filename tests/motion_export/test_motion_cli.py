@@ -51,19 +51,17 @@ def test_motion_export_usage_errors(tmp_path, pandaset_root, capsys):
 
 
 def _write_flagged_track(directory, pandaset, prefix: str, last: int, flags: dict[int, list[str]]):
-    from sot_apps.io.tracks import FrameRecord, Size, TrackFile, write_track
-    from tracker.geometry import State
+    from sot_apps.io.object_track import ObjectTrack
+    from sot_apps.io.tracks import TrackHeader, write_track
 
     tid = pandaset.resolve_track_id(prefix)
     gt = pandaset.tracks()[tid]
-    boxes = [gt.box(i) for i in range(last + 1)]
-    records = [FrameRecord(frame=k, timestamp_ns=int(pandaset.frames[k].timestamp_ns),
-                           state=State(b.x, b.y, b.z, b.heading), num_points=100, quality=0.9,
-                           flags=flags.get(k, [])) for k, b in enumerate(boxes)]
-    track = TrackFile(sequence=pandaset.id, object_id=tid, size=Size(boxes[0].length, boxes[0].width, boxes[0].height),
-                      start_frame=0, end_frame=last, init_box=boxes[0], config={"preset": "test"}, frames=records,
-                      label=gt.label)
-    write_track(directory, track, np.zeros((5, 3)))
+    n = last + 1
+    track = ObjectTrack.from_states(tid, gt.label, gt.boxes[0, 4:7], range(n),
+                                    [int(pandaset.frames[k].timestamp_ns) for k in range(n)], gt.states[:n], None,
+                                    [flags.get(k, []) for k in range(n)], scores=[0.9] * n, num_points=[100] * n,
+                                    shape_points=np.zeros((5, 3)))
+    write_track(directory, TrackHeader(pandaset.id, 0, last, gt.box(0), {"preset": "test"}), track)
     return tid
 
 

@@ -43,17 +43,18 @@ def test_every_output_of_two_sequences_by_three_objects(reference_run, tiny_worl
         seq = open_sequence(world)
         gt = seq.tracks()
         for obj in OBJECTS:
-            track, shape = read_track(out / name / "tracks" / obj)
-            assert track.object_id == obj and [r.frame for r in track.frames] == list(range(6))
+            header, track = read_track(out / name / "tracks" / obj)
+            shape = track.shape_points
+            assert track.object_id == obj and track.frames.tolist() == list(range(6))
             assert len(shape) > 0
             # the pipeline's track is the tracker API's result from the annotated start box, refined offline
             # (the track stage's default mode for data generation)
             direct = track_api(seq, gt[obj].box_at(0), 0, 5, get_preset("full"))
             direct = refine_offline(seq, direct, direct.config)
-            assert track.config["mode"] == "offline"
-            assert np.allclose([[r.state.x, r.state.y, r.state.z, r.state.heading] for r in track.frames],
+            assert header.config["mode"] == "offline"
+            assert np.allclose(track.states,
                                [[e.state.x, e.state.y, e.state.z, e.state.heading] for e in direct.estimates])
-            assert [r.num_points for r in track.frames] == [e.num_points for e in direct.estimates]
+            assert track.num_points.tolist() == [e.num_points for e in direct.estimates]
             assert np.allclose(shape, direct.shape)
         # motion export: MCAP readable by the mcap library, parquet rows for the three objects, dense npz
         with open(out / name / "motion.mcap", "rb") as handle:
@@ -237,9 +238,9 @@ def test_annotated_object_starts_at_its_first_box_with_enough_points(tiny_worlds
                       "motion": {"enabled": False}, "flow": {"enabled": False}, "scans": {"enabled": False}}}
     result = run_pipeline(PipelineConfig.from_json(doc), ExecutorSpec("inline"), progress=False)
     assert result.failed == []
-    track, _ = read_track(tmp_path / "out" / "synth_s4" / "tracks" / obj)
-    assert track.start_frame == expected and track.frames[0].frame == expected
-    assert track.frames[0].num_points == threshold
+    header, track = read_track(tmp_path / "out" / "synth_s4" / "tracks" / obj)
+    assert header.start_frame == expected and track.frames[0] == expected
+    assert track.num_points[0] == threshold
 
     doc["out"] = str(tmp_path / "strict")
     doc["stages"]["track"]["start"] = "first_annotated"

@@ -5,15 +5,16 @@ from __future__ import annotations
 import json
 
 from sot_apps.cli.main import main
-from sot_apps.io.tracks import FrameRecord, Size, TrackFile
-from tracker.geometry import Box, State
+from sot_apps.io.object_track import ObjectTrack
 
 
-def _track(flags_after_start: list[list[str]], quality: float = 0.9) -> TrackFile:
+def _track(flags_after_start: list[list[str]], quality: float = 0.9) -> ObjectTrack:
     flags = [["init"]] + flags_after_start
-    records = [FrameRecord(k, k * 100_000_000, State(float(k), 0.0, 1.0, 0.0), 0 if "no_points" in f else 50,
-                           quality if not f or f == ["init"] else 0.0, f) for k, f in enumerate(flags)]
-    return TrackFile("s", "car", Size(4.0, 2.0, 1.5), 0, len(records) - 1, Box(0, 0, 1, 0, 4, 2, 1.5), {}, records)
+    n = len(flags)
+    return ObjectTrack.from_states("car", "", (4.0, 2.0, 1.5), range(n), [k * 100_000_000 for k in range(n)],
+                                   [[float(k), 0.0, 1.0, 0.0] for k in range(n)], None, flags,
+                                   scores=[quality if not f or f == ["init"] else 0.0 for f in flags],
+                                   num_points=[0 if "no_points" in f else 50 for f in flags])
 
 
 def test_health_rule():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from sot_apps.io.tracks import FrameRecord, Size, TrackFile
+from sot_apps.io.object_track import ObjectTrack
 from sot_apps.report.draw import (
     BevCanvas,
     LegendEntry,
@@ -17,21 +17,18 @@ from sot_apps.report.draw import (
 )
 from sot_apps.report.figures import flow_key, shape_growth_figure, tracks_bev_figure
 from sot_apps.tracking import ShapeGrowth
-from tracker.geometry import State
 
 
-def _tracks_from_annotations(seq, count: int) -> list[tuple[TrackFile, np.ndarray]]:
-    """``count`` annotated PandaSet tracks, longest first, written as track files would hold them."""
+def _tracks_from_annotations(seq, count: int) -> list[ObjectTrack]:
+    """``count`` annotated PandaSet tracks, longest first, as a track file's rows would hold them (one box size)."""
     annotated = seq.tracks()
     ids = sorted(annotated, key=lambda t: (-len(annotated[t].frames), t))[:count]
     out = []
     for tid in ids:
         gt = annotated[tid]
-        records = [FrameRecord(k, int(seq.frames[k].timestamp_ns), State(b.x, b.y, b.z, b.heading), 50, 0.9)
-                   for k, b in gt.boxes_by_frame().items()]
-        first = gt.box(0)
-        out.append((TrackFile(seq.id, tid, Size(first.length, first.width, first.height), int(gt.frames[0]),
-                              int(gt.frames[-1]), first, {}, records, gt.label), np.zeros((0, 3))))
+        n = len(gt)
+        out.append(ObjectTrack.from_states(tid, gt.label, gt.boxes[0, 4:7], gt.frames, gt.timestamps_ns, gt.states,
+                                           None, scores=[0.9] * n, num_points=[50] * n, shape_points=np.zeros((0, 3))))
     return out
 
 
@@ -42,7 +39,7 @@ def test_bev_of_a_busy_sequence_names_every_object_and_its_labels_do_not_overlap
     assert image is not None and image.shape[0] > 400
     # one legend entry and one distinct colour per object (not one "tracked" colour for all)
     assert len(figure.object_labels) == 15
-    assert all(t.object_id[:10] in label for (t, _), label in zip(tracks, figure.object_labels, strict=True))
+    assert all(t.object_id[:10] in label for t, label in zip(tracks, figure.object_labels, strict=True))
     assert len(set(figure.object_colours)) == 15
     # one numbered label per object, none overlapping another
     assert len(figure.label_rects) == 15

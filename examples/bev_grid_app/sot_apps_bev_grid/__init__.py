@@ -50,12 +50,9 @@ class BevGridApp(AppBase):
         stamps = np.array([seq.frames[k].timestamp_ns for k in indices], np.int64)
         objects = []
         for object_id in object_ids:
-            track, _ = read_track(track_dir(out, sequence, object_id))
-            kept = [r for r in track.frames if r.quality >= config.min_quality]
-            objects.append((np.array([r.frame for r in kept], np.int64),
-                            np.array([r.timestamp_ns for r in kept], np.int64),
-                            np.array([r.state.to_array() for r in kept]).reshape(-1, 4),
-                            (track.size.length, track.size.width)))
+            _, track = read_track(track_dir(out, sequence, object_id))
+            kept = track.select(track.scores >= config.min_quality)   # scores: the tracker's quality
+            objects.append((kept.frames, kept.timestamps_ns, kept.states, track.size[:2]))
         occupancy, instance, velocity = bev_grids(indices, world_from_ego, objects, config.extent_m, config.cell_m)
         target = Path(out) / sequence / FILE_NAME
         write_npz(target, occupancy=occupancy, instance=instance, velocity_ego=velocity, frames=indices,
