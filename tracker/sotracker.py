@@ -379,7 +379,7 @@ class Tracker:
         candidates = cluster_candidates(points, self.box, sensor, r.cell, r.cluster_points, r.size_margin, time_s,
                                         centred=start is None, hold_scale=c.search.crop_scale)
         supported = estimate.num_points >= r.min_points and "prior_only" not in estimate.flags
-        held = start is None and s.reacquire.holds_object(candidates, supported)
+        held = start is None and s.reacquire.holds_object(candidates, self.box, supported)
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)
         confirms = held or (relock is not None and start is None
                             and float(np.linalg.norm(relock.centre - self.box.center[:2])) < r.hold_distance)

@@ -10,9 +10,10 @@ box's size are kept as candidates. The search goes on when points come back (a b
 follows its points at an offset) until the track holds its object again, a candidate moves it, or
 ``recover_frames`` frames in a row had support. The track holds when a confirmed candidate is within
 ``hold_distance`` of the box, or when on ``hold_frames`` frames in a row the frame had support and the box held
-a candidate (``hold_share`` of its points, in the box scaled by ``search.crop_scale``; at least ``min_points``)
-whose extent changed at most ``size_gate`` from one frame to the next: the object re-appeared where the motion
-model put the box and the normal step follows it (a partial view's centred candidate may be more than
+a candidate (``hold_share`` of its points, in the box scaled by ``search.crop_scale``; at least ``min_points``;
+long and wide enough that the box, sliding over it, stays within ``hold_distance`` of every placement its points
+allow) whose extent changed at most ``size_gate`` from one frame to the next: the object re-appeared where the
+motion model put the box and the normal step follows it (a partial view's centred candidate may be more than
 ``hold_distance`` off, and a single frame pair's velocity of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
 the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
@@ -65,8 +66,9 @@ class Reacquire:
         """The region to search: around the predicted ``box``, or along the lost ``start`` box's heading."""
         raise NotImplementedError
 
-    def holds_object(self, candidates: list[Candidate], supported: bool) -> bool:
-        """Whether a lost track holds its object again (``supported``: the frame's estimate has support)."""
+    def holds_object(self, candidates: list[Candidate], box: Box, supported: bool) -> bool:
+        """Whether a lost track holds its object again at ``box`` (``supported``: the frame's estimate has
+        support)."""
         return False
 
     def confirm(self, candidates: list[Candidate], box: Box, velocity: np.ndarray | None,
@@ -122,9 +124,13 @@ class ClusterReacquire(Reacquire):
         reach = min(c.reach + c.growth * lost_s, c.max_reach)
         return search_region(box, reach, reach, reach, c.rise)
 
-    def holds_object(self, candidates: list[Candidate], supported: bool) -> bool:
+    def holds_object(self, candidates: list[Candidate], box: Box, supported: bool) -> bool:
         c = self.c
-        held = [k for k in candidates if supported and k.count >= c.min_points and k.held >= c.hold_share * k.count]
+        # held: the candidate's points in the box, and the box pinned by them to within ``hold_distance`` (a box
+        # slides along a short cluster by the unseen length: a far car's nose in one end of a box that coasted off)
+        shortest = np.array([box.length, box.width]) - 2.0 * c.hold_distance
+        held = [k for k in candidates if supported and k.count >= c.min_points and k.held >= c.hold_share * k.count
+                and np.all(k.extent >= shortest)]
         if not held:
             self._held = []
             return False
