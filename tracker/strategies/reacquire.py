@@ -9,10 +9,10 @@ growing with the time since support was lost, are clustered (tracker/reacquire.p
 box's size are kept as candidates. The search goes on when points come back (a box that coasted off the object
 follows its points at an offset) until the track holds its object again, a candidate moves it, or
 ``recover_frames`` frames in a row had support. The track holds when a confirmed candidate is within
-``hold_distance`` of the box, or when on ``hold_frames`` frames in a row the frame had support and the box held
-a candidate (``hold_share`` of its points, in the box scaled by ``search.crop_scale``; at least ``min_points``;
-long and wide enough that the box, sliding over it, stays within ``hold_distance`` of every placement its points
-allow) whose extent changed at most ``size_gate`` from one frame to the next: the object re-appeared where the
+``hold_distance`` of the box, or (``hold_frames`` > 0, opt-in) when on ``hold_frames`` frames in a row the frame
+had support and the box held a candidate (``hold_share`` of its points, in the box scaled by
+``search.crop_scale``; at least ``min_points``; its extent at least the box's length and width - 2 x
+``hold_distance``, so that any box over it is within ``hold_distance`` of its centred placement) whose extent changed at most ``size_gate`` from one frame to the next: the object re-appeared where the
 motion model put the box and the normal step follows it (a partial view's centred candidate may be more than
 ``hold_distance`` off, and a single frame pair's velocity of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
