@@ -12,7 +12,8 @@ follows its points at an offset) until the track holds its object again, a candi
 ``hold_distance`` of the box, or (``hold_frames`` > 0, opt-in) when on ``hold_frames`` frames in a row the frame
 had support and the box held a candidate (``hold_share`` of its points, in the box scaled by
 ``search.crop_scale``; at least ``min_points``; its extent at least the box's length and width - 2 x
-``hold_distance``, so that any box over it is within ``hold_distance`` of its centred placement) whose extent changed at most ``size_gate`` from one frame to the next: the object re-appeared where the
+``hold_distance``, so that any box over it is within ``hold_distance`` of its centred placement; the box no
+further from that placement than half the unseen length + ``cell``) whose extent changed at most ``size_gate`` from one frame to the next: the object re-appeared where the
 motion model put the box and the normal step follows it (a partial view's centred candidate may be more than
 ``hold_distance`` off, and a single frame pair's velocity of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
@@ -126,11 +127,16 @@ class ClusterReacquire(Reacquire):
 
     def holds_object(self, candidates: list[Candidate], box: Box, supported: bool) -> bool:
         c = self.c
-        # held: the candidate's points in the box, and the box pinned by them to within ``hold_distance`` (a box
-        # slides along a short cluster by the unseen length: a far car's nose in one end of a box that coasted off)
-        shortest = np.array([box.length, box.width]) - 2.0 * c.hold_distance
+        # held: the candidate's points in the box, the box pinned by them to within ``hold_distance`` (a box slides
+        # along a short cluster by the unseen length: a far car's nose in one end of a box that coasted off), and
+        # the box no further from the cluster's centre than the unseen length allows (+ a grid cell: extents are
+        # measured on it): a box off a nearly whole cluster is not held
+        size = np.array([box.length, box.width])
+        axis = np.array([np.cos(box.heading), np.sin(box.heading)])
+        frame = np.array([axis, [-axis[1], axis[0]]])
         held = [k for k in candidates if supported and k.count >= c.min_points and k.held >= c.hold_share * k.count
-                and np.all(k.extent >= shortest)]
+                and np.all(k.extent >= size - 2.0 * c.hold_distance)
+                and np.all(np.abs(frame @ (k.centre - box.center[:2])) <= 0.5 * (size - k.extent) + c.cell)]
         if not held:
             self._held = []
             return False
