@@ -13,9 +13,10 @@ follows its points at an offset) until the track holds its object again, a candi
 had support and the box held a candidate (``hold_share`` of its points, in the box scaled by
 ``search.crop_scale``; at least ``min_points``; its extent at least the box's length and width - 2 x
 ``hold_distance``, so that any box over it is within ``hold_distance`` of its centred placement; the box no
-further from that placement than half the unseen length + ``cell``) whose extent changed at most ``size_gate`` from one frame to the next: the object re-appeared where the
-motion model put the box and the normal step follows it (a partial view's centred candidate may be more than
-``hold_distance`` off, and a single frame pair's velocity of it is not reliable). A start box with fewer than
+further from that placement than half the unseen length + ``cell``) whose extent changed at most ``size_gate``
+from one frame to the next: the object re-appeared where the motion model put the box and the normal step follows
+it (a partial view's centred candidate may be more than ``hold_distance`` off, and a single frame pair's velocity
+of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
 the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
 ``reacquired``) only on a candidate matched to
