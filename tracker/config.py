@@ -295,6 +295,9 @@ class ReacquireConfig:
     lost_frames: int = 2                 # frames in a row without that support: the track is lost
     recover_frames: int = 10             # a lost track is held again after this many supported frames in a row
     hold_distance: float = 1.0           # m: a confirmed candidate this near the box confirms the track as it is
+    hold_frames: int = 0                 # > 0: frames in a row with support and a candidate held in the box: the
+                                         # track holds (0: off; 2 was not accepted for full, docs/tracker.md)
+    hold_share: float = 0.9              # ... held: this share of the candidate's points in the box x crop_scale
     supported_holds_ties: bool = False   # a box with support stays against a candidate holding as many points
     start_points: int = 3                # a start box with fewer points is a lost start
     reach: float = 1.0                   # m: the lost track's region around the prediction at loss (each side)
@@ -314,7 +317,10 @@ class ReacquireConfig:
 
     def __post_init__(self) -> None:
         _choice("reacquire.mode", self.mode, ("none", "clusters"))
-        _positive(self, "reacquire", "lost_frames", "cell", "max_speed")
+        _positive(self, "reacquire", "lost_frames", "cell", "max_speed", "hold_share")
+        if self.hold_frames < 0 or self.hold_share > 1.0:
+            raise ValueError(f"reacquire.hold_frames must be >= 0 and reacquire.hold_share <= 1, got "
+                             f"{self.hold_frames}, {self.hold_share}")
 
 
 @dataclass(frozen=True)

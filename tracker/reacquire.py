@@ -50,23 +50,27 @@ def start_shift(local: np.ndarray, box: Box, ahead: float, behind: float, min_po
 @dataclass(frozen=True)
 class Candidate:
     """A non-ground cluster of the right size: the box placed on it (``centre``, xy, world), its extent along
-    and across the searched box's heading (m), its number of points, and the time it was seen (s)."""
+    and across the searched box's heading (m), its number of points, the time it was seen (s), and how many of
+    its points the searched box (scaled by ``hold_scale``) holds."""
 
     centre: np.ndarray
     extent: np.ndarray
     count: int
     time_s: float
+    held: int = 0
 
 
 def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: float, min_points: int,
-                       size_margin: float, time_s: float, centred: bool = False) -> list[Candidate]:
+                       size_margin: float, time_s: float, centred: bool = False,
+                       hold_scale: float = 1.0) -> list[Candidate]:
     """The clusters of ``points`` (non-ground, world) on a BEV grid of ``cell`` metres (8-connected cells) that
     hold at least ``min_points`` points and fit ``box``'s length and width + ``size_margin``, each with ``box``
     placed on it: along an axis where the cluster is shorter than the box and the line of sight from ``sensor``
     is within 60 degrees of the axis, the box's face toward the sensor meets the points (the visible face, as in
     :func:`start_shift`); else, or with ``centred``, the box is centred on the cluster's extent (which end of the
     object a short cluster shows is ambiguous for a track that was lost: the near end seen, the near end hidden by
-    an occluder, the roof of a far car; centred, the box is off by at most half the unseen length)."""
+    an occluder, the roof of a far car; centred, the box is off by at most half the unseen length). ``held``: the
+    cluster's points inside ``box`` scaled by ``hold_scale`` (whether the box already holds that object)."""
     if len(points) < min_points:
         return []
     c, s = np.cos(box.heading), np.sin(box.heading)
@@ -101,7 +105,8 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     faced = np.abs(sight) > 0.5 * np.linalg.norm(sight, axis=1, keepdims=True)  # that face is seen, not edge-on
     placed = np.where(faced & (extent[keep] < 2.0 * half) & (not centred), placed, mid)
     world = box.center[:2] + placed[:, :1] * np.array([c, s]) + placed[:, 1:] * np.array([-s, c])
-    return [Candidate(world[i], extent[k], int(sizes[k]), time_s) for i, k in enumerate(keep)]
+    held = np.bincount(label[points_in_box(points, box, hold_scale)], minlength=count)
+    return [Candidate(world[i], extent[k], int(sizes[k]), time_s, int(held[k])) for i, k in enumerate(keep)]
 
 
 def box_holds_against(box: Box, centre: np.ndarray, points: np.ndarray, hold_ties: bool, crop_scale: float) -> bool:

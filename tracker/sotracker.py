@@ -380,11 +380,12 @@ class Tracker:
         sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
         r = c.reacquire
         candidates = cluster_candidates(points, self.box, sensor, r.cell, r.cluster_points, r.size_margin, time_s,
-                                        centred=start is None)
-        relock = s.reacquire.confirm(candidates, self.box, velocity, start)
-        confirms = (relock is not None and start is None
-                    and float(np.linalg.norm(relock.centre - self.box.center[:2])) < r.hold_distance)
+                                        centred=start is None, hold_scale=c.search.crop_scale)
         supported = estimate.num_points >= r.min_points and "prior_only" not in estimate.flags
+        held = start is None and s.reacquire.holds_object(candidates, self.box, supported)
+        relock = s.reacquire.confirm(candidates, self.box, velocity, start)
+        confirms = held or (relock is not None and start is None
+                            and float(np.linalg.norm(relock.centre - self.box.center[:2])) < r.hold_distance)
         if relock is None or confirms or (start is None and box_holds_against(
                 self.box, relock.centre, points, r.supported_holds_ties and supported, self.config.search.crop_scale)):
             if confirms:  # the candidate is where the track is: it holds, the search ends

@@ -7,8 +7,16 @@
 its motion model (flag ``coasting``) while the sweep's non-ground points in a region around the prediction,
 growing with the time since support was lost, are clustered (tracker/reacquire.py) and the clusters of the
 box's size are kept as candidates. The search goes on when points come back (a box that coasted off the object
-follows its points at an offset) until a candidate confirms the track (within ``hold_distance`` of the box: the
-track holds) or moves it, or ``recover_frames`` frames in a row had support. A start box with fewer than
+follows its points at an offset) until the track holds its object again, a candidate moves it, or
+``recover_frames`` frames in a row had support. The track holds when a confirmed candidate is within
+``hold_distance`` of the box, or (``hold_frames`` > 0, opt-in) when on ``hold_frames`` frames in a row the frame
+had support and the box held a candidate (``hold_share`` of its points, in the box scaled by
+``search.crop_scale``; at least ``min_points``; its extent at least the box's length and width - 2 x
+``hold_distance``, so that any box over it is within ``hold_distance`` of its centred placement; the box no
+further from that placement than half the unseen length + ``cell``) whose extent changed at most ``size_gate``
+from one frame to the next: the object re-appeared where the motion model put the box and the normal step follows
+it (a partial view's centred candidate may be more than ``hold_distance`` off, and a single frame pair's velocity
+of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
 the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
 ``reacquired``) only on a candidate matched to
@@ -60,6 +68,11 @@ class Reacquire:
         """The region to search: around the predicted ``box``, or along the lost ``start`` box's heading."""
         raise NotImplementedError
 
+    def holds_object(self, candidates: list[Candidate], box: Box, supported: bool) -> bool:
+        """Whether a lost track holds its object again at ``box`` (``supported``: the frame's estimate has
+        support)."""
+        return False
+
     def confirm(self, candidates: list[Candidate], box: Box, velocity: np.ndarray | None,
                 start: Box | None) -> Relock | None:
         """A candidate consistent with one of the previous frame's, or None (the candidates are kept)."""
@@ -81,6 +94,7 @@ class ClusterReacquire(Reacquire):
         self._lost = False
         self._supported = 0
         self._previous: list[Candidate] = []
+        self._held: list[list[Candidate]] = []      # per frame in a row: the candidates the supported box held
 
     def lost_start(self, points: int) -> bool:
         return points < self.c.start_points
@@ -111,6 +125,27 @@ class ClusterReacquire(Reacquire):
             return search_region(start, ahead, ahead / 3.0, c.reach, c.rise)
         reach = min(c.reach + c.growth * lost_s, c.max_reach)
         return search_region(box, reach, reach, reach, c.rise)
+
+    def holds_object(self, candidates: list[Candidate], box: Box, supported: bool) -> bool:
+        c = self.c
+        # held: the candidate's points in the box, the box pinned by them to within ``hold_distance`` (a box slides
+        # along a short cluster by the unseen length: a far car's nose in one end of a box that coasted off), and
+        # the box no further from the cluster's centre than the unseen length allows (+ a grid cell: extents are
+        # measured on it): a box off a nearly whole cluster is not held
+        size = np.array([box.length, box.width])
+        axis = np.array([np.cos(box.heading), np.sin(box.heading)])
+        frame = np.array([axis, [-axis[1], axis[0]]])
+        held = [k for k in candidates if supported and k.count >= c.min_points and k.held >= c.hold_share * k.count
+                and np.all(k.extent >= size - 2.0 * c.hold_distance)
+                and np.all(np.abs(frame @ (k.centre - box.center[:2])) <= 0.5 * (size - k.extent) + c.cell)]
+        if not held:
+            self._held = []
+            return False
+        if self._held and not any(np.all(np.abs(now.extent - before.extent) <= c.size_gate)
+                                  for now in held for before in self._held[-1]):
+            self._held = []
+        self._held.append(held)
+        return 0 < c.hold_frames <= len(self._held)
 
     def confirm(self, candidates: list[Candidate], box: Box, velocity: np.ndarray | None,
                 start: Box | None) -> Relock | None:
