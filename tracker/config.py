@@ -296,7 +296,7 @@ class ReacquireConfig:
     recover_frames: int = 10             # a lost track is held again after this many supported frames in a row
     hold_distance: float = 1.0           # m: a confirmed candidate this near the box confirms the track as it is
     hold_frames: int = 0                 # > 0: frames in a row with support and a candidate held in the box: the
-                                         # track holds (0: off; 2 was not accepted for full, docs/tracker.md)
+                                         # track holds (0: off; 2 in full, docs/tracker.md)
     hold_share: float = 0.9              # ... held: this share of the candidate's points in the box x crop_scale
     supported_holds_ties: bool = False   # a box with support stays against a candidate holding as many points
     start_points: int = 3                # a start box with fewer points is a lost start

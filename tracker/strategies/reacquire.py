@@ -9,7 +9,7 @@ growing with the time since support was lost, are clustered (tracker/reacquire.p
 box's size are kept as candidates. The search goes on when points come back (a box that coasted off the object
 follows its points at an offset) until the track holds its object again, a candidate moves it, or
 ``recover_frames`` frames in a row had support. The track holds when a confirmed candidate is within
-``hold_distance`` of the box, or (``hold_frames`` > 0, opt-in) when on ``hold_frames`` frames in a row the frame
+``hold_distance`` of the box, or (``hold_frames`` > 0; 2 in full) when on ``hold_frames`` frames in a row the frame
 had support and the box held a candidate (``hold_share`` of its points, in the box scaled by
 ``search.crop_scale``; at least ``min_points``; its extent at least the box's length and width - 2 x
 ``hold_distance``, so that any box over it is within ``hold_distance`` of its centred placement; the box no
