@@ -26,3 +26,21 @@ def test_ruff_finds_nothing():
 def test_mypy_finds_nothing_in_tracker_and_the_apps():
     done = _run("mypy", "tracker", "sot_apps/apps")
     assert done.returncode == 0, f"mypy tracker sot_apps/apps (exit {done.returncode}):\n{done.stdout}{done.stderr}"
+
+
+def test_the_tracker_stays_small_enough_to_read():
+    """The tracker's shape that issue 24 set: ``TrackerConfig`` nested per concern (at most 15 top-level fields),
+    the ``Tracker`` class at most 350 lines, and ``Tracker.step`` a short sequence of named steps (at most 30
+    lines of body, its signature and docstring not counted)."""
+    import ast
+    import dataclasses
+
+    from tracker.config import TrackerConfig
+
+    assert len(dataclasses.fields(TrackerConfig)) <= 15
+    tree = ast.parse((ROOT / "tracker" / "sotracker.py").read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Tracker")
+    assert cls.end_lineno is not None and cls.end_lineno - cls.lineno + 1 <= 350
+    step = next(n for n in cls.body if isinstance(n, ast.FunctionDef) and n.name == "step")
+    body = step.body[1:] if isinstance(step.body[0], ast.Expr) else step.body   # the docstring
+    assert step.end_lineno is not None and step.end_lineno - body[0].lineno + 1 <= 30

@@ -16,7 +16,7 @@ from .frames import LidarFrame
 from .geometry import Box, invert_transform, transform_points
 from .strategies.ground import GroundRemover, RoadPoints
 
-__all__ = ["LocalCrop", "LocalRegion", "local_region"]
+__all__ = ["LocalCrop", "LocalRegion", "local_region", "road_within"]
 
 
 @dataclass(frozen=True)
@@ -114,3 +114,11 @@ def local_region(frame: LidarFrame, box: Box, scale: float, ground: GroundRemove
     world = world[(u <= half_length) & (v <= half_width)]
     crop = LocalCrop(frame.index, world, box, half_length, half_width, ground.label)
     return LocalRegion(world, road_points, crop, tuple(flags))
+
+
+def road_within(road: np.ndarray, box: Box, frame: LidarFrame, max_range: float) -> np.ndarray:
+    """``road`` (the region's road points), or none of them when ``max_range`` > 0 and ``box`` is farther than that
+    from the sensor (horizontally): the road around a far box is seen too sparsely to hold its height."""
+    if max_range > 0 and np.hypot(*(box.center[:2] - frame.world_from_ego[:2, 3])) > max_range:
+        return road[:0]
+    return road

@@ -31,7 +31,7 @@ from .deskew import deskew_points
 from .detection import Detections, FrameDetections, associate_detection, detection_motion
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
-from .local_region import LocalCrop, local_region
+from .local_region import LocalCrop, local_region, road_within
 from .motion_limits import limit_motion
 from .reacquire import box_holds_against, cluster_candidates, search_region, start_shift
 from .registration import box_moved
@@ -207,10 +207,7 @@ class Tracker:
         """Non-ground world points near ``box`` (tracker/local_region.py); keeps the road points and the crop."""
         s, c = self.strategies, self.config
         region = local_region(frame, box, scale, s.ground, s.road, c.ground.margin, c.deskew, self._previous_pose)
-        self._ground_points = region.road
-        far = c.height.road_max_range
-        if far > 0 and np.hypot(*(box.center[:2] - frame.world_from_ego[:2, 3])) > far:
-            self._ground_points = region.road[:0]  # the road around a far box is seen too sparsely to hold its z
+        self._ground_points = road_within(region.road, box, frame, c.height.road_max_range)
         if region.crop is not None:
             self.last_crop = region.crop
         return region.points, list(region.flags)
