@@ -31,9 +31,24 @@ _OTHER_UNRAISABLE_HOOK = sys.unraisablehook   # the hook main() replaced, for ev
 _CAN_REDELIVER = hasattr(signal, "setitimer") and hasattr(signal, "SIGALRM")   # not on Windows
 
 
+def _inside_import_machinery(frame) -> bool:
+    """Whether Python code of importlib itself is running (not a module body it executes)."""
+    return frame is not None and frame.f_code.co_filename.startswith("<frozen importlib")
+
+
 def _raise_interrupt(signum, frame) -> None:
-    """Ctrl-C (SIGINT), or its re-delivery (SIGALRM, below) -> KeyboardInterrupt, handled in main()."""
+    """Ctrl-C (SIGINT), or its re-delivery (SIGALRM, below) -> KeyboardInterrupt, handled in main().
+
+    Not inside importlib's own code: an exception raised there (between taking the interpreter's import lock, or a
+    module's lock, and the ``try`` that releases it) leaves the lock held, and every other thread's next import
+    waits for it forever (seen: the thread that starts a Dask LocalCluster, while the main thread, interrupted in an
+    import, waited for that thread). There the interrupt is delivered again 10 ms later, once the import code has
+    run on (a module body's own code raises it as any other code)."""
     global _INTERRUPT_PENDING
+    if _CAN_REDELIVER and _inside_import_machinery(frame):
+        _INTERRUPT_PENDING = True
+        signal.setitimer(signal.ITIMER_REAL, 0.01)
+        return
     _INTERRUPT_PENDING = False
     if _CAN_REDELIVER:
         signal.setitimer(signal.ITIMER_REAL, 0.0)   # one KeyboardInterrupt per Ctrl-C, never a second one later

@@ -307,8 +307,10 @@ class ExecutorSession:
             self._cluster = None
         if self._cluster_start is not None:   # started by prestart, never used (the run stopped before its tasks)
             start, self._cluster_start = self._cluster_start, None
+            # after a Ctrl-C, a start that does not end within a minute is left to its daemon thread: exiting beats
+            # waiting for ever on a thread that cannot go on
             with deferred_interrupt(), contextlib.suppress(Exception):
-                start.result().close()
+                start.result(timeout=None if wait else 60.0).close()
 
     def _interrupt_dask_tasks(self) -> None:
         _quieten_dask_logs()
@@ -495,6 +497,8 @@ class ExecutorSession:
                     i = index[future.key]
                     try:
                         outcomes[i] = future.result()
+                    except KeyboardInterrupt:
+                        raise   # Ctrl-C while this process waited for the result: the run is interrupted
                     except BaseException as exc:  # noqa: BLE001 - a lost worker
                         outcomes[i] = TaskOutcome(tasks[i].key, False, error=f"{type(exc).__name__}: {exc}")
                     bar.update(1)
