@@ -31,21 +31,28 @@ _OTHER_UNRAISABLE_HOOK = sys.unraisablehook   # the hook main() replaced, for ev
 _CAN_REDELIVER = hasattr(signal, "setitimer") and hasattr(signal, "SIGALRM")   # not on Windows
 
 
-def _inside_import_machinery(frame) -> bool:
-    """Whether Python code of importlib itself is running (not a module body it executes)."""
-    return frame is not None and frame.f_code.co_filename.startswith("<frozen importlib")
+def _inside_an_import(frame) -> bool:
+    """Whether ``frame`` runs inside an import: importlib's own code or a module body (or what it calls) that
+    importlib is executing."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _raise_interrupt(signum, frame) -> None:
     """Ctrl-C (SIGINT), or its re-delivery (SIGALRM, below) -> KeyboardInterrupt, handled in main().
 
-    Not inside importlib's own code: an exception raised there (between taking the interpreter's import lock, or a
-    module's lock, and the ``try`` that releases it) leaves the lock held, and every other thread's next import
-    waits for it forever (seen: the thread that starts a Dask LocalCluster, while the main thread, interrupted in an
-    import, waited for that thread). There the interrupt is delivered again 10 ms later, once the import code has
-    run on (a module body's own code raises it as any other code)."""
+    Never inside an import: it is delivered again 10 ms later, until the import is over. Raised in importlib's own
+    code (between taking the interpreter's import lock, or a module's lock, and the ``try`` that releases it) it
+    can leave the lock held, and every other thread's next import waits for it for ever (seen: the thread that
+    starts a Dask LocalCluster, while the main thread, interrupted in an import, waited for that thread); raised in
+    a module body that a C extension imports (numpy importing ``datetime``), it becomes an ImportError that says
+    nothing of the Ctrl-C (seen: exit 1 with numpy's "bad install" message). A Ctrl-C waits at most for the
+    slowest import in progress (Dask's, ~1 s)."""
     global _INTERRUPT_PENDING
-    if _CAN_REDELIVER and _inside_import_machinery(frame):
+    if _CAN_REDELIVER and _inside_an_import(frame):
         _INTERRUPT_PENDING = True
         signal.setitimer(signal.ITIMER_REAL, 0.01)
         return
