@@ -164,16 +164,20 @@ def remove_stale_temporaries(root: str | Path) -> list[Path]:
     return removed
 
 
-def write_bytes(path: str | Path, data: bytes) -> None:
+def write_bytes(path: str | Path, data: bytes, sync: bool = True) -> None:
+    """Write ``data`` atomically. ``sync``: the data reaches the disk (fsync) before the rename; without it the file
+    is still whole or absent for every reader (a killed process leaves nothing half-written), but a power cut may
+    leave it empty: for outputs whose completeness is checked on a rerun (``sot-apps flow``'s pairs)."""
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as handle:
             handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
+            if sync:
+                handle.flush()
+                os.fsync(handle.fileno())
 
 
-def write_text(path: str | Path, text: str) -> None:
-    write_bytes(path, text.encode("utf-8"))
+def write_text(path: str | Path, text: str, sync: bool = True) -> None:
+    write_bytes(path, text.encode("utf-8"), sync)
 
 
 def _json_default(value: Any) -> Any:
@@ -186,10 +190,11 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def write_json(path: str | Path, data: Any, indent: int | None = 1) -> None:
-    """Write JSON atomically (numpy arrays and scalars are converted; NaN is refused)."""
+def write_json(path: str | Path, data: Any, indent: int | None = 1, sync: bool = True) -> None:
+    """Write JSON atomically (numpy arrays and scalars are converted; NaN is refused; ``sync``: as
+    :func:`write_bytes`)."""
     text = json.dumps(data, indent=indent, default=_json_default, allow_nan=False)
-    write_text(path, text + "\n")
+    write_text(path, text + "\n", sync)
 
 
 def write_npz(path: str | Path, compressed: bool = True, level: int | None = None, **arrays: np.ndarray) -> None:
