@@ -32,7 +32,6 @@ from tracker import interpolate_pose, invert_transform, transform_points
 
 from ..errors import InputError
 from ..io.atomic import write_bytes, write_json
-from ..io.images import read_color_image
 from ..io.sequence import Camera, Sequence
 from .camera import CameraModel
 from .dense import RayCache, dense_flow
@@ -42,8 +41,6 @@ from .objects import MeshedObject
 from .occlusion import ProjectedPoints, project_lidar
 from .png import encode_png
 from .scene import FlowObject, OcclusionParams, PairFlow, PairSetup, flow_magnitude
-from .sparse import sparse_flow
-from .visualize import flow_to_color, overlay
 
 __all__ = ["FlowOptions", "camera_pose_at", "build_pair", "compute_pair", "annotate_camera", "write_pair_outputs",
            "pair_output_jobs", "pair_finished", "PairWriter", "STATS_VERSION"]
@@ -154,6 +151,8 @@ def compute_pair(setup: PairSetup, flow_objects: list[FlowObject], mode: str, ra
     if mode == "dense":
         return dense_flow(setup, flow_objects, ray_cache)
     if mode == "sparse":
+        from .sparse import sparse_flow  # imported by the mode that uses it (start-up of sot-apps flow)
+
         return sparse_flow(setup, flow_objects)
     raise ValueError(f"unknown mode {mode!r}")
 
@@ -167,6 +166,8 @@ def _write_encoded(path: Path, image: np.ndarray) -> None:
 
 
 def _write_vis(root: Path, name: str, result: PairFlow, image: np.ndarray, image_path: Path) -> None:
+    from .visualize import flow_to_color, overlay
+
     colour = flow_to_color(result.flow, result.valid_occ)   # RGB, black where there is no flow
     write_bytes(root / "vis" / f"{name}_flow.png", encode_png(colour, 0, result.valid_occ), sync=False)
     if image.shape[:2] != result.instance.shape:
@@ -184,7 +185,11 @@ def pair_output_jobs(root: Path, k: int, result: PairFlow, image_path: Path, wri
     caller's thread: a damaged image is an error (InputError naming it) before any file of the pair is written,
     never drawn."""
     name = f"{k:06d}"
-    image = read_color_image(image_path) if write_vis else None
+    image = None
+    if write_vis:
+        from ..io.images import read_color_image
+
+        image = read_color_image(image_path)
     # flow_occ and flow_noc in one job: the non-occluded pixels are some of the valid ones, scaled once for both
     jobs = [lambda: write_kitti_flows(root / "flow_occ" / f"{name}.png", root / "flow_noc" / f"{name}.png",
                                       result.flow, result.valid_occ, result.valid_noc, sync=False),

@@ -16,7 +16,6 @@ import errno
 import io
 import json
 import os
-import secrets
 import shutil
 import sys
 import tempfile
@@ -101,7 +100,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         # The name is ours before the file exists, so a Ctrl-C at any point (the signal may be taken by any
         # thread, so masking it here would not be enough) leaves nothing behind: the except below removes it.
         for _ in range(100):
-            tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp"
+            tmp = path.parent / f".{path.name}.{os.urandom(4).hex()}.tmp"
             try:
                 os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
                 break
