@@ -75,6 +75,22 @@ def camera_pose_at(seq: Sequence, camera: Camera, k: int) -> np.ndarray:
     return np.asarray(frame.world_from_camera, dtype=np.float64)
 
 
+def _in_view(cam: np.ndarray, model: CameraModel, margin: float, min_depth: float, dtype: type) -> np.ndarray:
+    """(N,) bool: the camera-frame points ``cam`` deeper than ``min_depth`` whose pinhole pixel (x / z * f + c, in
+    ``dtype``, the array's own) lies within ``margin`` pixels of the image. One column at a time: the same
+    operations per element as on the (N, 2) pixel array, at a third of the cost."""
+    K = model.K
+    z = cam[:, 2]
+    inside = z > min_depth
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for axis, size in ((0, model.width), (1, model.height)):
+            pixel = cam[:, axis] / z
+            pixel *= dtype(K[axis, axis])
+            pixel += dtype(K[axis, 2])
+            inside &= (pixel > -margin) & (pixel < size + margin)
+    return inside
+
+
 def _lidar_occluders(seq: Sequence, k: int, objects: list[MeshedObject], camera_from_world: np.ndarray,
                      model: CameraModel, margin: float) -> ProjectedPoints:
     """Frame k's points minus those in (or near) any tracked object during the sweep, projected."""
@@ -90,18 +106,11 @@ def _lidar_occluders(seq: Sequence, k: int, objects: list[MeshedObject], camera_
     # the exact float64 test below then runs on that subset only, so the result is as if run on every point.
     cam32 = cv2.transform(np.ascontiguousarray(xyz, dtype=np.float32).reshape(1, -1, 3),
                           (camera_from_world @ world_from_ego)[:3]).reshape(-1, 3)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = cam32[:, :2] / cam32[:, 2:3] * np.diag(model.K)[:2].astype(np.float32) + model.K[:2, 2].astype(np.float32)
     near = slack + 16.0
-    maybe = np.flatnonzero((cam32[:, 2] > 0.45) & (uv[:, 0] > -near) & (uv[:, 0] < model.width + near)
-                           & (uv[:, 1] > -near) & (uv[:, 1] < model.height + near))
+    maybe = np.flatnonzero(_in_view(cam32, model, near, 0.45, np.float32))
     points = transform_points(world_from_ego, xyz[maybe])
     cam = transform_points(camera_from_world, points)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = cam[:, :2] / cam[:, 2:3] * np.diag(model.K)[:2] + model.K[:2, 2]
-    view = ((cam[:, 2] > 0.5) & (uv[:, 0] > -slack) & (uv[:, 0] < model.width + slack)
-            & (uv[:, 1] > -slack) & (uv[:, 1] < model.height + slack))
-    points = points[view]
+    points = points[_in_view(cam, model, slack, 0.5, np.float64)]
     keep = np.ones(len(points), dtype=bool)
     t_end = seq.frames[k].timestamp_ns
     for obj in objects:
