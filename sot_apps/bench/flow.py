@@ -75,7 +75,7 @@ def time_dense_flow(seq, camera_name: str, objects, pairs: range, repeats: int =
             write_pair_outputs(Path(tmp) / "b", k, whole, camera.frames[k].image_path, True)
             vis.append((time.perf_counter() - t0) * 1e3 - writing[-1])
     # the same files as sot-apps flow writes them: pair after pair handed to its writer pool (the jobs of a pair in
-    # parallel, file syncs overlapping the encoding, at most two pairs waiting), until the last file is in place
+    # parallel, at most two pairs waiting; no file syncs, as there), until the last file is in place
     pool_ms = pool_cpu_ms = 0.0
     if held:
         with tempfile.TemporaryDirectory() as tmp:

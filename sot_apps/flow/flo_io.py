@@ -61,9 +61,10 @@ def _unknown_rows(width: int, height: int) -> memoryview:
     return memoryview(np.full((height, width, 2), UNKNOWN_FLOW, dtype="<f4")).cast("B")
 
 
-def write_flo(path: str | Path, flow: np.ndarray, valid: np.ndarray | None = None) -> None:
+def write_flo(path: str | Path, flow: np.ndarray, valid: np.ndarray | None = None, sync: bool = True) -> None:
     """Write ``flow`` as a .flo file (unknown where not ``valid``). With ``valid``, only the rows holding valid
-    pixels are filled; the runs of rows without any are written from one shared buffer of unknown rows."""
+    pixels are filled; the runs of rows without any are written from one shared buffer of unknown rows.
+    ``sync``: fsync before the rename (:func:`sot_apps.io.atomic.write_bytes`)."""
     flow = np.asarray(flow)
     _check_flow(flow)
     height, width = flow.shape[:2]
@@ -83,8 +84,9 @@ def write_flo(path: str | Path, flow: np.ndarray, valid: np.ndarray | None = Non
                     handle.write(data[run[0] * row_bytes:(run[-1] + 1) * row_bytes])
                     done = first + len(run)
                 handle.write(unknown[:(height - done) * row_bytes])
-            handle.flush()
-            os.fsync(handle.fileno())
+            if sync:
+                handle.flush()
+                os.fsync(handle.fileno())
 
 
 def read_flo(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

@@ -154,17 +154,18 @@ def kitti_flow_pngs(flow: np.ndarray, valid: np.ndarray, valid_subset: np.ndarra
     return data, block.restricted(subset).png(cuts=edges.tolist(), reuse=reusable)
 
 
-def write_kitti_flow(path: str | Path, flow: np.ndarray, valid: np.ndarray) -> None:
-    write_bytes(path, kitti_flow_png(flow, valid))
+def write_kitti_flow(path: str | Path, flow: np.ndarray, valid: np.ndarray, sync: bool = True) -> None:
+    """The KITTI flow PNG of ``flow`` where ``valid``, atomically (``sync``: :func:`sot_apps.io.atomic.write_bytes`)."""
+    write_bytes(path, kitti_flow_png(flow, valid), sync)
 
 
 def write_kitti_flows(path: str | Path, subset_path: str | Path, flow: np.ndarray, valid: np.ndarray,
-                      valid_subset: np.ndarray) -> None:
+                      valid_subset: np.ndarray, sync: bool = True) -> None:
     """:func:`write_kitti_flow` of ``valid`` to ``path`` and of ``valid_subset`` to ``subset_path``
     (:func:`kitti_flow_pngs`: the values scaled once)."""
     data, subset_data = kitti_flow_pngs(flow, valid, valid_subset)
-    write_bytes(path, data)
-    write_bytes(subset_path, subset_data)
+    write_bytes(path, data, sync)
+    write_bytes(subset_path, subset_data, sync)
 
 
 def read_kitti_flow(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

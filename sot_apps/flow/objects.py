@@ -24,7 +24,6 @@ from ..errors import InputError
 from ..io.object_track import ObjectTrack
 from ..io.sequence import Sequence
 from ..objects.meshes import Mesh, box_mesh, mesh_from_points, voxel_downsample_means
-from ..objects.selection import DEFAULT_SELECTION
 from ..objects.shapes import ShapeParams, box_capture_time, object_points_by_frame
 from ..objects.trajectory import CAMERA_EXTRAPOLATION_NS, EndMode, Trajectory
 
@@ -189,6 +188,8 @@ def objects_from_annotations(seq: Sequence, track_ids: list[str] | None = None, 
              for tid in ids}
     boxes = {tid: tb for tid, tb in boxes.items() if len(tb)}
     if moving_only:
+        from ..objects.selection import DEFAULT_SELECTION
+
         boxes = {tid: tb for tid, tb in boxes.items()
                  if DEFAULT_SELECTION.track_motion(tracks[tid], seq.timestamps_ns).moving}
     params = ShapeParams(ground_clearance=ground_clearance, capture_time=box_time == "points", end="extrapolate",

@@ -16,7 +16,6 @@ import errno
 import io
 import json
 import os
-import secrets
 import shutil
 import sys
 import tempfile
@@ -101,7 +100,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         # The name is ours before the file exists, so a Ctrl-C at any point (the signal may be taken by any
         # thread, so masking it here would not be enough) leaves nothing behind: the except below removes it.
         for _ in range(100):
-            tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp"
+            tmp = path.parent / f".{path.name}.{os.urandom(4).hex()}.tmp"
             try:
                 os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
                 break
@@ -164,16 +163,20 @@ def remove_stale_temporaries(root: str | Path) -> list[Path]:
     return removed
 
 
-def write_bytes(path: str | Path, data: bytes) -> None:
+def write_bytes(path: str | Path, data: bytes, sync: bool = True) -> None:
+    """Write ``data`` atomically. ``sync``: the data reaches the disk (fsync) before the rename; without it the file
+    is still whole or absent for every reader (a killed process leaves nothing half-written), but a power cut may
+    leave it empty: for outputs whose completeness is checked on a rerun (``sot-apps flow``'s pairs)."""
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as handle:
             handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
+            if sync:
+                handle.flush()
+                os.fsync(handle.fileno())
 
 
-def write_text(path: str | Path, text: str) -> None:
-    write_bytes(path, text.encode("utf-8"))
+def write_text(path: str | Path, text: str, sync: bool = True) -> None:
+    write_bytes(path, text.encode("utf-8"), sync)
 
 
 def _json_default(value: Any) -> Any:
@@ -186,10 +189,11 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def write_json(path: str | Path, data: Any, indent: int | None = 1) -> None:
-    """Write JSON atomically (numpy arrays and scalars are converted; NaN is refused)."""
+def write_json(path: str | Path, data: Any, indent: int | None = 1, sync: bool = True) -> None:
+    """Write JSON atomically (numpy arrays and scalars are converted; NaN is refused; ``sync``: as
+    :func:`write_bytes`)."""
     text = json.dumps(data, indent=indent, default=_json_default, allow_nan=False)
-    write_text(path, text + "\n")
+    write_text(path, text + "\n", sync)
 
 
 def write_npz(path: str | Path, compressed: bool = True, level: int | None = None, **arrays: np.ndarray) -> None:

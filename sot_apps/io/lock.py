@@ -24,7 +24,6 @@ import datetime
 import fcntl
 import os
 import shlex
-import socket
 import sys
 from pathlib import Path
 
@@ -87,7 +86,7 @@ class OutputLock:
         stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
         try:
             os.ftruncate(fd, 0)
-            os.pwrite(fd, os.fsencode(f"pid {os.getpid()} on {socket.gethostname()}, started {stamp}: "
+            os.pwrite(fd, os.fsencode(f"pid {os.getpid()} on {os.uname().nodename}, started {stamp}: "
                                       f"{_command_line()}\n"), 0)   # fsencode: a non-UTF-8 path argument
         except OSError as exc:  # e.g. a full disk: the command could not write its outputs either
             self._release(fd, created)

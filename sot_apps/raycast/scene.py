@@ -23,7 +23,6 @@ the GIL), forked processes with embreex (which holds it).
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 from concurrent.futures import ThreadPoolExecutor
 
@@ -161,6 +160,8 @@ def cast_rays(scene: RaycastScene, origins: np.ndarray, directions: np.ndarray, 
             parts = list(pool.map(lambda s: scene.cast(origins if origins.ndim == 1 else origins[s[0]:s[1]],
                                                        directions[s[0]:s[1]]), spans))
         return RayHits.concatenate(parts)
+    import multiprocessing as mp  # only here (~20 ms of start-up for every caster that never forks)
+
     if "fork" not in mp.get_all_start_methods():
         return scene.cast(origins, directions)
     global _WORKER_ARGS, _WORKER_SCENE

@@ -3,6 +3,7 @@ OS takes works (a directory named with a non-UTF-8 byte), and a pair's files are
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -179,6 +180,47 @@ def test_vis_is_written_only_when_asked(tiny_dir, tmp_path):
     assert main(["flow", *args, "--out", str(tmp_path / "b"), "--vis"]) == 0
     assert sorted(p.name for p in (tmp_path / "b" / "front_camera" / "vis").iterdir()) == [
         "000000_flow.png", "000000_overlay.jpg", "000001_flow.png", "000001_overlay.jpg"]
+
+
+def test_a_rerun_computes_again_the_pairs_whose_files_a_power_cut_emptied(tiny_dir, tmp_path):
+    """The pairs' files are not synced one by one: after a power cut a renamed file may be empty or cut short on
+    the disk. A rerun checks each finished pair's record and files and computes again the pairs that are not whole
+    (the same bytes as before); a whole pair is left as it is, and stats.json lists every pair."""
+    from sot_apps.cli.main import main
+
+    args = ["flow", str(tiny_dir), "--from-annotations", "--camera", "front_camera", "--pairs", "0:4", "--quiet",
+            "--out", str(tmp_path)]
+    assert main(args) == 0
+    root = tmp_path / "front_camera"
+    files = sorted(p for p in root.rglob("*") if p.is_file() and p.parent.name != "front_camera")
+    assert len(files) == 4 * 5
+
+    def contents():   # the records without their compute time
+        return {p: {k: v for k, v in json.loads(p.read_bytes()).items() if k != "time_ms"} if p.suffix == ".json"
+                else p.read_bytes() for p in files}
+
+    before = contents()
+    damaged = [root / "flow_noc" / "000000.png", root / "flo" / "000001.flo", root / "pairs" / "000002.json"]
+    for path, keep in zip(damaged, (0, 12, 0), strict=True):
+        path.write_bytes(path.read_bytes()[:keep])
+    cut = root / "instances" / "000003.png"
+    cut.write_bytes(cut.read_bytes()[:-1])   # cut short by one byte: no whole IEND chunk
+    untouched = root / "flo" / "000001.flo"
+    stamps = {p: p.stat().st_mtime_ns for p in files if p.name.startswith("00000")}
+    os.utime(root / "flow_occ" / "000000.png", ns=(1, 1))   # a file of a damaged pair: rewritten on the rerun
+    assert main(args) == 0
+    assert contents() == before
+    assert (root / "flow_occ" / "000000.png").stat().st_mtime_ns != 1
+    assert untouched.stat().st_mtime_ns != stamps[untouched]   # pair 1 was computed again
+    stats = json.loads((root / "stats.json").read_text())
+    assert [r["frame"] for r in stats["pairs"]] == [0, 1, 2, 3]
+    assert not [p for p in root.rglob("*.tmp")]
+
+    # a whole pair is skipped: none of its files is written again
+    whole = [p for p in files if p.stem == "000001"]
+    mtimes = {p: p.stat().st_mtime_ns for p in whole}
+    assert main(args) == 0
+    assert {p: p.stat().st_mtime_ns for p in whole} == mtimes
 
 
 def test_pair_writer_records_follow_their_files_and_errors_propagate(tmp_path):

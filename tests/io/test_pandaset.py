@@ -141,3 +141,21 @@ def test_pose_quaternions_match_scipy_bit_for_bit(pandaset_root):
         matrix = pose_to_matrix(pose, files[0], "pose")
         assert np.array_equal(matrix[:3, :3], truth)
         assert matrix[:3, 3].tolist() == [float(pose["position"][k]) for k in ("x", "y", "z")]
+
+
+def test_cuboid_rows_are_csv_dictreaders_rows(pandaset_root, tmp_path):
+    """The cuboid CSVs are read in one loop (not csv.DictReader's per-row method): the same rows, blank rows
+    skipped, missing values None and extra ones under None, for the real files and for ragged ones."""
+    import csv
+
+    from sot_apps.io.pandaset import _cuboid_rows
+
+    files = sorted((pandaset_root / "annotations" / "cuboids").glob("*.csv"))
+    ragged = tmp_path / "00.csv"
+    ragged.write_text('uuid,label,yaw\r\na,"Car, big",0.5\n\nb,Bus\nc,Car,1,extra,more\n', encoding="utf-8")
+    empty = tmp_path / "01.csv"
+    empty.write_text("", encoding="utf-8")
+    for path in [*files, ragged, empty]:
+        with open(path, newline="", encoding="utf-8") as handle:
+            assert _cuboid_rows(path) == list(csv.DictReader(handle)), path
+    assert len(files) > 50
