@@ -45,7 +45,10 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    the online states; with a ``source``, each frame's points also gathered around the window's box). The second
    solution is kept when its boxes hold more than ``window_start_margin`` × the points the first one's hold
    (summed over frames, on the same points); a start from the window alone is no good where the online offset
-   is one rigid shift, which the gauge removes but the window, part-corrected, no longer is.
+   is one rigid shift, which the gauge removes but the window, part-corrected, no longer is. Given the points and
+   no source, the window pass is skipped when the second solution could never be kept: the first one's boxes hold
+   so many points that ``window_start_margin`` x that is at least an upper bound of what any boxes hold
+   (:func:`_window_cannot_win`; the result is the same, without the pass's cost).
 7. gauge from the window (``gauge_window`` = M > 0, with ``window_start``; off by default): the regauge of step 4
    moves every frame by frame 0's own registration error (frame 0 pins the gauge alone; on a sparse start that is
    centimetres, on every frame). The window holds frame 0 at the start box and registers the next frames to it, so
