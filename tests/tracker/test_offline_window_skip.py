@@ -23,19 +23,15 @@ def _online(held_off: range, in_box: bool = False) -> tuple[TrackResult, list[np
     ``in_box``: only those in the true box, so that the solve's boxes hold nearly all of them)."""
     boxes = _straight(14, (8.0, 6.0), 0.0, 1.0)
     seq = _scene(boxes, 0, ground_centre=(15.0, 6.0), ground_half=11.0)
-    rng = np.random.default_rng(0)
+    size = np.array(boxes[0].size)
+    states = np.array([b.to_array()[:4] for b in boxes])
+    noise = np.random.default_rng(0).normal(0.0, [0.05, 0.05, 0.0, 0.01], states.shape)
+    states[1:] += noise[1:]
+    states[list(held_off), 0] -= 2.9
     config = get_preset("full", seed=0)
-    estimates = []
-    for k, truth in enumerate(boxes):
-        state = truth.to_array()[:4].copy()
-        if k > 0:
-            state[:2] += rng.normal(0.0, 0.05, 2)
-            state[3] += rng.normal(0.0, 0.01)
-        if k in held_off:
-            state[0] -= 2.9
-        estimates.append(FrameEstimate(k, State.from_array(state), Box(*state, *truth.size), 50, 1.0, (), 1.0,
-                                       np.zeros((0, 3))))
-    online = TrackResult(estimates, np.array(boxes[0].size), np.zeros((0, 3)), config)
+    estimates = [FrameEstimate(k, State.from_array(x), Box(*x, *size), 50, 1.0, (), 1.0, np.zeros((0, 3)))
+                 for k, x in enumerate(states)]
+    online = TrackResult(estimates, size, np.zeros((0, 3)), config)
     points = gather_frame_points(seq, online, config, config.refinement.offline)
     if in_box:
         points = [p[points_in_box(p, truth, 1.0)] for p, truth in zip(points, boxes, strict=True)]
