@@ -45,7 +45,10 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    the online states; with a ``source``, each frame's points also gathered around the window's box). The second
    solution is kept when its boxes hold more than ``window_start_margin`` × the points the first one's hold
    (summed over frames, on the same points); a start from the window alone is no good where the online offset
-   is one rigid shift, which the gauge removes but the window, part-corrected, no longer is.
+   is one rigid shift, which the gauge removes but the window, part-corrected, no longer is. Given the points and
+   no source, the window pass is skipped when the second solution could never be kept: the first one's boxes hold
+   so many points that ``window_start_margin`` x that is at least an upper bound of what any boxes hold
+   (:func:`_window_cannot_win`; the result is the same, without the pass's cost).
 7. gauge from the window (``gauge_window`` = M > 0, with ``window_start``; off by default): the regauge of step 4
    moves every frame by frame 0's own registration error (frame 0 pins the gauge alone; on a sparse start that is
    centimetres, on every frame). The window holds frame 0 at the start box and registers the next frames to it, so
@@ -752,6 +755,27 @@ def _support(points: list[np.ndarray], states: np.ndarray, size: np.ndarray) -> 
     return int(sum(points_in_box(p, _box(s, size), 1.0).sum() for p, s in zip(points, states, strict=True) if len(p)))
 
 
+def _support_bound(points: list[np.ndarray], height: float) -> int:
+    """An upper bound of :func:`_support` for ANY states (boxes of height ``height``): per frame, the most of its
+    points whose z lie within ``height`` (+1e-9 m for rounding) of each other, which a level box holds at most."""
+    bound = 0
+    for p in points:
+        if len(p):
+            z = np.sort(p[:, 2])
+            bound += int(np.max(np.searchsorted(z, z + (height + 1e-9), side="right") - np.arange(len(z))))
+    return bound
+
+
+def _window_cannot_win(points: list[np.ndarray], states: np.ndarray, size: np.ndarray, params: OfflineParams) -> bool:
+    """Whether step 6 cannot change the result on these points whatever the window pass gives: the solve from the
+    online states holds so many of them that no states' boxes hold ``window_start_margin`` x as many (the window
+    pass, the most expensive part of the solve, is then not run; ``gauge_window`` needs it: never skipped)."""
+    if params.gauge_window > 0:
+        return False
+    held = _support(points, states, size)
+    return params.window_start_margin * held >= _support_bound(points, float(size[2]))
+
+
 def _window_start(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
                   points: list[np.ndarray], online: np.ndarray, window: np.ndarray, states: np.ndarray,
                   shape: np.ndarray | None
@@ -794,7 +818,9 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
         points = gather_frame_points(source, result, config, params)
     online = np.array([e.state.to_array() for e in result.estimates])
     states, shape = refine_states(points, online, np.asarray(result.size), params, seed=config.seed)
-    if params.window_start > 0 and len(online) > 2:
+    # (without a source the second solve sees these points only: when it cannot win, its window is not run)
+    if (params.window_start > 0 and len(online) > 2
+            and not (source is None and _window_cannot_win(points, states, np.asarray(result.size), params))):
         from .fixed_lag import window_states
 
         window = window_states(points, result, params.window_start, config)
