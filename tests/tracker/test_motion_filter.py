@@ -183,7 +183,7 @@ def _ground(n: int, z: float, rng: np.random.Generator) -> np.ndarray:
 @pytest.mark.parametrize("road_points", [0, 200])
 def test_a_road_plane_through_few_ground_points_holds_the_height_weakly(road_points):
     """height.road_points: the road seen through 25 points (a far road) pulls the box less than the road seen
-    through 300 (a near one), and the near road is the same prior with or without it."""
+    through 300 (a near one); the near road holds the box in either case, and without the setting both pull alike."""
     from tracker.strategies.height import FilterHeight, road_plane
 
     rng = np.random.default_rng(0)

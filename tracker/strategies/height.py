@@ -17,8 +17,7 @@ from ..geometry import Box
 from ..motion_filter import HeightFilter
 
 __all__ = ["HeightModel", "IcpHeight", "FixedHeight", "GroundHeight", "FilterHeight", "road_height",
-           "road_plane",
-           "choose_height"]
+           "road_plane", "choose_height"]
 
 
 def road_height(ground: np.ndarray, centre_xy: np.ndarray, box: Box, min_points: int = 20) -> float | None:
@@ -107,7 +106,7 @@ class FilterHeight:
         if plane is not None:
             height = plane[0]
             if self.params.road_points > 0:  # a plane through few ground points (a far road) holds z weakly
-                sigma = self.params.road_sigma * float(np.sqrt(max(1.0, self.params.road_points / plane[1])))
+                sigma = self.params.road_sigma * float(np.sqrt(max(1.0, self.params.road_points / max(plane[1], 1))))
         x[2] = self.filter.update(prev.z + x[2] if fit else None, height, sigma) - prev.z
         return x
 
