@@ -243,7 +243,8 @@ class HeightConfig:
     the road; "fixed" dz = 0; "filter" a slow estimate from the registration's z with the road as a prior.
     ``road`` ("ground"/"filter"): the road under the box from "local" per-cell planes (fitted for this even when
     the ground remover is "sweep"), from the points the ground "removal" took, or "none"; ``road_max_range`` > 0:
-    none for a box farther than that from the sensor."""
+    none for a box farther than that from the sensor; ``road_points`` > 0 ("filter"): a road plane through fewer
+    ground points than that is a weaker prior."""
 
     model: str = "icp"
     road: str = "local"
@@ -253,10 +254,14 @@ class HeightConfig:
     offset_gain: float = 0.05            # "filter": the height above the road follows the estimate this slowly
     road_max_range: float = 0.0          # > 0: no road for a box farther than this from the sensor (m, horizontal):
                                          # a plane through the sparse ground around a far box is off by several cm
+    road_points: int = 0                 # > 0, "filter": the road prior's sigma x sqrt(road_points / n) for a plane
+                                         # through n < road_points ground points (a far road holds z weakly; 0: off)
 
     def __post_init__(self) -> None:
         _choice("height.model", self.model, ("icp", "ground", "fixed", "filter"))
         _choice("height.road", self.road, ("local", "removal", "none"))
+        if self.road_points < 0:
+            raise ValueError(f"height.road_points: must be >= 0, got {self.road_points}")
 
 
 @dataclass(frozen=True)

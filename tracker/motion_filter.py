@@ -175,11 +175,12 @@ class HeightFilter:
         self.z += gain * (value - self.z)
         self.var *= 1.0 - gain
 
-    def update(self, fit_z: float | None, road: float | None) -> float:
-        """One frame: predict, then fuse the fit's z and the road prior; returns the new z."""
+    def update(self, fit_z: float | None, road: float | None, road_sigma: float | None = None) -> float:
+        """One frame: predict, then fuse the fit's z and the road prior (``road_sigma``: this frame's, else the
+        filter's); returns the new z."""
         self.var += self.drift_sigma ** 2
         if road is not None and self.offset is not None:
-            self._measure(road + self.offset, self.road_sigma)
+            self._measure(road + self.offset, self.road_sigma if road_sigma is None else road_sigma)
         if fit_z is not None and np.isfinite(fit_z):
             self._measure(float(fit_z), self.fit_sigma)
         if road is not None:

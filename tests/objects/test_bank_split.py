@@ -79,3 +79,30 @@ def test_nuscenes_demo_truck_is_a_bank_vehicle(tmp_path):
     entries, skipped = entries_from_annotations(tmp_path / "bank", seq, [truck], mirror=True, min_points=100)
     assert not skipped and entries[0].point_count > 400
     _sane(entries[0], tmp_path / "bank")
+
+
+# The long vehicles (trucks, a bus) of each part (docs/benchmark.md, "The selection set"): a choosing set can
+# show a long-vehicle failure only if the choosing part has long vehicles, and the confirming part keeps its own.
+_CONFIRM_LONG = (("7fab2350-7eaf-3b7e-a39d-6937a4c1bede", "b87c7491-db0b-49e1-9fb8-ecc52f13184e"),  # box truck
+                 ("adcf7d18-0510-35b0-a2fa-b4cea13a6d76", "8dbb0a29-cbb9-4154-8180-629090213612"),  # truck
+                 ("adcf7d18-0510-35b0-a2fa-b4cea13a6d76", "d1cc41fe-e0d6-4788-859e-a57b7c084584"),  # bus
+                 ("scene-0061", "i18"))                                                              # truck
+
+
+def test_long_vehicles_of_the_confirming_part_stay_there():
+    assert all(bank_split(_entry(f"e{i}", seq, track)) == "confirm" for i, (seq, track) in enumerate(_CONFIRM_LONG))
+
+
+def test_real_long_vehicles_of_the_choosing_part(tmp_path):
+    """AV2's sparse bus c48dca5e, cut from its real scan, chooses (by its vehicle's hash), as PandaSet's trucks do
+    (the tuned-on sequence); both are longer than any car of the part (<= 4.8 m)."""
+    seq = open_sequence(AV2_LOG_B)
+    entries, skipped = entries_from_annotations(tmp_path, seq, [seq.resolve_track_id("c48dca5e")], mirror=True,
+                                                min_points=40)
+    assert not skipped and len(entries) == 1
+    bus = entries[0]
+    assert bank_split(bus) == "choose" and bus.label == "BUS"
+    assert 11.0 < bus.box_size()[0] < 12.5 and bus.point_count >= 40
+    trucks = ("49914840-b88c-4c45-9c07-d3271197b566", "bdc0f646-0d15-408a-8fcf-274688625e7a",
+              "9c698ef3-ce67-44d6-936b-631812d83343", "7ed5e06e-628a-475d-b3ed-6031f8095879")
+    assert all(bank_split(_entry(f"t{i}", "pandaset_002", t)) == "choose" for i, t in enumerate(trucks))

@@ -171,3 +171,36 @@ def test_a_gap_of_four_frames_is_predicted_with_the_elapsed_time(scene):
     # 0.41 m in all: docs/tracker.md "A rear view")
     assert abs(along) < 0.1, offset
     assert np.hypot(*offset) < 0.3, offset
+
+
+def _ground(n: int, z: float, rng: np.random.Generator) -> np.ndarray:
+    """``n`` flat road points at height ``z`` in the 3 m ring around a 4.5 x 1.8 m box at the origin."""
+    xy = rng.uniform([-5.0, -3.8], [5.0, 3.8], size=(4 * n, 2))
+    ring = xy[(np.abs(xy[:, 0]) > 2.25) | (np.abs(xy[:, 1]) > 0.9)][:n]
+    return np.column_stack([ring, np.full(len(ring), z)])
+
+
+@pytest.mark.parametrize("road_points", [0, 200])
+def test_a_road_plane_through_few_ground_points_holds_the_height_weakly(road_points):
+    """height.road_points: the road seen through 25 points (a far road) pulls the box less than the road seen
+    through 300 (a near one); the near road holds the box in either case, and without the setting both pull alike."""
+    from tracker.strategies.height import FilterHeight, road_plane
+
+    rng = np.random.default_rng(0)
+    params = get_preset("full", **{"height.road_points": road_points}).height
+    box = Box(0.0, 0.0, 0.8, 0.0, 4.5, 1.8, 1.5)
+    dense, sparse = _ground(300, 0.0, rng), _ground(25, 0.1, rng)
+    assert road_plane(sparse, np.zeros(2), box)[1] == 25
+    pulled = {}
+    for name, road in (("dense", _ground(300, 0.1, rng)), ("sparse", sparse)):
+        height = FilterHeight(params)
+        height.start(box, dense)                       # the start: 0.8 m above a road at 0
+        prev = box
+        for _ in range(20):                            # the fit holds z; the road reads 0.1 m higher
+            prev = Box(prev.x, prev.y, prev.z + height.motion(np.zeros(4), prev, road, True)[2], 0.0, 4.5, 1.8, 1.5)
+        pulled[name] = prev.z - 0.8
+    assert 0.05 < pulled["dense"] < 0.1                # the dense road is followed in either case
+    if road_points:
+        assert pulled["sparse"] < 0.75 * pulled["dense"]   # sigma x sqrt(200 / 25): the fit holds more
+    else:
+        assert pulled["sparse"] == pytest.approx(pulled["dense"], abs=0.01)

@@ -2,7 +2,8 @@
 
 :class:`IcpHeight`: dz from the loss like dx, dy. :class:`FixedHeight`: dz = 0. :class:`GroundHeight`: the box keeps
 its start height above the road under it. :class:`FilterHeight`: a slow filter of the registration's z with the
-road as a prior (tracker/motion_filter.py). The road is a plane through the road points around the box.
+road as a prior (tracker/motion_filter.py; with ``height.road_points`` the prior's sigma grows as the plane's
+ground points fall below that count). The road is a plane through the road points around the box.
 """
 
 from __future__ import annotations
@@ -16,12 +17,19 @@ from ..geometry import Box
 from ..motion_filter import HeightFilter
 
 __all__ = ["HeightModel", "IcpHeight", "FixedHeight", "GroundHeight", "FilterHeight", "road_height",
-           "choose_height"]
+           "road_plane", "choose_height"]
 
 
 def road_height(ground: np.ndarray, centre_xy: np.ndarray, box: Box, min_points: int = 20) -> float | None:
     """Height of the road under ``centre_xy``: a plane z = a x + b y + c through the ground points around the
     box (outside its footprint, within 3 m), refitted without outliers; None with too few points."""
+    plane = road_plane(ground, centre_xy, box, min_points)
+    return None if plane is None else plane[0]
+
+
+def road_plane(ground: np.ndarray, centre_xy: np.ndarray, box: Box, min_points: int = 20
+               ) -> tuple[float, int] | None:
+    """:func:`road_height` and the number of ground points the plane was fitted through."""
     if len(ground) < min_points:
         return None
     d = ground[:, :2] - centre_xy
@@ -40,7 +48,7 @@ def road_height(ground: np.ndarray, centre_xy: np.ndarray, box: Box, min_points:
         residual = near[:, 0:2] - centre_xy
         pred = residual @ coef[:2] + coef[2]
         keep = np.abs(near[:, 2] - pred) < 0.15
-    return float(coef[2])
+    return float(coef[2]), int(keep.sum())
 
 
 class HeightModel(Protocol):
@@ -93,8 +101,13 @@ class FilterHeight:
 
     def motion(self, x: np.ndarray, prev: Box, road: np.ndarray, fit: bool) -> np.ndarray:
         x = x.copy()
-        height = road_height(road, prev.center[:2] + x[:2], prev)
-        x[2] = self.filter.update(prev.z + x[2] if fit else None, height) - prev.z
+        plane = road_plane(road, prev.center[:2] + x[:2], prev)
+        height, sigma = None, None
+        if plane is not None:
+            height = plane[0]
+            if self.params.road_points > 0:  # a plane through few ground points (a far road) holds z weakly
+                sigma = self.params.road_sigma * float(np.sqrt(max(1.0, self.params.road_points / max(plane[1], 1))))
+        x[2] = self.filter.update(prev.z + x[2] if fit else None, height, sigma) - prev.z
         return x
 
 
