@@ -309,6 +309,8 @@ class ReacquireConfig:
     growth: float = 4.0                  # m/s: ... grows by this per second since the support was lost
     lateral_growth: float = 1.5          # m/s: a lost track's candidate is at most reach + this x lost time across
                                          # its predicted path (a hidden vehicle keeps its lane or changes it slowly)
+    centre_in_reach: bool = False        # a lost track's candidate's centre is within reach + growth x lost time of
+                                         # the predicted box centre, not only some of its points (off in full)
     max_speed: float = 15.0              # m/s: a lost start's region reaches this far ahead per second (a third behind)
     max_reach: float = 45.0              # m: the region grows no further
     rise: float = 0.5                    # m: the region is this much taller each way than the box

@@ -3,14 +3,17 @@
 Per tracklet (:func:`tracklet_figures`, frame indices relative to the tracklet's first frame, as the list
 records them):
 
-- ``relocked`` (``hidden``): at some frame from the re-appearing frame to 3 frames after it, the tracker's
-  box overlaps the truth with 3D IoU >= 0.3 (:data:`LOCK_IOU`);
+- ``relocked`` (``hidden``): the track is locked within 3 frames of re-appearing and stays locked: in the
+  window from the re-appearing frame to 3 frames after it (cut at the tracklet's end), the tracker's box overlaps
+  the truth with 3D IoU >= 0.3 (:data:`LOCK_IOU`) at some frame and at every later frame of the window (a box
+  that touches the object and is captured by something else before the window ends is not re-locked);
+- ``relocked_any`` (``hidden``): the looser count, IoU >= 0.3 at any frame of that window;
 - ``found_near`` (``far_approach`` that comes within 30 m): the box overlaps the truth with IoU >= 0.3 at
   the first frame within 30 m;
 - ``heading_err_last_deg`` (``oblique``): |heading error| at the last frame, in degrees (0-180).
 
-Pooled over tracklets (:func:`pool_figures`): ``relock_share`` and ``found_near_share`` (fractions of the
-tracklets that have the figure) and ``heading_err_last_med_deg`` (the median).
+Pooled over tracklets (:func:`pool_figures`): ``relock_share``, ``relock_any_share`` and ``found_near_share``
+(fractions of the tracklets that have the figure) and ``heading_err_last_med_deg`` (the median).
 """
 
 from __future__ import annotations
@@ -46,9 +49,11 @@ def tracklet_figures(extra: Mapping, ious: np.ndarray, predicted_headings: Seque
     if extra.get("reappear_frame") is not None:
         window = [_iou_at(ious, k) for k in range(int(extra["reappear_frame"]),
                                                   int(extra["reappear_frame"]) + RELOCK_WITHIN + 1)]
-        window = [v for v in window if np.isfinite(v)]
-        if window:
-            out["relocked"] = float(max(window) >= LOCK_IOU)
+        locked = np.array([v >= LOCK_IOU for v in window if np.isfinite(v)])
+        if locked.size:
+            first = int(np.argmax(locked))                 # the first locked frame of the window (0 if none)
+            out["relocked"] = float(locked.any() and locked[first:].all())
+            out["relocked_any"] = float(locked.any())
     if extra.get("near_frame") is not None:
         v = _iou_at(ious, int(extra["near_frame"]))
         if np.isfinite(v):
@@ -62,7 +67,8 @@ def pool_figures(figures: Iterable[Mapping[str, float]]) -> dict[str, float]:
     """Shares and the median heading error over tracklets (only the figures some tracklet has)."""
     figures = list(figures)
     out: dict[str, float] = {}
-    for name, pooled in (("relocked", "relock_share"), ("found_near", "found_near_share")):
+    for name, pooled in (("relocked", "relock_share"), ("relocked_any", "relock_any_share"),
+                         ("found_near", "found_near_share")):
         values = [f[name] for f in figures if name in f]
         if values:
             out[pooled] = float(np.mean(values))

@@ -21,6 +21,27 @@ def test_relock_counts_the_reappearing_frame_and_three_after():
     assert tracklet_figures(hidden, ious, [0.0], [0.0])["relocked"] == 0.0
 
 
+def test_relock_must_hold_from_the_first_locked_frame_to_the_end_of_the_window():
+    hidden = {"profile": "hidden", "reappear_frame": 10}
+    ious = np.zeros(19)               # frames 1..19; the window is frames 10..13
+    ious[11 - 1:] = 0.6               # locked at frame 11 and held after: re-locked both ways
+    figures = tracklet_figures(hidden, ious, [0.0], [0.0])
+    assert figures["relocked"] == 1.0 and figures["relocked_any"] == 1.0
+    ious[12 - 1] = 0.1                # captured by something else at frame 12, back at 13: not held
+    figures = tracklet_figures(hidden, ious, [0.0], [0.0])
+    assert figures["relocked"] == 0.0 and figures["relocked_any"] == 1.0
+    ious[:] = 0.0
+    ious[10 - 1] = 0.5                # touched at the re-appearing frame only, then lost
+    figures = tracklet_figures(hidden, ious, [0.0], [0.0])
+    assert figures["relocked"] == 0.0 and figures["relocked_any"] == 1.0
+    ious[:] = 0.0
+    ious[17 - 1] = 0.5                # a window cut by the tracklet's end: frames 16..17 of frames 0..17
+    short = tracklet_figures({"profile": "hidden", "reappear_frame": 16}, ious[:17], [0.0], [0.0])
+    assert short["relocked"] == 1.0
+    pooled = pool_figures([figures, short])
+    assert pooled["relock_share"] == pytest.approx(0.5) and pooled["relock_any_share"] == pytest.approx(1.0)
+
+
 def test_found_near_and_heading_error_at_the_last_frame():
     ious = np.full(9, 0.1)
     ious[4 - 1] = 0.31

@@ -178,6 +178,28 @@ def test_a_car_the_hidden_target_passed_does_not_capture_the_track(occluder_velo
     assert _iou(result, boxes)[hidden.stop + 2:].min() > 0.7             # held again once it re-appears
 
 
+@pytest.mark.parametrize("centre_in_reach", [False, True])
+def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(centre_in_reach):
+    """The target drives at 1 m/s (0.1 m per frame) toward a car parked 9 m ahead in its lane and is hidden for 12
+    frames. The search region grows around the prediction (reach + growth x lost time) and the parked car's rear
+    comes into it: its two-frame motion (0 m/s) is within the velocity gate of the predicted 1 m/s, it is ahead
+    (on the path), and the empty coasting box holds none of its points, so it captures the track. Its centre is
+    further from the prediction (7 m) than the object can have strayed in that time; with
+    ``reacquire.centre_in_reach`` the candidate's centre must lie within that bound, the track coasts on and holds
+    the target as it re-appears."""
+    boxes = _straight(30, (10.0, 4.0), 0.0, 0.1)
+    parked = [Box(19.0, 4.0, 0.0, 0.0, *BOX_SIZE)] * 30
+    hidden = range(8, 20)
+    seq = _scene(boxes, 0, hidden=hidden, others=(parked,), ground_half=24.0)
+    result = _track(seq, **REACQUIRE, **{"reacquire.centre_in_reach": centre_in_reach})
+    iou = _iou(result, boxes)
+    relocked = [k for k, e in enumerate(result.estimates) if "reacquired" in e.flags]
+    if centre_in_reach:
+        assert not relocked and iou[1:hidden.stop].min() > 0.7 and iou[hidden.stop + 1:].min() > 0.7
+    else:
+        assert relocked and relocked[0] < hidden.stop and iou[hidden.stop:].max() < 0.1   # on the parked car
+
+
 def test_a_far_sparse_start_that_approaches_is_found_before_it_is_within_30_m():
     """Out of the sensor's reach (no points beyond 50 m) at the start, 58 m away, closing at 8.6 m/s head-on; then
     a few points that grow as it comes near. A lost start: the search along the start box's heading finds it."""

@@ -24,7 +24,8 @@ one of the previous frame's candidates in position, size and motion: for a lost 
 ``velocity_gate`` of the predicted one and a place on the object's path (not more than ``reach`` behind the box
 of the last supported frame along its heading, the way it moves: a hidden vehicle does not end up behind where
 it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
-the predicted path: a vehicle a lane over is another one); for a lost start a velocity along the start box's
+the predicted path: a vehicle a lane over is another one; with ``centre_in_reach`` (off in full) its centre within
+``reach`` + ``growth`` x the time since of the predicted box centre); for a lost start a velocity along the start box's
 heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance
 travelled from the start box since the start.
 """
@@ -182,8 +183,14 @@ class ClusterReacquire(Reacquire):
             return None
         # nor far across its predicted path: lanes change at a metre or two per second (a candidate a lane over is
         # a vehicle beside it, e.g. the one that hid it, driving alongside)
+        lost_s = max(now.time_s - self._held_s, 0.0)
         across = abs(float((now.centre - box.center[:2]) @ np.array([-axis[1], axis[0]])))
-        if across > self.c.reach + self.c.lateral_growth * max(now.time_s - self._held_s, 0.0):
+        if across > self.c.reach + self.c.lateral_growth * lost_s:
+            return None
+        # nor further from the prediction than the object can have strayed from it since (``centre_in_reach``: the
+        # region's own bound on the candidate's centre; a parked car at the region's edge reaches in with its points)
+        if self.c.centre_in_reach and float(np.linalg.norm(now.centre - box.center[:2])) > min(
+                self.c.reach + self.c.growth * lost_s, self.c.max_reach):
             return None
         return Relock(now.centre, predicted.copy())
 
