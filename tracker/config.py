@@ -389,8 +389,6 @@ class OfflineParams:
     window_start_moved: float = 0.5     # ... only when the window moved some centre farther than this (m) from the
                                         # online one
     window_start_margin: float = 1.05   # ... kept when its boxes hold more than this x the first solve's points
-    window_start_sigmas: float = 0.0    # ... and more than this x sqrt(the first's count) points more (0: no such
-                                        # test; a count differs by about its square root by chance)
     gauge_window: int = 0               # > 0 (offline, with window_start): the trajectory is moved by the mean object-
                                         # frame offset from its states to the window pass's over frames 1..this
     gauge_window_max: float = 0.3       # ... only when that offset's centre part is under this (m)

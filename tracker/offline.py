@@ -44,7 +44,6 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    ``window_start_moved`` from the online one, steps 2–5 run again from its states (the weak pull still toward
    the online states; with a ``source``, each frame's points also gathered around the window's box). The second
    solution is kept when its boxes hold more than ``window_start_margin`` × the points the first one's hold
-   and more than ``window_start_sigmas`` × √(that count) more (a count differs by about its root by chance)
    (summed over frames, on the same points); a start from the window alone is no good where the online offset
    is one rigid shift, which the gauge removes but the window, part-corrected, no longer is.
 7. gauge from the window (``gauge_window`` = M > 0, with ``window_start``; off by default): the regauge of step 4
@@ -753,14 +752,6 @@ def _support(points: list[np.ndarray], states: np.ndarray, size: np.ndarray) -> 
     return int(sum(points_in_box(p, _box(s, size), 1.0).sum() for p, s in zip(points, states, strict=True) if len(p)))
 
 
-def keeps_second_start(held: int, held_first: int, params: OfflineParams) -> bool:
-    """Step 6's test: the second solve's boxes hold ``held`` points, the first one's ``held_first``; kept when more
-    than ``window_start_margin`` × and more than ``window_start_sigmas`` × √``held_first`` more (a count differs by
-    about its square root by chance: on a sparse track one point more is no evidence)."""
-    return bool(held > params.window_start_margin * held_first
-                and held - held_first > params.window_start_sigmas * np.sqrt(held_first))
-
-
 def _window_start(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
                   points: list[np.ndarray], online: np.ndarray, window: np.ndarray, states: np.ndarray,
                   shape: np.ndarray | None
@@ -778,7 +769,7 @@ def _window_start(source: FrameSource | None, result: TrackResult, config: Track
         around = gather_frame_points(source, moved, config, params)
         both = [np.unique(np.vstack([a, b]), axis=0) if len(b) else a for a, b in zip(points, around, strict=True)]
     second, second_shape = refine_states(both, online, size, params, seed=config.seed, initial=window)
-    if keeps_second_start(_support(both, second, size), _support(both, states, size), params):
+    if _support(both, second, size) > params.window_start_margin * _support(both, states, size):
         return second, second_shape, both
     return states, shape, points
 

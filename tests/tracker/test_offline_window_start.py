@@ -11,9 +11,7 @@ import pytest
 from test_reacquire_clusters import _iou, _scene, _straight
 
 from tracker import get_preset, refine_fixed_lag, refine_offline
-from tracker.config import OfflineParams
 from tracker.geometry import Box, State
-from tracker.offline import keeps_second_start
 from tracker.sotracker import FrameEstimate, TrackResult
 
 HELD_OFF = range(1, 12)   # frames the online pass held 2.9 m behind the car (re-locked at 12)
@@ -67,17 +65,3 @@ def test_the_second_solve_runs_only_where_the_window_moved_a_state(held_off):
     without = refine_offline(seq, on_the_car, config.updated({"refinement.offline.window_start": 0}))
     assert np.array_equal([e.box.to_array() for e in with_second.estimates],
                           [e.box.to_array() for e in without.estimates])
-
-
-def test_the_second_start_is_kept_only_on_more_points_than_chance_gives():
-    """``window_start_sigmas``: a count differs by about its square root by chance. World 2's veh_002 (dense, seed
-    0): the second solve's boxes hold 181,633 points against 179,866 (1,767 more, 4.2 roots of the count; the
-    window start is on the car after a re-lock) and is kept at margin 1.0 with 2 roots, not at the 1.05 margin; a
-    sparse oblique car: 529 against 528, one point, no evidence either way: not kept with 2 roots."""
-    params = OfflineParams
-    plain = params(window_start_margin=1.05)
-    counted = params(window_start_margin=1.0, window_start_sigmas=2.0)
-    assert not keeps_second_start(181_633, 179_866, plain) and keeps_second_start(181_633, 179_866, counted)
-    assert keeps_second_start(529, 528, params(window_start_margin=1.0))
-    assert not keeps_second_start(529, 528, counted)
-    assert keeps_second_start(528 + 47, 528, counted) and not keeps_second_start(528 + 45, 528, counted)  # 2 x 22.98
