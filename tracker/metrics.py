@@ -392,16 +392,25 @@ def voxel_downsample_centres(points: np.ndarray, voxel: float = 0.05) -> np.ndar
     if points.shape[0] == 0:
         return np.zeros((0, 3))
     keys = np.floor(points / voxel).astype(np.int64)
-    low = keys.min(axis=0)
-    span = keys.max(axis=0) - low + 1
-    if np.prod(span.astype(np.float64)) < 2.0**62:
-        # one int64 code per voxel (x-major, like a lexicographic sort of the rows): a 1D unique is fast
-        rel = keys - low
-        codes = unique_sorted((rel[:, 0] * span[1] + rel[:, 1]) * span[2] + rel[:, 2])
+    coded = _voxel_codes(keys)
+    if coded is not None:
+        codes, low, span = coded
+        codes = unique_sorted(codes)
         keys = np.stack([codes // (span[1] * span[2]), (codes // span[2]) % span[1], codes % span[2]], axis=1) + low
     else:
         keys = np.unique(keys, axis=0)
     return (keys.astype(np.float64) + 0.5) * voxel
+
+
+def _voxel_codes(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """One int64 code per row of integer voxel keys (x-major, so sorting the codes sorts the rows
+    lexicographically: a 1D unique is fast), with the keys' minimum and span; None when the span overflows."""
+    low = keys.min(axis=0)
+    span = keys.max(axis=0) - low + 1
+    if np.prod(span.astype(np.float64)) >= 2.0**62:
+        return None
+    rel = keys - low
+    return (rel[:, 0] * span[1] + rel[:, 1]) * span[2] + rel[:, 2], low, span
 
 
 def voxel_downsample_means(points: np.ndarray, voxel: float) -> np.ndarray:
@@ -411,10 +420,13 @@ def voxel_downsample_means(points: np.ndarray, voxel: float) -> np.ndarray:
     if len(points) == 0 or voxel <= 0:
         return points
     keys = np.floor(points / voxel).astype(np.int64)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    coded = _voxel_codes(keys)
+    if coded is None:
+        _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    else:  # the same voxel order; per-column bincount sums in the points' order, as np.add.at does
+        _, inverse, counts = np.unique(coded[0], return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
-    sums = np.zeros((len(counts), 3))
-    np.add.at(sums, inverse, points)
+    sums = np.stack([np.bincount(inverse, weights=points[:, c], minlength=len(counts)) for c in range(3)], axis=1)
     return sums / counts[:, None]
 
 

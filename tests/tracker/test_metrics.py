@@ -28,6 +28,7 @@ from tracker.metrics import (
     success,
     tracklet_metrics,
     voxel_downsample_centres,
+    voxel_downsample_means,
 )
 
 # --------------------------------------------------------------------------- IoU: hand-computed cases
@@ -323,6 +324,17 @@ def test_chamfer_voxelised_at_5cm():
 def test_voxel_centres_negative_coordinates():
     pts = np.array([[-0.01, -0.06, 0.0], [-0.02, -0.07, 0.04]])
     np.testing.assert_allclose(voxel_downsample_centres(pts), [[-0.025, -0.075, 0.025]])
+
+
+def test_voxel_means_are_each_voxels_point_mean_in_sorted_voxel_order():
+    """Three voxels of 5 cm (one across the origin's negative side), points given out of order: one mean each,
+    voxels sorted by (x, y, z) index."""
+    pts = np.array([[0.11, 0.01, 0.01], [-0.01, 0.02, 0.03], [0.12, 0.03, 0.02], [0.01, 0.01, 0.01],
+                    [-0.03, 0.04, 0.01], [0.02, 0.03, 0.04]])
+    want = [[-0.02, 0.03, 0.02], [0.015, 0.02, 0.025], [0.115, 0.02, 0.015]]
+    np.testing.assert_allclose(voxel_downsample_means(pts, 0.05), want, atol=1e-12)
+    far = np.vstack([pts, [[3e17, 0.0, 0.0]]])   # a span too wide for one int64 code: the row-wise path
+    np.testing.assert_allclose(voxel_downsample_means(far, 0.05)[:3], want, atol=1e-12)
 
 
 # --------------------------------------------------------------------------- difficulty and records
