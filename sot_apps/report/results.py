@@ -157,7 +157,7 @@ def _benchmark_section(data: dict[str, Any]) -> list[str]:
     groups = list(data["tables"][presets[0]]) if presets else []
     out = [f"{len(data['tracklets'])} tracklets, {seeds} tracker seed{'s' if seeds != 1 else ''}"
            f"{' (Acc: mean ± spread over seeds)' if seeds > 1 else ''}. Acc / Rob in %; ReLock3: share of hidden "
-           "tracklets found again within 3 frames of re-appearing, Found30: share of far approaches found within "
+           "tracklets re-locked within 3 frames of re-appearing and held to that window's end, Found30: share of far approaches found within "
            "30 m, Hdg@last: median heading error at the last frame.", ""]
     body = []
     for g in groups:
