@@ -42,13 +42,21 @@ def random_subset(points: np.ndarray, max_points: int, rng: np.random.Generator)
 
 def fit_rigid_2d(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """Least-squares 2D rotation angle and translation with dst ~ R(angle) @ src + t (closed form)."""
-    w = np.ones(len(src)) if weights is None else weights
-    wsum = max(float(w.sum()), 1e-12)
-    cs = (w[:, None] * src).sum(axis=0) / wsum
-    cd = (w[:, None] * dst).sum(axis=0) / wsum
-    a, b = src - cs, dst - cd
-    cos_sum = float((w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])).sum())
-    sin_sum = float((w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])).sum())
+    if weights is None:   # unit weights: the same sums without the products by 1.0 (x * 1.0 is x)
+        wsum = max(float(len(src)), 1e-12)
+        cs = _add(src, axis=0) / wsum
+        cd = _add(dst, axis=0) / wsum
+        a, b = src - cs, dst - cd
+        cos_sum = float(_add(a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
+        sin_sum = float(_add(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
+    else:
+        w = weights
+        wsum = max(float(w.sum()), 1e-12)
+        cs = (w[:, None] * src).sum(axis=0) / wsum
+        cd = (w[:, None] * dst).sum(axis=0) / wsum
+        a, b = src - cs, dst - cd
+        cos_sum = float((w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])).sum())
+        sin_sum = float((w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])).sum())
     angle = float(np.arctan2(sin_sum, cos_sum))
     c, s = np.cos(angle), np.sin(angle)
     t = cd - np.array([c * cs[0] - s * cs[1], s * cs[0] + c * cs[1]])
@@ -108,6 +116,9 @@ class RansacResult:
     iterations: int
 
 
+_add = np.add.reduce   # ndarray.sum / mean's own reduction, without their Python wrappers (the same sums)
+
+
 def _squared_bev(d: np.ndarray) -> np.ndarray:
     """``(d ** 2).sum(axis=1)`` of (N, 2) differences, bit for bit (two non-negative squares: their one sum),
     without numpy's slow reduction over a short axis."""
@@ -155,20 +166,26 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, rng: np.random.Generator, 
         samples = draws.samples(batch, b)
         batch += 1
         ps, pd = score_src[samples], score_dst[samples]                     # (b, s, 2)
-        cs, cd = ps.mean(axis=1), pd.mean(axis=1)
+        cs, cd = _add(ps, axis=1) / sample_size, _add(pd, axis=1) / sample_size   # ps.mean(axis=1), bit for bit
         a, c_ = ps - cs[:, None], pd - cd[:, None]
-        cos_sum = (a[..., 0] * c_[..., 0] + a[..., 1] * c_[..., 1]).sum(axis=1)
-        sin_sum = (a[..., 0] * c_[..., 1] - a[..., 1] * c_[..., 0]).sum(axis=1)
+        cos_sum = _add(a[..., 0] * c_[..., 0] + a[..., 1] * c_[..., 1], axis=1)
+        sin_sum = _add(a[..., 0] * c_[..., 1] - a[..., 1] * c_[..., 0], axis=1)
         ang = np.arctan2(sin_sum, cos_sum)
         co, si = np.cos(ang), np.sin(ang)
         tx = cd[:, 0] - (co * cs[:, 0] - si * cs[:, 1])
         ty = cd[:, 1] - (si * cs[:, 0] + co * cs[:, 1])
-        coefficients = np.stack([tx * co + ty * si, ty * co - tx * si, -co, -si, -tx, -ty], axis=1)  # (b, 6)
+        coefficients = np.empty((len(ang), 6))                              # (b, 6)
+        coefficients[:, 0] = tx * co + ty * si
+        coefficients[:, 1] = ty * co - tx * si
+        np.negative(co, out=coefficients[:, 2])
+        np.negative(si, out=coefficients[:, 3])
+        np.negative(tx, out=coefficients[:, 4])
+        np.negative(ty, out=coefficients[:, 5])
         squared = coefficients @ features
         squared *= 2.0
         squared += norms
         squared += (tx * tx + ty * ty)[:, None]
-        counts = (squared <= thr2).sum(axis=1)
+        counts = np.count_nonzero(squared <= thr2, axis=1)
         j = int(np.argmax(counts))
         if counts[j] > best_count:
             best_count, best_angle, best_t = int(counts[j]), float(ang[j]), np.array([tx[j], ty[j]])

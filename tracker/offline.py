@@ -251,9 +251,6 @@ def _normals(shape: np.ndarray, k: int, tree: cKDTree | None = None, rows: np.nd
     return _smallest_eigenvectors(*_neighbour_covariances(shape, k, tree or cKDTree(shape), rows))
 
 
-_COV_A, _COV_B = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2])  # xx, yy, zz, xy, xz, yz
-
-
 def _neighbour_covariances(shape: np.ndarray, k: int, tree: cKDTree, rows: np.ndarray | None = None
                            ) -> tuple[np.ndarray, ...]:
     """The six entries (xx, yy, zz, xy, xz, yz) of the covariance of each point's k nearest neighbours in
@@ -268,10 +265,14 @@ def _neighbour_covariances(shape: np.ndarray, k: int, tree: cKDTree, rows: np.nd
     for j in range(1, k):
         mean += nb[:, j]
     nb -= (mean / k)[:, None]
-    products = nb[_COV_A] * nb[_COV_B]
     sums = np.zeros((6, len(idx)))
-    for j in range(k):
-        sums += products[:, j]
+    products = np.empty((6, len(idx)))
+    for j in range(k):  # neighbour j's six products (xx, yy, zz, xy, xz, yz), added in neighbour order
+        col = nb[:, j]
+        np.multiply(col, col, out=products[:3])
+        np.multiply(col[0], col[1:], out=products[3:5])
+        np.multiply(col[1], col[2], out=products[5])
+        sums += products
     return tuple(sums / k)
 
 
@@ -357,6 +358,17 @@ def _z_trend(online_z: np.ndarray, frames: int) -> np.ndarray:
     cum = np.r_[0.0, np.cumsum(online_z)]
     smooth = (cum[np.arange(k) + m_at + 1] - cum[np.arange(k) - m_at]) / (2 * m_at + 1)
     return np.diff(smooth)
+
+
+def _d_transpose(c: np.ndarray, s: np.ndarray, lx: np.ndarray, ly: np.ndarray, v: np.ndarray,
+                 out: np.ndarray) -> np.ndarray:
+    """D'v (P, 4) of per-point vectors ``v`` (P, 3), written into ``out``: D = d(local)/d(tx, ty, tz, theta) of
+    :meth:`_Solver._data`, rows (-c, -s, 0, ly), (s, -c, 0, -lx), (0, 0, -1, 0)."""
+    out[:, 0] = -c * v[:, 0] + s * v[:, 1]
+    out[:, 1] = -s * v[:, 0] - c * v[:, 1]
+    np.negative(v[:, 2], out=out[:, 2])
+    out[:, 3] = ly * v[:, 0] - lx * v[:, 1]
+    return out
 
 
 class _Solver:
@@ -543,20 +555,23 @@ class _Solver:
         # With |n| = 1, A'A = (1 - beta^2) n n' + beta^2 I, so J'J = (1 - beta^2) (D'n)(D'n)' + beta^2 D'D
         # and J'r = D'A'r = (1 - beta) (D'n)(n.e) + beta D'r (n.r = n.e); D'D is 1 on the diagonal but
         # (theta, theta) = lx^2 + ly^2, with (tx, theta) = -c ly - s lx and (ty, theta) = c lx - s ly.
-        nj = np.stack([-c * n[:, 0] + si * n[:, 1], -si * n[:, 0] - c * n[:, 1], -n[:, 2],
-                       ly * n[:, 0] - lx * n[:, 1]], axis=1)  # D'n, (P, 4)
-        dr = np.stack([-c * r[:, 0] + si * r[:, 1], -si * r[:, 0] - c * r[:, 1], -r[:, 2],
-                       ly * r[:, 0] - lx * r[:, 1]], axis=1)  # D'r
+        nj = _d_transpose(c, si, lx, ly, n, np.empty((len(w), 4)))  # D'n, (P, 4)
         per_point = np.empty((len(w), 20))
         jtj = per_point[:, :16].reshape(-1, 4, 4)
         np.multiply(nj[:, :, None], ((1.0 - beta**2) * nj)[:, None, :], out=jtj)
         b2 = beta**2
-        jtj[:, [0, 1, 2], [0, 1, 2]] += b2
+        for a in range(3):
+            jtj[:, a, a] += b2
         jtj[:, 3, 3] += b2 * (lx**2 + ly**2)
         for a, g in ((0, -c * ly - si * lx), (1, c * lx - si * ly)):
-            jtj[:, a, 3] += b2 * g
-            jtj[:, 3, a] += b2 * g
-        per_point[:, 16:] = (1.0 - beta) * nj * ne[:, None] + beta * dr
+            g *= b2
+            jtj[:, a, 3] += g
+            jtj[:, 3, a] += g
+        gradient = per_point[:, 16:]
+        np.multiply((1.0 - beta) * nj, ne[:, None], out=gradient)
+        dr = _d_transpose(c, si, lx, ly, r, nj)  # D'r (in nj's place: nj is no longer needed)
+        dr *= beta
+        gradient += dr
         per_point *= w[:, None]
         sums = np.bincount(self.slots, weights=per_point.ravel(), minlength=20 * self.k).reshape(self.k, 20)
         return cost, sums[:, :16].reshape(self.k, 4, 4), sums[:, 16:]

@@ -14,7 +14,7 @@ from tracker.config import OfflineParams, get_preset
 from tracker.frames import LidarFrame
 from tracker.geometry import Box, make_transform, points_in_box, rotation_z, transform_points
 from tracker.ground import ground_mask
-from tracker.offline import _BANDS, _normals, _prior_band, _Solver, frame_region_points
+from tracker.offline import _BANDS, _neighbour_covariances, _normals, _prior_band, _Solver, frame_region_points
 from tracker.sotracker import Tracker, deskew_points
 from tracker.sweep_ground import sweep_ground_mask
 
@@ -207,3 +207,58 @@ def test_the_online_steps_crop_gives_the_regions_points():
     frame = seq.lidar_frame(1)
     np.testing.assert_array_equal(frame_region_points(frame, est.box, other, params, crop=tracker.last_crop),
                                   frame_region_points(frame, est.box, other, params))
+
+
+def _shapes_for_covariances() -> list[np.ndarray]:
+    """A voxel-centre shape (lattice, many equal distances) and scattered points."""
+    rng = np.random.default_rng(3)
+    surface = rng.normal(size=(3000, 3)) * [1.5, 0.8, 0.4]
+    lattice = np.unique(np.floor(surface / 0.05), axis=0) * 0.05 + 0.025
+    return [lattice, rng.normal(size=(500, 3)) * [2.0, 1.0, 0.5] + [10.0, -3.0, 1.0]]
+
+
+@pytest.mark.parametrize("k", [3, 10])
+def test_neighbour_covariances_are_the_neighbour_axis_sums_bit_for_bit(k):
+    """The six covariance entries equal the mean over the k neighbours (numpy's, in neighbour order) and the sums
+    of each product over the neighbours taken in the kd-tree's order from 0, exactly, for all rows and a subset."""
+    for shape in _shapes_for_covariances():
+        tree = cKDTree(shape)
+        for rows in (None, np.arange(0, len(shape), 7)):
+            got = _neighbour_covariances(shape, k, tree, rows)
+            _, idx = tree.query(shape if rows is None else shape[rows], k=k)
+            nb = shape[idx]                                      # (m, k, 3)
+            mean = nb[:, 0].copy()
+            for j in range(1, k):
+                mean += nb[:, j]
+            d = nb - (mean / k)[:, None]
+            for entry, (a, b) in zip(got, ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)), strict=True):
+                want = np.zeros(len(idx))
+                for j in range(k):
+                    want = want + d[:, j, a] * d[:, j, b]
+                assert np.array_equal(entry, want / k)
+
+
+def test_gauss_newton_blocks_are_the_per_point_products_summed_per_frame_bit_for_bit():
+    """:meth:`_Solver._data`'s blocks against the per-point J'WJ and J'Wr written out (D'n, D'r stacked) and summed
+    frame by frame in point order."""
+    solver, states, params = _solver_on_a_synthetic_track(6, fixed=1)
+    cost, blocks, grads = solver._data(states, True)
+    c, si, lx, ly, n, ne, r, norm, weight, cost_r = solver._residuals(states)
+    beta, delta = params.tangent_weight, params.huber_delta
+    w = weight * np.where(norm <= delta, 1.0, delta / np.maximum(norm, 1e-12))
+    nj = np.stack([-c * n[:, 0] + si * n[:, 1], -si * n[:, 0] - c * n[:, 1], -n[:, 2], ly * n[:, 0] - lx * n[:, 1]], 1)
+    dr = np.stack([-c * r[:, 0] + si * r[:, 1], -si * r[:, 0] - c * r[:, 1], -r[:, 2], ly * r[:, 0] - lx * r[:, 1]], 1)
+    jtj = nj[:, :, None] * ((1.0 - beta**2) * nj)[:, None, :]
+    jtj[:, [0, 1, 2], [0, 1, 2]] += beta**2
+    jtj[:, 3, 3] += beta**2 * (lx**2 + ly**2)
+    for a, g in ((0, -c * ly - si * lx), (1, c * lx - si * ly)):
+        jtj[:, a, 3] += beta**2 * g
+        jtj[:, 3, a] += beta**2 * g
+    jtr = (1.0 - beta) * nj * ne[:, None] + beta * dr
+    assert cost == cost_r
+    for k in range(solver.k):
+        want_h, want_g = np.zeros((4, 4)), np.zeros(4)
+        for i in np.flatnonzero(solver.frame_idx == k):
+            want_h = want_h + jtj[i] * w[i]
+            want_g = want_g + jtr[i] * w[i]
+        assert np.array_equal(blocks[k], want_h) and np.array_equal(grads[k], want_g), k
