@@ -14,7 +14,9 @@ chunks' balance) and against the costliest object (no chunking can go below it).
 
 from __future__ import annotations
 
-__all__ = ["worker_accounting", "schedule_balance", "main_accounting", "format_accounting"]
+import os
+
+__all__ = ["process_age", "worker_accounting", "schedule_balance", "main_accounting", "format_accounting"]
 
 
 def worker_accounting(schedule: dict) -> list[dict]:
@@ -106,3 +108,16 @@ def format_accounting(schedule: dict, phases: dict, workers: int, startup: bool 
                      f"({m['track_cpu_s']:.2f} s CPU in this process meanwhile), end {m['end_wall_s']:.2f} s "
                      f"({m['end_cpu_s']:.2f})")
     return "\n".join(lines)
+
+
+def process_age() -> float:
+    """Seconds since this process started (Linux: /proc; 0 where unknown): for the run's process its interpreter
+    start-up and imports; for a worker forked from the fork server, the time since its fork."""
+    try:
+        with open("/proc/self/stat") as f:
+            start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])
+        with open("/proc/uptime") as f:
+            uptime = float(f.read().split()[0])
+        return round(max(0.0, uptime - start_ticks / os.sysconf("SC_CLK_TCK")), 3)
+    except (OSError, ValueError, IndexError, AttributeError):
+        return 0.0

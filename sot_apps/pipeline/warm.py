@@ -1,0 +1,57 @@
+"""The workers' fork server, warmed for a run: it opens the run's sequences once, so every worker forked from it
+(local processes and a Dask LocalCluster's) starts with them in its worker-local cache
+(:func:`sot_apps.io.opened.open_cached`) instead of each opening them at its first task (~0.1-0.3 s of CPU per
+worker for a PandaSet sequence: its cuboids), and freezes its garbage collector, so the workers' collections never
+walk (and copy-on-write) the objects the server imported.
+
+The server imports this module last (``ExecutorSession.prestart``) with :data:`WARM_VARIABLE` in its environment:
+the sequences as JSON ``[[path, format], ...]``. Imported anywhere else (the variable unset) it does nothing.
+:func:`pipeline_sequences` reads them from a pipeline file with :mod:`json` alone, so that ``sot-apps run`` can start
+the server before its own imports.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+__all__ = ["WARM_VARIABLE", "sequence_path", "pipeline_sequences", "warm_environment"]
+
+WARM_VARIABLE = "SOT_APPS_WARM_SEQUENCES"
+
+
+def sequence_path(base: str | Path, path: str) -> str:
+    """A pipeline file's sequence path: a relative one resolved against the file's directory ``base``."""
+    return path if Path(path).is_absolute() else str((Path(base) / path).resolve())
+
+
+def pipeline_sequences(pipeline: str | Path) -> list[tuple[str, str | None]]:
+    """The ``(path, format)`` of every sequence of a pipeline file, read without validating it (empty when it cannot
+    be read: :func:`sot_apps.pipeline.config.load_config` reports that)."""
+    try:
+        doc = json.loads(Path(pipeline).read_text(encoding="utf-8"))
+        return [(sequence_path(Path(pipeline).parent, s["path"]), s.get("format")) for s in doc["sequences"]]
+    except Exception:  # noqa: BLE001 - a warm-up only
+        return []
+
+
+def warm_environment(sources: list[tuple[str, str | None]]) -> dict[str, str]:
+    """The environment that makes the fork server open ``sources`` when it imports this module."""
+    return {WARM_VARIABLE: json.dumps([[path, format] for path, format in sources])}
+
+
+def _warm_this_process() -> None:
+    import gc
+
+    try:
+        from .plan import open_sequences
+
+        open_sequences([(str(path), format) for path, format in json.loads(os.environ.pop(WARM_VARIABLE))])
+    except Exception:  # noqa: BLE001 - the fork server must start whatever happens; the tasks report errors
+        pass
+    gc.freeze()
+
+
+if WARM_VARIABLE in os.environ:
+    _warm_this_process()
