@@ -16,11 +16,12 @@ import traceback
 import uuid
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Iterator, Mapping
-
-from tqdm import tqdm
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping
 
 from ..interrupts import deferred_interrupt, sigint_ignored_in_children
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 __all__ = ["Task", "TaskOutcome", "ExecutorSpec", "ExecutorSession", "run_tasks"]
 
@@ -185,6 +186,10 @@ def _children_environment(environ: Mapping[str, str] | None = None) -> Iterator[
                 os.environ[var] = value
 
 
+# when this process started its fork server: (its CPU seconds, unix time) then (pipeline.accounting: start-up path)
+forkserver_started: tuple[float, float] | None = None
+
+
 def _start_forkserver(modules: Iterable[str] = (), environ: Mapping[str, str] | None = None) -> bool:
     """Start multiprocessing's fork server (once per process) importing ``modules`` besides its own preload list,
     with SIGINT ignored (inherited by every process it forks: a Ctrl-C while a worker starts prints nothing),
@@ -195,10 +200,12 @@ def _start_forkserver(modules: Iterable[str] = (), environ: Mapping[str, str] | 
     import multiprocessing
     import multiprocessing.forkserver
 
+    global forkserver_started
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return False
     server = multiprocessing.forkserver._forkserver
     if not getattr(server, "_forkserver_pid", None):
+        forkserver_started = time.process_time(), time.time()
         preload = list(getattr(server, "_preload_modules", None) or ["__main__"])
         preload += [m for m in modules if m not in preload]
         server.set_forkserver_preload(preload)
@@ -261,6 +268,8 @@ LOCAL_DASK_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.a
 
 
 def _progress(total: int, desc: str, enabled: bool) -> tqdm:
+    from tqdm import tqdm  # imported when a batch runs: `sot-apps run` starts its fork server before this import
+
     return tqdm(total=total, desc=desc, unit="task", disable=not enabled, dynamic_ncols=True, leave=False)
 
 

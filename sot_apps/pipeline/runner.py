@@ -15,6 +15,7 @@ per unit its status, time and output checksums.
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +24,7 @@ from typing import Any, Callable
 from ..apps import App, RunContext, SequenceTracks, Skip, get_app
 from ..errors import InputError, OutputError
 from ..io.atomic import remove_stale_temporaries, write_json
-from . import WORKER_MODULES
+from . import WORKER_MODULES, executors
 from . import stages as st
 from .accounting import process_age
 from .config import PipelineConfig
@@ -225,12 +226,14 @@ def _schedule(chunks: list, tasks: list[Task], outcomes: list[TaskOutcome], star
         entry = {"key": task.key, "ok": outcome.ok, "planned_cost": round(sum(o.cost for o in chunk), 2),
                  "objects": {e["object"]: e["cpu_s"] for e in result.get("objects", [])} or [o.object_id for o in chunk]}
         if ran:
+            if "server_ready_unix" in ran:
+                entry["server_ready_s"] = round(ran["server_ready_unix"] - started, 3)
             entry |= {"pid": ran["pid"], "process_start_s": round(ran["process_start_unix"] - started, 3),
                       "start_s": round(ran["start_unix"] - started, 4), "end_s": round(ran["end_unix"] - started, 4),
                       **{k: v for k, v in ran.items() if not k.endswith("_unix") and k != "pid"},
                       **{k: result["times"][k] for k in ("cpu_s", "read_s", "ground_s", "sweeps", "object_frames")}}
         entries.append(entry)
-    return {"wall_s": round(ended - started, 4), "tasks": entries}
+    return {"wall_s": round(ended - started, 4), "run_pid": os.getpid(), "tasks": entries}
 
 
 def _track_checksums(out: Path, sequence: str, objects: list[str]) -> dict[str, dict[str, str]]:
@@ -335,6 +338,9 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
     started = time.time()
     t0 = time.perf_counter()
     phases = {"started": {"at_s": -process_age(), "cpu_s": round(time.process_time(), 4)}}
+    if executors.forkserver_started is not None:   # this process started the workers' fork server (then: CPU, time)
+        cpu, unix = executors.forkserver_started
+        phases["server_started"] = {"at_s": round(unix - started, 4), "cpu_s": round(cpu, 4)}
 
     def phase(name: str) -> None:   # this process's wall seconds since the run's start and its CPU seconds so far
         phases[name] = {"at_s": round(time.perf_counter() - t0, 4), "cpu_s": round(time.process_time(), 4)}

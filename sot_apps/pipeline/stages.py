@@ -100,7 +100,11 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     # where and when it ran (pipeline.accounting): the worker process and when it began, its CPU before this task (its start-up when
     # this is its first task), the whole process's CPU during the task (the task's threads and anything else the
     # worker runs meanwhile, e.g. Dask's event loop), and the sequence opening (a worker's first task opens it)
+    from . import warm
+
+    server = warm.server_ready or {}   # the fork server this worker came from, when it was warmed
     task = {"pid": os.getpid(), "process_start_unix": forked, "start_unix": started, "end_unix": time.time(),
+            **({"server_ready_unix": server["unix"], "server_ready_cpu_s": server["cpu_s"]} if server else {}),
             "process_cpu_before_s": round(process0, 4), "process_cpu_s": round(time.process_time() - process0, 4),
             "open_cpu_s": round(open_s, 4) if open_cached.cache_info().misses > opened else 0.0}
     return {"sequence": first.sequence, "objects": objects, "times": breakdown, "task": task}

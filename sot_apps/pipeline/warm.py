@@ -16,9 +16,13 @@ import json
 import os
 from pathlib import Path
 
-__all__ = ["WARM_VARIABLE", "sequence_path", "pipeline_sequences", "warm_environment"]
+__all__ = ["WARM_VARIABLE", "sequence_path", "pipeline_sequences", "warm_environment", "server_ready"]
 
 WARM_VARIABLE = "SOT_APPS_WARM_SEQUENCES"
+
+# in a warmed fork server and the workers forked from it: the server's CPU seconds and unix time when it had
+# imported its modules and opened the sequences, i.e. when it could fork a ready worker (pipeline.accounting)
+server_ready: dict[str, float] | None = None
 
 
 def sequence_path(base: str | Path, path: str) -> str:
@@ -43,6 +47,9 @@ def warm_environment(sources: list[tuple[str, str | None]]) -> dict[str, str]:
 
 def _warm_this_process() -> None:
     import gc
+    import time
+
+    global server_ready
 
     try:
         from .plan import open_sequences
@@ -51,6 +58,7 @@ def _warm_this_process() -> None:
     except Exception:  # noqa: BLE001 - the fork server must start whatever happens; the tasks report errors
         pass
     gc.freeze()
+    server_ready = {"cpu_s": round(time.process_time(), 4), "unix": time.time()}
 
 
 if WARM_VARIABLE in os.environ:
