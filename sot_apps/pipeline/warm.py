@@ -16,9 +16,13 @@ import json
 import os
 from pathlib import Path
 
-__all__ = ["WARM_VARIABLE", "sequence_path", "pipeline_sequences", "warm_environment", "server_ready"]
+__all__ = ["WARM_VARIABLE", "WARM_MAX_SEQUENCES", "sequence_path", "pipeline_sequences", "warm_environment", "server_ready"]
 
 WARM_VARIABLE = "SOT_APPS_WARM_SEQUENCES"
+# the server opens the sequences only for a run of at most this many: then every worker tracks chunks of the same
+# few sequences and would open each of them; with more, a worker opens only those of its own tasks, and the server
+# opening them all would hold back every worker's start (the sequence cache keeps 8 anyway)
+WARM_MAX_SEQUENCES = 2
 
 # in a warmed fork server and the workers forked from it: the server's CPU seconds and unix time when it had
 # imported its modules and opened the sequences, i.e. when it could fork a ready worker (pipeline.accounting)
@@ -41,7 +45,9 @@ def pipeline_sequences(pipeline: str | Path) -> list[tuple[str, str | None]]:
 
 
 def warm_environment(sources: list[tuple[str, str | None]]) -> dict[str, str]:
-    """The environment that makes the fork server open ``sources`` when it imports this module."""
+    """The environment that makes the fork server open ``sources`` (none when there are more than
+    :data:`WARM_MAX_SEQUENCES`) and freeze its objects when it imports this module."""
+    sources = sources if len(sources) <= WARM_MAX_SEQUENCES else []
     return {WARM_VARIABLE: json.dumps([[path, format] for path, format in sources])}
 
 

@@ -148,6 +148,18 @@ def test_pipeline_sequences_reads_the_sequences_load_config_reads():
     assert pipeline_sequences(examples[0].parent / "missing.json") == []
 
 
+def test_the_server_opens_only_the_sequences_of_a_run_of_few():
+    """More sequences than ``WARM_MAX_SEQUENCES``: the server opens none (each worker opens its own tasks' ones),
+    and still freezes its objects."""
+    import json
+
+    from sot_apps.pipeline.warm import WARM_MAX_SEQUENCES, WARM_VARIABLE, warm_environment
+
+    few = [(f"/data/s{i}", None) for i in range(WARM_MAX_SEQUENCES)]
+    assert json.loads(warm_environment(few)[WARM_VARIABLE]) == [[p, f] for p, f in few]
+    assert json.loads(warm_environment(few + [("/data/more", "kitti")])[WARM_VARIABLE]) == []
+
+
 def test_prestart_starts_nothing_inline():
     import multiprocessing
 
