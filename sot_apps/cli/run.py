@@ -68,20 +68,22 @@ def register(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from ..pipeline import WORKER_MODULES
     from ..pipeline.executors import ExecutorSession
+    from ..pipeline.warm import pipeline_sequences, warm_environment
 
     spec = executor_from_args(args)
-    # the workers' fork server imports the toolkit on the other core while this process imports and plans
-    # (docs/pipeline.md, "Worker start-up"); a Dask LocalCluster is created once the pipeline file is read, on a
-    # thread, while this process plans
+    # the workers' fork server imports the toolkit and opens the file's sequences on the other core while this
+    # process imports and plans (docs/pipeline.md, "Worker start-up"); a Dask LocalCluster is created once the
+    # pipeline file is read, on a thread, while this process plans
+    warm = warm_environment(pipeline_sequences(args.pipeline))
     with ExecutorSession(spec) as session:
-        session.prestart(WORKER_MODULES, cluster=False)
+        session.prestart(WORKER_MODULES, cluster=False, environ=warm)
         from ..io.atomic import ensure_writable
         from ..pipeline.config import load_config
         from ..pipeline.runner import run_pipeline
 
         config = load_config(args.pipeline, out=args.out, detections=args.detections)
         ensure_writable(config.out, directory=True)
-        session.prestart(WORKER_MODULES)
+        session.prestart(WORKER_MODULES, environ=warm)
         result = run_pipeline(config, spec, progress=not args.quiet, session=session)
     print(f"{len(result.plan.objects)} objects in {len(result.plan.sequences)} sequences, {spec.describe()}, "
           f"{result.seconds:.1f} s")

@@ -14,7 +14,10 @@ chunks' balance) and against the costliest object (no chunking can go below it).
 
 from __future__ import annotations
 
-__all__ = ["worker_accounting", "schedule_balance", "main_accounting", "format_accounting"]
+import os
+
+__all__ = ["process_age", "worker_accounting", "schedule_balance", "main_accounting", "predicted_makespan",
+           "format_accounting"]
 
 
 def worker_accounting(schedule: dict) -> list[dict]:
@@ -80,6 +83,46 @@ def main_accounting(phases: dict, startup: bool = True) -> dict:
             "end_wall_s": round(at("finished") - at("tracked"), 3), "end_cpu_s": round(cpu("finished") - cpu("tracked"), 3)}
 
 
+def predicted_makespan(schedule: dict, phases: dict, workers: int) -> dict:
+    """The run's wall seconds (start-up included) if every process had a core of its own and a CPU second bought the
+    work it bought in this run: from CPU seconds only, so a run measured on a loaded machine still says what the
+    schedule allows. The run's process first spends ``serial_s`` (its start-up, planning and cost estimate: its CPU
+    when the first batch began); a worker process is ready once that is done and its fork server is ready (the
+    run's CPU when it started the server plus the server's CPU for its imports and opening the sequences:
+    ``server_s``), plus the worker's own start-up CPU (its first task's ``process_cpu_before_s``); tasks run on one
+    core at a time, for their CPU, handed out in the schedule's order to the worker free first (as the executors
+    do); then the run's end (its CPU after the stage). A run whose tasks ran in its own process (1 worker) starts
+    them at its CPU at the first task (the tracking imports included). ``even_s``: the same with the tasks' CPU
+    spread evenly over the workers (perfect balance): the gap to ``makespan_s`` is the tail."""
+    tasks = [t for t in schedule.get("tasks", []) if "pid" in t]
+    if not tasks or "opened" not in phases:
+        return {}
+    serial = float(phases["opened"]["cpu_s"]) + float(schedule.get("chunking_cpu_s", 0.0))
+    run_pid = schedule.get("run_pid")
+    first: dict[int, dict] = {}
+    for t in sorted(tasks, key=lambda t: t["start_s"]):
+        first.setdefault(t["pid"], t)
+    server = None
+    if all(pid == run_pid for pid in first):   # inline: the run's own process tracks
+        workers, ready = 1, float(tasks[0]["process_cpu_before_s"])
+    else:
+        ready_cpu = [t["server_ready_cpu_s"] for t in first.values() if "server_ready_cpu_s" in t]
+        if ready_cpu and "server_started" in phases:
+            server = float(phases["server_started"]["cpu_s"]) + max(ready_cpu)
+        startup = sorted(t["process_cpu_before_s"] for t in first.values())[len(first) // 2]
+        ready = max(serial, server or 0.0) + startup
+    free = [ready] * max(1, workers)
+    for t in tasks:   # the schedule lists them in the order they were handed out
+        i = min(range(len(free)), key=free.__getitem__)
+        free[i] += float(t["cpu_s"])
+    end = max(0.0, float(phases.get("finished", phases["opened"])["cpu_s"])
+              - float(phases.get("tracked", phases["opened"])["cpu_s"]))
+    total = sum(float(t["cpu_s"]) for t in tasks)
+    return {"serial_s": round(serial, 3), "server_s": round(server, 3) if server is not None else None,
+            "first_task_s": round(ready, 3), "tasks_cpu_s": round(total, 3), "end_s": round(end, 3),
+            "makespan_s": round(max(free) + end, 3), "even_s": round(ready + total / max(1, workers) + end, 3)}
+
+
 def format_accounting(schedule: dict, phases: dict, workers: int, startup: bool = True) -> str:
     """The three accountings as text (``sot-apps bench pipeline`` prints one block per configuration)."""
     lines = ["| worker | tasks | objects | object-frames/s (busy) | first task at s | busy s | idle s | task CPU s "
@@ -97,6 +140,13 @@ def format_accounting(schedule: dict, phases: dict, workers: int, startup: bool 
                  f"object {b['costliest_object_s']:.2f} s; tasks' wall {float(schedule.get('wall_s', 0.0)):.2f} s, after "
                  f"chunking {float(schedule.get('chunking_s', 0.0)):.2f} s ({float(schedule.get('chunking_cpu_s', 0.0)):.2f} "
                  "s CPU: the cost estimate)")
+    p = predicted_makespan(schedule, phases, workers)
+    if p and startup:
+        lines.append(f"predicted wall with a core per process (CPU seconds only): {p['makespan_s']:.2f} s = run's "
+                     f"process {p['serial_s']:.2f} s" + (f", fork server ready at {p['server_s']:.2f} s"
+                                                         if p["server_s"] is not None else "")
+                     + f", first task at {p['first_task_s']:.2f} s, {p['tasks_cpu_s']:.2f} s of tasks over {workers} "
+                     f"worker(s) (evenly: {p['even_s']:.2f} s), end {p['end_s']:.2f} s")
     m = main_accounting(phases, startup)
     if m:
         begin = (f"start-up {m['startup_wall_s']:.2f} s wall ({m['startup_cpu_s']:.2f} s CPU), " if startup else "")
@@ -106,3 +156,16 @@ def format_accounting(schedule: dict, phases: dict, workers: int, startup: bool 
                      f"({m['track_cpu_s']:.2f} s CPU in this process meanwhile), end {m['end_wall_s']:.2f} s "
                      f"({m['end_cpu_s']:.2f})")
     return "\n".join(lines)
+
+
+def process_age() -> float:
+    """Seconds since this process started (Linux: /proc; 0 where unknown): for the run's process its interpreter
+    start-up and imports; for a worker forked from the fork server, the time since its fork."""
+    try:
+        with open("/proc/self/stat") as f:
+            start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])
+        with open("/proc/uptime") as f:
+            uptime = float(f.read().split()[0])
+        return round(max(0.0, uptime - start_ticks / os.sysconf("SC_CLK_TCK")), 3)
+    except (OSError, ValueError, IndexError, AttributeError):
+        return 0.0

@@ -16,11 +16,12 @@ import traceback
 import uuid
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Iterator
-
-from tqdm import tqdm
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping
 
 from ..interrupts import deferred_interrupt, sigint_ignored_in_children
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 __all__ = ["Task", "TaskOutcome", "ExecutorSpec", "ExecutorSession", "run_tasks"]
 
@@ -168,11 +169,13 @@ _THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS
 
 
 @contextlib.contextmanager
-def _single_threaded_children() -> Iterator[None]:
+def _children_environment(environ: Mapping[str, str] | None = None) -> Iterator[None]:
     """Processes started in the block get the thread variables of :func:`_single_threaded_env` (unless this
-    process sets them): this process's own environment is left as it was afterwards."""
-    saved = {var: os.environ.get(var) for var in _THREAD_VARIABLES}
+    process sets them) and ``environ``: this process's own environment is left as it was afterwards."""
+    environ = dict(environ or {})
+    saved = {var: os.environ.get(var) for var in (*_THREAD_VARIABLES, *environ)}
     _single_threaded_env()
+    os.environ.update(environ)
     try:
         yield
     finally:
@@ -183,29 +186,36 @@ def _single_threaded_children() -> Iterator[None]:
                 os.environ[var] = value
 
 
-def _start_forkserver(modules: Iterable[str] = ()) -> bool:
+# when this process started its fork server: (its CPU seconds, unix time) then (pipeline.accounting: start-up path)
+forkserver_started: tuple[float, float] | None = None
+
+
+def _start_forkserver(modules: Iterable[str] = (), environ: Mapping[str, str] | None = None) -> bool:
     """Start multiprocessing's fork server (once per process) importing ``modules`` besides its own preload list,
-    with SIGINT ignored (inherited by every process it forks: a Ctrl-C while a worker starts prints nothing) and
-    single-threaded BLAS/OpenMP. Returns immediately: the server imports in the background, and the processes
+    with SIGINT ignored (inherited by every process it forks: a Ctrl-C while a worker starts prints nothing),
+    single-threaded BLAS/OpenMP and ``environ`` in its environment (read by the modules it imports, e.g.
+    :mod:`sot_apps.pipeline.warm`). Returns immediately: the server imports in the background, and the processes
     forked from it start with those modules loaded (no interpreter start-up, no imports). False without fork
-    servers (Windows). A server already running keeps the preload list it was started with."""
+    servers (Windows). A server already running keeps the preload list and environment it was started with."""
     import multiprocessing
     import multiprocessing.forkserver
 
+    global forkserver_started
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return False
     server = multiprocessing.forkserver._forkserver
     if not getattr(server, "_forkserver_pid", None):
+        forkserver_started = time.process_time(), time.time()
         preload = list(getattr(server, "_preload_modules", None) or ["__main__"])
         preload += [m for m in modules if m not in preload]
         server.set_forkserver_preload(preload)
-        with sigint_ignored_in_children(), _single_threaded_children():
+        with sigint_ignored_in_children(), _children_environment(environ):
             multiprocessing.forkserver.ensure_running()
     return True
 
 
 @contextlib.contextmanager
-def _forkserver_method(modules: Iterable[str] = ()) -> Iterator[None]:
+def _forkserver_method(modules: Iterable[str] = (), environ: Mapping[str, str] | None = None) -> Iterator[None]:
     """Dask's workers forked from multiprocessing's fork server, started with SIGINT ignored.
 
     Spawned workers (Dask's default) start a fresh interpreter that installs Python's KeyboardInterrupt handler:
@@ -223,7 +233,7 @@ def _forkserver_method(modules: Iterable[str] = ()) -> Iterator[None]:
     from distributed.utils import get_mp_context
 
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
-        if _start_forkserver(("distributed", *modules)):   # distributed and the toolkit preloaded (prestart)
+        if _start_forkserver(("distributed", *modules), environ):   # distributed and the toolkit preloaded (prestart)
             import distributed.utils
 
             # Dask's own preload list (get_mp_context) would import pandas and lz4 into this process at the first
@@ -258,6 +268,8 @@ LOCAL_DASK_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.a
 
 
 def _progress(total: int, desc: str, enabled: bool) -> tqdm:
+    from tqdm import tqdm  # imported when a batch runs: `sot-apps run` starts its fork server before this import
+
     return tqdm(total=total, desc=desc, unit="task", disable=not enabled, dynamic_ncols=True, leave=False)
 
 
@@ -273,6 +285,7 @@ class ExecutorSession:
         self.spec = spec
         self._pool: ProcessPoolExecutor | None = None
         self._preload: tuple[str, ...] = ()   # modules the workers import before their first task (prestart)
+        self._environ: dict[str, str] = {}     # ... and the fork server's environment variables (prestart)
         self._stop_event = None
         self._client = None
         self._cluster = None
@@ -339,7 +352,8 @@ class ExecutorSession:
             return self._run_dask(tasks, desc, progress)
         raise ValueError(f"unknown executor kind {spec.kind!r}")
 
-    def prestart(self, modules: Iterable[str] = (), cluster: bool = True) -> None:
+    def prestart(self, modules: Iterable[str] = (), cluster: bool = True,
+                 environ: Mapping[str, str] | None = None) -> None:
         """Prepare the workers now, without waiting for them, so that their start-up overlaps with what this
         process does before its first batch (planning). Local processes: where the platform has fork servers,
         start multiprocessing's fork server importing ``modules`` (once; every worker is then forked from it with
@@ -348,18 +362,21 @@ class ExecutorSession:
         workers from the same server (``modules`` preloaded); with ``cluster`` it is created now on a thread of
         this process (its scheduler and nannies live here) while this process goes on planning, and the first
         batch takes it (``cluster=False``: only the fork server; ``sot-apps run`` starts the cluster once its
-        pipeline file is read, so that a bad file is reported at once). Nothing for inline runs."""
+        pipeline file is read, so that a bad file is reported at once). ``environ``: variables set in the fork
+        server's environment (``sot-apps run`` names its sequences there, for :mod:`sot_apps.pipeline.warm`).
+        Nothing for inline runs."""
         spec = self.spec
         self._preload = tuple(modules)
+        self._environ = dict(environ or {})
         if spec.kind == "dask" and not spec.address:
             # the cluster's workers are forked from this fork server, which imports Dask's worker and ``modules``
-            _start_forkserver(("distributed", *self._preload))
+            _start_forkserver(("distributed", *self._preload), self._environ)
             if cluster and self._cluster is None and self._cluster_start is None:
                 self._cluster_start = _in_thread(self._start_local_cluster, "dask-cluster-start")
             return
         if spec.kind != "local" or spec.workers <= 1 or self._pool is not None:
             return
-        if _start_forkserver(self._preload):
+        if _start_forkserver(self._preload, self._environ):
             return   # the pool forks its workers from the server at the first batch
         with sigint_ignored_in_children():   # submit() starts the worker processes
             pool = self._process_pool()
@@ -390,7 +407,7 @@ class ExecutorSession:
             import multiprocessing
 
             # forked from the fork server (started by prestart, else here) with the toolkit loaded; else spawned
-            method = "forkserver" if _start_forkserver(self._preload) else "spawn"
+            method = "forkserver" if _start_forkserver(self._preload, self._environ) else "spawn"
             context = multiprocessing.get_context(method)
             self._stop_event = context.Event()
             self._pool = ProcessPoolExecutor(max_workers=self.spec.workers, mp_context=context,
@@ -457,7 +474,7 @@ class ExecutorSession:
         import dask
         from distributed import LocalCluster
 
-        with _forkserver_method(self._preload), dask.config.set(LOCAL_DASK_CONFIG):
+        with _forkserver_method(self._preload, self._environ), dask.config.set(LOCAL_DASK_CONFIG):
             return LocalCluster(n_workers=max(1, self.spec.workers), threads_per_worker=1, processes=True,
                                 dashboard_address=None, worker_dashboard_address=None,
                                 # no dashboard; its HTTP server (health, metrics) on a free port instead of 8787,

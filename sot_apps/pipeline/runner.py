@@ -24,8 +24,9 @@ from typing import Any, Callable
 from ..apps import App, RunContext, SequenceTracks, Skip, get_app
 from ..errors import InputError, OutputError
 from ..io.atomic import remove_stale_temporaries, write_json
-from . import WORKER_MODULES
+from . import WORKER_MODULES, executors
 from . import stages as st
+from .accounting import process_age
 from .config import PipelineConfig
 from .costs import estimate_costs
 from .executors import ExecutorSession, ExecutorSpec, Task, TaskOutcome
@@ -33,6 +34,7 @@ from .health import health_lines, run_track_health
 from .lock import RunLock
 from .manifest import DoneMarker, code_digest, config_digest, write_manifest
 from .plan import Plan, make_plan, open_sequences, track_chunks
+from .warm import warm_environment
 
 __all__ = ["UnitRecord", "PipelineResult", "run_pipeline", "WORKER_MODULES"]
 
@@ -215,7 +217,8 @@ def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
 
 def _schedule(chunks: list, tasks: list[Task], outcomes: list[TaskOutcome], started: float, ended: float) -> dict:
     """When and where each tracking task ran (:mod:`sot_apps.pipeline.accounting` reads it): per task its worker,
-    start and end (seconds from the stage's start), CPU and its objects' own CPU seconds."""
+    when that worker's process began, the task's start and end (seconds from the stage's start; a worker started
+    before the stage has a negative process start), CPU and its objects' own CPU seconds."""
     entries = []
     for task, chunk, outcome in zip(tasks, chunks, outcomes, strict=True):
         result = outcome.result if outcome.ok else {}
@@ -223,12 +226,14 @@ def _schedule(chunks: list, tasks: list[Task], outcomes: list[TaskOutcome], star
         entry = {"key": task.key, "ok": outcome.ok, "planned_cost": round(sum(o.cost for o in chunk), 2),
                  "objects": {e["object"]: e["cpu_s"] for e in result.get("objects", [])} or [o.object_id for o in chunk]}
         if ran:
-            entry |= {"pid": ran["pid"], "start_s": round(ran["start_unix"] - started, 4),
-                      "end_s": round(ran["end_unix"] - started, 4),
-                      **{k: v for k, v in ran.items() if k not in ("pid", "start_unix", "end_unix")},
+            if "server_ready_unix" in ran:
+                entry["server_ready_s"] = round(ran["server_ready_unix"] - started, 3)
+            entry |= {"pid": ran["pid"], "process_start_s": round(ran["process_start_unix"] - started, 3),
+                      "start_s": round(ran["start_unix"] - started, 4), "end_s": round(ran["end_unix"] - started, 4),
+                      **{k: v for k, v in ran.items() if not k.endswith("_unix") and k != "pid"},
                       **{k: result["times"][k] for k in ("cpu_s", "read_s", "ground_s", "sweeps", "object_frames")}}
         entries.append(entry)
-    return {"wall_s": round(ended - started, 4), "tasks": entries}
+    return {"wall_s": round(ended - started, 4), "run_pid": os.getpid(), "tasks": entries}
 
 
 def _track_checksums(out: Path, sequence: str, objects: list[str]) -> dict[str, dict[str, str]]:
@@ -321,7 +326,8 @@ def run_pipeline(config: PipelineConfig, executor: ExecutorSpec = ExecutorSpec()
     """
     if session is None:
         with RunLock(config.out), ExecutorSession(executor) as own:
-            own.prestart(WORKER_MODULES)   # the workers import while this process plans
+            # the workers import and open the sequences while this process plans
+            own.prestart(WORKER_MODULES, environ=warm_environment([(s.path, s.format) for s in config.sequences]))
             return run_pipeline(config, executor, progress, plan, own)
     with RunLock(config.out):
         return _run_with_session(config, executor, progress, plan, session)
@@ -331,7 +337,10 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
                       session: ExecutorSession) -> PipelineResult:
     started = time.time()
     t0 = time.perf_counter()
-    phases = {"started": {"at_s": -_process_age(), "cpu_s": round(time.process_time(), 4)}}
+    phases = {"started": {"at_s": -process_age(), "cpu_s": round(time.process_time(), 4)}}
+    if executors.forkserver_started is not None:   # this process started the workers' fork server (then: CPU, time)
+        cpu, unix = executors.forkserver_started
+        phases["server_started"] = {"at_s": round(unix - started, 4), "cpu_s": round(cpu, 4)}
 
     def phase(name: str) -> None:   # this process's wall seconds since the run's start and its CPU seconds so far
         phases[name] = {"at_s": round(time.perf_counter() - t0, 4), "cpu_s": round(time.process_time(), 4)}
@@ -395,15 +404,3 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
                                "track_schedule": track_schedule, "phases": phases})
     return PipelineResult(out, plan, records, time.perf_counter() - t0, manifest, failures_path, stage_seconds,
                           health, track_times, track_schedule, phases)
-
-
-def _process_age() -> float:
-    """Seconds since this process started (Linux: /proc; 0 where unknown): its interpreter start-up and imports."""
-    try:
-        with open("/proc/self/stat") as f:
-            start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])
-        with open("/proc/uptime") as f:
-            uptime = float(f.read().split()[0])
-        return round(max(0.0, uptime - start_ticks / os.sysconf("SC_CLK_TCK")), 3)
-    except (OSError, ValueError, IndexError, AttributeError):
-        return 0.0

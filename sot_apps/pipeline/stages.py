@@ -19,6 +19,7 @@ import numpy as np
 
 from ..apps import track_dir
 from ..evaluation.track_health import track_health
+from .accounting import process_age
 from .config import TrackStage
 from .manifest import DoneMarker
 from .plan import ObjectPlan, open_cached
@@ -48,6 +49,7 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     from ..tracking import track_objects as track_objects_pass
 
     t0, cpu0, process0, started = time.perf_counter(), time.thread_time(), time.process_time(), time.time()
+    forked = started - process_age()   # when this worker process began (a fork server's child: its fork)
     first = plans[0]
     opened = open_cached.cache_info().misses
     seq = open_cached(first.sequence_path, first.format)
@@ -95,10 +97,14 @@ def track_objects(out: str, plans: list[ObjectPlan], stage: TrackStage, digests:
     breakdown = times.to_json() | {"write_s": round(write_seconds, 4), "cpu_s": round(cpu, 4),
                                    "wall_s": round(time.perf_counter() - t0, 4)}
     breakdown["overhead_s"] = round(cpu - times.read - times.ground - times.step - times.refine - write_seconds, 4)
-    # where and when it ran (pipeline.accounting): the worker process, its CPU before this task (its start-up when
+    # where and when it ran (pipeline.accounting): the worker process and when it began, its CPU before this task (its start-up when
     # this is its first task), the whole process's CPU during the task (the task's threads and anything else the
     # worker runs meanwhile, e.g. Dask's event loop), and the sequence opening (a worker's first task opens it)
-    task = {"pid": os.getpid(), "start_unix": started, "end_unix": time.time(),
+    from . import warm
+
+    server = warm.server_ready or {}   # the fork server this worker came from, when it was warmed
+    task = {"pid": os.getpid(), "process_start_unix": forked, "start_unix": started, "end_unix": time.time(),
+            **({"server_ready_unix": server["unix"], "server_ready_cpu_s": server["cpu_s"]} if server else {}),
             "process_cpu_before_s": round(process0, 4), "process_cpu_s": round(time.process_time() - process0, 4),
             "open_cpu_s": round(open_s, 4) if open_cached.cache_info().misses > opened else 0.0}
     return {"sequence": first.sequence, "objects": objects, "times": breakdown, "task": task}

@@ -93,6 +93,73 @@ print(json.dumps({"main": os.getpid(), "main_loaded": "colorsys" in sys.modules,
     assert all(r[1] != doc["main"] and r[2] != doc["main"] for r in results)   # forked from the server
 
 
+def test_a_warmed_fork_server_hands_its_workers_the_opened_sequences(tiny_worlds):
+    """``prestart(..., environ=warm_environment(sources))`` (as ``sot-apps run``): the fork server opens the
+    sequences once and freezes its objects out of the garbage collector (:mod:`sot_apps.pipeline.warm`); every
+    worker forked from it finds them in its sequence cache (its first opening is a cache hit), and the variable is
+    consumed by the server. Without the variable nothing is opened. In a fresh process: one server per process."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = """
+import json, sys
+from sot_apps.pipeline.executors import ExecutorSession, ExecutorSpec, Task
+from sot_apps.pipeline.warm import warm_environment
+from tests.pipeline.preload_probe import sequence_cache
+path, warm = sys.argv[1], sys.argv[2] == "warm"
+with ExecutorSession(ExecutorSpec("local", workers=2)) as session:
+    session.prestart(("sot_apps.pipeline.warm",), environ=warm_environment([(path, None)]) if warm else None)
+    outcomes = session.run([Task(f"probe/{i}", sequence_cache, (path,)) for i in range(4)], progress=False)
+print(json.dumps([o.result for o in outcomes]))
+"""
+    root = Path(__file__).resolve().parents[2]
+    for warm in ("warm", "cold"):
+        run = subprocess.run([sys.executable, "-c", script, str(tiny_worlds[0]), warm], cwd=root, capture_output=True,
+                             text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(root)})
+        assert run.returncode == 0, run.stderr
+        results = json.loads(run.stdout.strip().splitlines()[-1])
+        first = {}
+        for r in results:   # each worker's first task
+            first.setdefault(r["pid"], r)
+        assert all(r["variable"] is None for r in results)
+        if warm == "warm":
+            assert all(r["held"] == 1 and r["hit"] and r["frozen"] > 0 for r in first.values())
+        else:
+            assert all(r["held"] == 0 and not r["hit"] and r["frozen"] == 0 for r in first.values())
+
+
+def test_pipeline_sequences_reads_the_sequences_load_config_reads():
+    """The warm-up's reading of a pipeline file (json only) names the sequences, paths resolved as
+    :func:`~sot_apps.pipeline.config.load_config` resolves them, for every example pipeline; an unreadable file
+    names none."""
+    from pathlib import Path
+
+    from sot_apps.pipeline.config import load_config
+    from sot_apps.pipeline.warm import pipeline_sequences
+
+    examples = sorted((Path(__file__).resolve().parents[2] / "examples").glob("pipeline*.json"))
+    assert examples
+    for example in examples:
+        expected = [(s.path, s.format) for s in load_config(example).sequences]
+        assert pipeline_sequences(example) == expected and expected
+    assert pipeline_sequences(examples[0].parent / "missing.json") == []
+
+
+def test_the_server_opens_only_the_sequences_of_a_run_of_few():
+    """More sequences than ``WARM_MAX_SEQUENCES``: the server opens none (each worker opens its own tasks' ones),
+    and still freezes its objects."""
+    import json
+
+    from sot_apps.pipeline.warm import WARM_MAX_SEQUENCES, WARM_VARIABLE, warm_environment
+
+    few = [(f"/data/s{i}", None) for i in range(WARM_MAX_SEQUENCES)]
+    assert json.loads(warm_environment(few)[WARM_VARIABLE]) == [[p, f] for p, f in few]
+    assert json.loads(warm_environment(few + [("/data/more", "kitti")])[WARM_VARIABLE]) == []
+
+
 def test_prestart_starts_nothing_inline():
     import multiprocessing
 

@@ -91,8 +91,10 @@ def test_a_split_sequence_gives_the_tracks_of_one_pass(tiny_worlds, tmp_path, mo
     assert {u.status for u in split.by_stage("track")} == {"done"}
     assert output_checksums(tmp_path / "split") == output_checksums(tmp_path / "one")
     # the schedule says where each chunk ran (here: this process) and what its objects cost
+    assert split.track_schedule["run_pid"] == os.getpid()
     for task in split.track_schedule["tasks"]:
         assert task["pid"] == os.getpid() and task["planned_cost"] > 0
+        assert task["process_start_s"] < 0   # this process began before the stage
         assert 0 <= task["start_s"] <= task["end_s"] <= split.track_schedule["wall_s"]
         assert abs(sum(task["objects"].values()) - (task["cpu_s"] - task["read_s"] - task["ground_s"])) < 0.5
 
@@ -116,3 +118,31 @@ def test_worker_accounting_adds_up_a_schedule():
     assert other["object_frames_per_s"] == round(200 / 8.5, 2)
     b = schedule_balance(schedule, 2)
     assert (b["task_cpu_s"], b["busiest_worker_cpu_s"], b["even_share_s"], b["costliest_object_s"]) == (15.5, 8.0, 7.75, 5.0)
+
+
+def test_predicted_makespan_schedules_the_tasks_cpu_after_the_serial_start():
+    """From CPU seconds only: 2 workers become ready when both the run's process (1.0 s: its CPU at the first batch
+    plus the cost estimate) and the fork server (started at 0.2 s, 1.1 s of its own CPU: ready at 1.3 s) are done,
+    plus the worker's start-up (0.1 s); tasks of 5, 4, 3, 2 s handed out in that order to the worker free first:
+    {5, 2} and {4, 3}, 8.4 s, then the run's end (0.1 s). Inline (the run's own process tracks): its first task
+    starts at its CPU then (imports included) and the tasks run one after the other."""
+    from sot_apps.pipeline.accounting import predicted_makespan
+
+    def task(pid, start, cpu, before):
+        return {"pid": pid, "start_s": start, "cpu_s": cpu, "process_cpu_before_s": before,
+                "server_ready_cpu_s": 1.1}
+
+    phases = {"started": {"at_s": -0.5, "cpu_s": 0.4}, "server_started": {"at_s": -0.4, "cpu_s": 0.2},
+              "opened": {"at_s": 0.3, "cpu_s": 0.9}, "tracked": {"at_s": 9.0, "cpu_s": 1.0},
+              "finished": {"at_s": 9.1, "cpu_s": 1.1}}
+    schedule = {"run_pid": 1, "chunking_cpu_s": 0.1,
+                "tasks": [task(2, 0.5, 5.0, 0.1), task(3, 0.5, 4.0, 0.1), task(3, 4.5, 3.0, 4.2),
+                          task(2, 5.5, 2.0, 5.2)]}
+    p = predicted_makespan(schedule, phases, 2)
+    assert (p["serial_s"], p["server_s"], p["first_task_s"]) == (1.0, 1.3, 1.4)
+    assert (p["tasks_cpu_s"], p["end_s"], p["makespan_s"], p["even_s"]) == (14.0, 0.1, 8.5, 8.5)
+    schedule["tasks"][0]["cpu_s"] = 7.0   # {7, 2} against {4, 3}: the tail
+    assert predicted_makespan(schedule, phases, 2)["makespan_s"] == 10.5
+    inline = {"run_pid": 1, "tasks": [{"pid": 1, "start_s": 0.4, "cpu_s": 14.0, "process_cpu_before_s": 1.3}]}
+    p = predicted_makespan(inline, phases, 1)
+    assert (p["first_task_s"], p["makespan_s"], p["server_s"]) == (1.3, 15.4, None)
