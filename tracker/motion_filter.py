@@ -160,15 +160,18 @@ def travel_heading(displacement: np.ndarray, position_sigma: float, floor_sigma:
 
 class HeightFilter:
     """The box centre's z: a random walk (``drift_sigma`` m per frame) measured by the registration
-    (``fit_sigma``) and by road height + offset (``road_sigma``), the offset averaged slowly (``offset_gain``)."""
+    (``fit_sigma``) and by road height + offset (``road_sigma``), the offset averaged slowly (``offset_gain``)
+    from the estimate's height above the road, or with ``offset_from_fit`` from the registration's (a road seen
+    with a slowly changing bias, far out, then moves the offset instead of the box)."""
 
     def __init__(self, z: float, road: float | None, drift_sigma: float, fit_sigma: float, road_sigma: float,
-                 offset_gain: float) -> None:
+                 offset_gain: float, offset_from_fit: bool = False) -> None:
         self.z = float(z)
         self.var = 0.0
         self.offset = None if road is None else float(z - road)
         self.drift_sigma, self.fit_sigma, self.road_sigma = drift_sigma, fit_sigma, road_sigma
         self.offset_gain = offset_gain
+        self.offset_from_fit = offset_from_fit
 
     def _measure(self, value: float, sigma: float) -> None:
         gain = self.var / (self.var + sigma ** 2)
@@ -184,8 +187,12 @@ class HeightFilter:
         if fit_z is not None and np.isfinite(fit_z):
             self._measure(float(fit_z), self.fit_sigma)
         if road is not None:
-            observed = self.z - road
-            self.offset = observed if self.offset is None else self.offset + self.offset_gain * (observed - self.offset)
+            if self.offset is None:
+                self.offset = self.z - road
+            elif not self.offset_from_fit:
+                self.offset += self.offset_gain * (self.z - road - self.offset)
+            elif fit_z is not None and np.isfinite(fit_z):
+                self.offset += self.offset_gain * (float(fit_z) - road - self.offset)
         return self.z
 
 

@@ -96,8 +96,9 @@ class FilterHeight:
 
     def start(self, box: Box, road: np.ndarray) -> None:
         p = self.params
-        self.filter = HeightFilter(box.z, road_height(road, box.center[:2], box), p.drift_sigma, p.fit_sigma,
-                                   p.road_sigma, p.offset_gain)
+        road_z = road_height(road, box.center[:2], box)
+        self.filter = HeightFilter(box.z, road_z, p.drift_sigma, p.fit_sigma, p.road_sigma, p.offset_gain,
+                                   p.offset_from_fit)
 
     def motion(self, x: np.ndarray, prev: Box, road: np.ndarray, fit: bool) -> np.ndarray:
         x = x.copy()
