@@ -137,10 +137,10 @@ def test_height_filter_offset_from_the_fit_absorbs_a_slowly_growing_road_bias():
     bias = np.linspace(0.0, 0.10, 30)
     fits = 0.8 + rng.normal(0.0, 0.05, 30)
     last = {}
-    for from_fit, gain in ((False, 0.05), (True, 0.2)):
-        h = HeightFilter(z=0.8, road=0.0, drift_sigma=0.02, fit_sigma=0.15, road_sigma=0.05, offset_gain=gain,
-                         offset_from_fit=from_fit)
-        last[from_fit] = np.mean([h.update(fits[k], bias[k]) for k in range(30)][-5:])
+    for from_fit in (False, True):
+        h = HeightFilter(z=0.8, road=0.0, drift_sigma=0.02, fit_sigma=0.15, road_sigma=0.05, offset_gain=0.05,
+                         offset_fit_gain=0.2)
+        last[from_fit] = np.mean([h.update(fits[k], bias[k], offset_from_fit=from_fit) for k in range(30)][-5:])
     assert last[False] - 0.8 > 0.06       # the road's bias carries the box up
     assert abs(last[True] - 0.8) < 0.035  # the registration's z holds it
 
