@@ -265,6 +265,9 @@ class HeightConfig:
         _choice("height.road", self.road, ("local", "removal", "none"))
         if self.road_points < 0:
             raise ValueError(f"height.road_points: must be >= 0, got {self.road_points}")
+        if not 0.0 <= self.offset_fit_gain <= 1.0 or self.offset_fit_points < 0:
+            raise ValueError(f"height.offset_fit_gain: must be in [0, 1] and height.offset_fit_points >= 0, got "
+                             f"{self.offset_fit_gain}, {self.offset_fit_points}")
 
 
 @dataclass(frozen=True)
