@@ -252,6 +252,9 @@ class HeightConfig:
     fit_sigma: float = 0.15              # "filter": noise of the registration's z (m)
     road_sigma: float = 0.05             # "filter": noise of road height + offset (m)
     offset_gain: float = 0.05            # "filter": the height above the road follows the estimate this slowly
+    offset_fit_gain: float = 0.0         # > 0, "filter": the height above the road follows the registration's z
+                                         # at this gain instead (a far road's changing bias moves the offset, not z)
+    offset_fit_points: int = 0           # > 0: ... only where the road plane holds fewer ground points than this
     road_max_range: float = 0.0          # > 0: no road for a box farther than this from the sensor (m, horizontal):
                                          # a plane through the sparse ground around a far box is off by several cm
     road_points: int = 0                 # > 0, "filter": the road prior's sigma x sqrt(road_points / n) for a plane
@@ -262,6 +265,9 @@ class HeightConfig:
         _choice("height.road", self.road, ("local", "removal", "none"))
         if self.road_points < 0:
             raise ValueError(f"height.road_points: must be >= 0, got {self.road_points}")
+        if not 0.0 <= self.offset_fit_gain <= 1.0 or self.offset_fit_points < 0:
+            raise ValueError(f"height.offset_fit_gain: must be in [0, 1] and height.offset_fit_points >= 0, got "
+                             f"{self.offset_fit_gain}, {self.offset_fit_points}")
 
 
 @dataclass(frozen=True)

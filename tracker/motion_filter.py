@@ -160,32 +160,41 @@ def travel_heading(displacement: np.ndarray, position_sigma: float, floor_sigma:
 
 class HeightFilter:
     """The box centre's z: a random walk (``drift_sigma`` m per frame) measured by the registration
-    (``fit_sigma``) and by road height + offset (``road_sigma``), the offset averaged slowly (``offset_gain``)."""
+    (``fit_sigma``) and by road height + offset (``road_sigma``), the offset averaged slowly (``offset_gain``)
+    from the estimate's height above the road, or on the frames ``update`` is told so, from the registration's
+    (``offset_fit_gain``: a road seen with a slowly changing bias, far out, then moves the offset, not the box)."""
 
     def __init__(self, z: float, road: float | None, drift_sigma: float, fit_sigma: float, road_sigma: float,
-                 offset_gain: float) -> None:
+                 offset_gain: float, offset_fit_gain: float = 0.0) -> None:
         self.z = float(z)
         self.var = 0.0
         self.offset = None if road is None else float(z - road)
         self.drift_sigma, self.fit_sigma, self.road_sigma = drift_sigma, fit_sigma, road_sigma
         self.offset_gain = offset_gain
+        self.offset_fit_gain = offset_fit_gain
 
     def _measure(self, value: float, sigma: float) -> None:
         gain = self.var / (self.var + sigma ** 2)
         self.z += gain * (value - self.z)
         self.var *= 1.0 - gain
 
-    def update(self, fit_z: float | None, road: float | None, road_sigma: float | None = None) -> float:
+    def update(self, fit_z: float | None, road: float | None, road_sigma: float | None = None,
+               offset_from_fit: bool = False) -> float:
         """One frame: predict, then fuse the fit's z and the road prior (``road_sigma``: this frame's, else the
-        filter's); returns the new z."""
+        filter's); the offset follows the fit's z above the road if ``offset_from_fit`` and ``offset_fit_gain`` > 0,
+        else the estimate's; returns the new z."""
         self.var += self.drift_sigma ** 2
         if road is not None and self.offset is not None:
             self._measure(road + self.offset, self.road_sigma if road_sigma is None else road_sigma)
         if fit_z is not None and np.isfinite(fit_z):
             self._measure(float(fit_z), self.fit_sigma)
         if road is not None:
-            observed = self.z - road
-            self.offset = observed if self.offset is None else self.offset + self.offset_gain * (observed - self.offset)
+            if self.offset is None:
+                self.offset = self.z - road
+            elif not (offset_from_fit and self.offset_fit_gain > 0.0):
+                self.offset += self.offset_gain * (self.z - road - self.offset)
+            elif fit_z is not None and np.isfinite(fit_z):
+                self.offset += self.offset_fit_gain * (float(fit_z) - road - self.offset)
         return self.z
 
 

@@ -128,6 +128,23 @@ def test_height_filter_follows_the_road_and_ignores_a_drifting_fit():
     assert abs(far.update(0.9, None) - 0.8) < 0.05  # no road: the fit moves z only slowly
 
 
+def test_height_filter_offset_from_the_fit_absorbs_a_slowly_growing_road_bias():
+    """A far road seen with a bias that grows 10 cm over 30 frames (a car driving away from 47 to 64 m on the
+    PandaSet street, docs/tracker.md) and an unbiased registration z (5 cm noise, seeded): with the offset
+    learned from the estimate (gain 0.05) the box follows the road's bias up; learned from the registration (gain
+    0.2) it stays."""
+    rng = np.random.default_rng(0)
+    bias = np.linspace(0.0, 0.10, 30)
+    fits = 0.8 + rng.normal(0.0, 0.05, 30)
+    last = {}
+    for from_fit in (False, True):
+        h = HeightFilter(z=0.8, road=0.0, drift_sigma=0.02, fit_sigma=0.15, road_sigma=0.05, offset_gain=0.05,
+                         offset_fit_gain=0.2)
+        last[from_fit] = np.mean([h.update(fits[k], bias[k], offset_from_fit=from_fit) for k in range(30)][-5:])
+    assert last[False] - 0.8 > 0.06       # the road's bias carries the box up
+    assert abs(last[True] - 0.8) < 0.035  # the registration's z holds it
+
+
 def test_first_frame_hypotheses_span_the_heading_and_score_the_points():
     hyps = motion_hypotheses(0.5, 9, 3.0, 1.0)
     assert np.allclose(hyps[0], 0.0) and len(hyps) >= 9

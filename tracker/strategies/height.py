@@ -96,8 +96,9 @@ class FilterHeight:
 
     def start(self, box: Box, road: np.ndarray) -> None:
         p = self.params
-        self.filter = HeightFilter(box.z, road_height(road, box.center[:2], box), p.drift_sigma, p.fit_sigma,
-                                   p.road_sigma, p.offset_gain)
+        road_z = road_height(road, box.center[:2], box)
+        self.filter = HeightFilter(box.z, road_z, p.drift_sigma, p.fit_sigma, p.road_sigma, p.offset_gain,
+                                   p.offset_fit_gain)
 
     def motion(self, x: np.ndarray, prev: Box, road: np.ndarray, fit: bool) -> np.ndarray:
         x = x.copy()
@@ -107,7 +108,10 @@ class FilterHeight:
             height = plane[0]
             if self.params.road_points > 0:  # a plane through few ground points (a far road) holds z weakly
                 sigma = self.params.road_sigma * float(np.sqrt(max(1.0, self.params.road_points / max(plane[1], 1))))
-        x[2] = self.filter.update(prev.z + x[2] if fit else None, height, sigma) - prev.z
+        # a road through few ground points (far out) is seen with a bias that changes as the box moves: there the
+        # height above it is learned from the registration's z (height.offset_fit_gain, height.offset_fit_points)
+        from_fit = plane is not None and (self.params.offset_fit_points == 0 or plane[1] < self.params.offset_fit_points)
+        x[2] = self.filter.update(prev.z + x[2] if fit else None, height, sigma, from_fit) - prev.z
         return x
 
 
