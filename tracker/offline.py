@@ -44,7 +44,9 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    ``window_start_moved`` from the online one, steps 2–5 run again from its states (the weak pull still toward
    the online states; with a ``source``, each frame's points also gathered around the window's box). The second
    solution is kept when its boxes hold more than ``window_start_margin`` × the points the first one's hold
-   (summed over frames, on the same points); a start from the window alone is no good where the online offset
+   (summed over frames, on the same points; ``full``: 1.0); with backward passes the states are the fused ones,
+   which already hold the lost stretch where the window would move it, so the second solve runs whatever the window
+   moved; a start from the window alone is no good where the online offset
    is one rigid shift, which the gauge removes but the window, part-corrected, no longer is. Given the points and
    no source, the window pass is skipped when the second solution could never be kept: the first one's boxes hold
    so many points that ``window_start_margin`` x that is at least an upper bound of what any boxes hold
@@ -827,6 +829,8 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
             points = [p if a is b else frame_region_points(source.lidar_frame(b.frame), b.box, config, params)
                       for p, a, b in zip(points, result.estimates, fused.estimates, strict=True)]
         result = fused
+        # the fused states already hold the lost stretch where the window would move it: its move tests nothing
+        params = dataclasses.replace(params, window_start_moved=0.0)
     if points is None:
         if source is None:
             raise ValueError("refine_offline needs a source to read when no points are given")

@@ -54,10 +54,15 @@ def _counting_window(monkeypatch) -> list[int]:
     return calls
 
 
-@pytest.mark.parametrize("held_off, in_box, skipped", [(range(0), True, True), (range(1, 7), False, False)])
-def test_the_window_pass_is_skipped_only_where_it_cannot_change_the_boxes(monkeypatch, held_off, in_box, skipped):
+@pytest.mark.parametrize("held_off, in_box, margin, skipped", [(range(0), True, 1.05, True),
+                                                                (range(0), True, 1.0, False),
+                                                                (range(1, 7), False, 1.0, False)])
+def test_the_window_pass_is_skipped_only_where_it_cannot_change_the_boxes(monkeypatch, held_off, in_box, margin,
+                                                                         skipped):
+    """With ``full``'s margin of 1.0 the solve's boxes would have to hold every point any boxes could: not skipped
+    even with only the car's points; with 1.05 it is."""
     online, points = _online(held_off, in_box)
-    config = online.config
+    config = online.config.updated({"refinement.offline.window_start_margin": margin})
     calls = _counting_window(monkeypatch)
     got = refine_offline(None, online, config, points=points)
     assert (len(calls) == 0) == skipped
