@@ -311,6 +311,9 @@ class ReacquireConfig:
                                          # its predicted path (a hidden vehicle keeps its lane or changes it slowly)
     centre_in_reach: bool = False        # a lost track's candidate's centre is within reach + growth x lost time of
                                          # the predicted box centre, not only some of its points (off in full)
+    whole_candidates: bool = False       # a lost track is not re-locked on a cluster cut by the region's side (its
+                                         # centre and motion are those of the part inside: a parked car the growing
+                                         # region reaches into); off: any candidate
     max_speed: float = 15.0              # m/s: a lost start's region reaches this far ahead per second (a third behind)
     max_reach: float = 45.0              # m: the region grows no further
     rise: float = 0.5                    # m: the region is this much taller each way than the box

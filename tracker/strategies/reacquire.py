@@ -154,6 +154,8 @@ class ClusterReacquire(Reacquire):
         previous, self._previous = self._previous, candidates
         best: tuple[float, Relock] | None = None
         for now in candidates:
+            if now.cut and start is None and c.whole_candidates:
+                continue
             for before in previous:
                 dt = now.time_s - before.time_s
                 if dt <= 0 or np.any(np.abs(now.extent - before.extent) > c.size_gate):
