@@ -302,3 +302,21 @@ def test_a_cluster_that_reaches_the_regions_side_is_cut():
     inside, cut = sorted(candidates, key=lambda k: float(np.linalg.norm(k.centre - box.center[:2])))
     assert not inside.cut and cut.cut
     assert np.linalg.norm(inside.centre - box.center[:2]) < 0.1 and cut.extent[0] < 1.6
+
+
+def test_a_sparse_car_hidden_for_8_frames_is_relocked_on_the_coarser_lost_track_grid():
+    """A car 30 m away with 1.5 points per m^2 of its faces toward the sensor (its points lie 0.5-1 m apart),
+    hidden for 8 frames. On the 0.4 m grid its re-appeared points fall apart into fragments, none of them the car
+    (each centred off it, or their extents jumping between frames past ``size_gate``): no tracker seed re-locks it
+    with IoU >= 0.5 over the 3 frames after it re-appears. On a lost track's 0.6 m grid
+    (``reacquire.track_cell``) they connect into one cluster of the car, and two of three seeds do."""
+    boxes = _straight(20, (30.0, 4.0), 0.0, 0.4)
+    hidden = range(8, 16)
+    held = {}
+    for cell in (0.0, 0.6):
+        held[cell] = 0
+        for seed in range(3):
+            seq = _scene(boxes, seed, hidden=hidden, density=lambda r: 1.5, ground_centre=(36.0, 4.0))
+            iou = _iou(_track(seq, **{"reacquire.track_cell": cell}), boxes)
+            held[cell] += int(iou[hidden.stop + 1:hidden.stop + 4].min() >= 0.5)
+    assert held[0.0] == 0 and held[0.6] >= 2
