@@ -138,7 +138,7 @@ class ClusterReacquire(Reacquire):
         frame = np.array([axis, [-axis[1], axis[0]]])
         held = [k for k in candidates if supported and k.count >= c.min_points and k.held >= c.hold_share * k.count
                 and np.all(k.extent >= size - 2.0 * c.hold_distance)
-                and np.all(np.abs(frame @ (k.centre - box.center[:2])) <= 0.5 * (size - k.extent) + c.grid(False))]
+                and np.all(np.abs(frame @ (k.centre - box.center[:2])) <= 0.5 * (size - k.extent) + c.cell)]
         if not held:
             self._held = []
             return False
