@@ -320,7 +320,7 @@ class ReacquireConfig:
     cell: float = 0.4                    # m: the BEV grid the clusters are connected on
     track_cell: float = 0.0              # m: > 0: a lost track's grid instead (a far car's few points lie further
                                          # apart than 0.4 m: on the finer grid they fall apart into fragments, each
-                                         # centred off the car); a lost start keeps ``cell``
+                                         # centred off the car); a lost start keeps ``cell`` (0.6 in full)
     cluster_points: int = 2              # a candidate cluster holds at least this many points
     size_margin: float = 1.0             # m: a candidate's extent is at most the box's length / width + this
     size_gate: float = 1.0               # m: a candidate's extent changes at most this between frames
@@ -667,7 +667,7 @@ _FULL = TrackerConfig(
                         consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
-    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2),
+    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, track_cell=0.6),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10)),
 )
 # faithful: the authors' implementation (docs/tracker.md)

@@ -25,7 +25,8 @@ one of the previous frame's candidates in position, size and motion: for a lost 
 of the last supported frame along its heading, the way it moves: a hidden vehicle does not end up behind where
 it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
 the predicted path: a vehicle a lane over is another one; with ``centre_in_reach`` (off in full) its centre within
-``reach`` + ``growth`` x the time since of the predicted box centre); for a lost start a velocity along the start box's
+``reach`` + ``growth`` x the time since of the predicted box centre; with ``whole_candidates`` (off in full) not
+a cluster the region cuts); for a lost start a velocity along the start box's
 heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance
 travelled from the start box since the start.
 """
