@@ -317,10 +317,16 @@ class ReacquireConfig:
                                          # its predicted path (a hidden vehicle keeps its lane or changes it slowly)
     centre_in_reach: bool = False        # a lost track's candidate's centre is within reach + growth x lost time of
                                          # the predicted box centre, not only some of its points (off in full)
+    whole_candidates: bool = False       # a lost track is not re-locked on a cluster cut by the region's side (its
+                                         # centre and motion are those of the part inside: a parked car the growing
+                                         # region reaches into); off: any candidate
     max_speed: float = 15.0              # m/s: a lost start's region reaches this far ahead per second (a third behind)
     max_reach: float = 45.0              # m: the region grows no further
     rise: float = 0.5                    # m: the region is this much taller each way than the box
     cell: float = 0.4                    # m: the BEV grid the clusters are connected on
+    track_cell: float = 0.0              # m: > 0: a lost track's grid instead (a far car's few points lie further
+                                         # apart than 0.4 m: on the finer grid they fall apart into fragments, each
+                                         # centred off the car); a lost start keeps ``cell`` (0.6 in full)
     cluster_points: int = 2              # a candidate cluster holds at least this many points
     size_margin: float = 1.0             # m: a candidate's extent is at most the box's length / width + this
     size_gate: float = 1.0               # m: a candidate's extent changes at most this between frames
@@ -328,9 +334,16 @@ class ReacquireConfig:
     min_speed: float = 1.5               # m/s: a lost start's candidate moves at least this fast
     max_angle: float = 0.6               # rad: ... along its heading line (either way) within this
 
+    def grid(self, lost_start: bool) -> float:
+        """The BEV grid cell of the search (m): ``cell`` for a lost start, ``track_cell`` (if set) for a lost
+        track."""
+        return self.cell if lost_start or self.track_cell <= 0 else self.track_cell
+
     def __post_init__(self) -> None:
         _choice("reacquire.mode", self.mode, ("none", "clusters"))
         _positive(self, "reacquire", "lost_frames", "cell", "max_speed", "hold_share")
+        if self.track_cell < 0:
+            raise ValueError(f"reacquire.track_cell must be >= 0, got {self.track_cell}")
         if self.hold_frames < 0 or self.hold_share > 1.0:
             raise ValueError(f"reacquire.hold_frames must be >= 0 and reacquire.hold_share <= 1, got "
                              f"{self.hold_frames}, {self.hold_share}")
@@ -660,7 +673,7 @@ _FULL = TrackerConfig(
                         consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
-    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2),
+    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, track_cell=0.6),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0)),
 )
 # faithful: the authors' implementation (docs/tracker.md)

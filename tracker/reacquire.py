@@ -50,19 +50,21 @@ def start_shift(local: np.ndarray, box: Box, ahead: float, behind: float, min_po
 @dataclass(frozen=True)
 class Candidate:
     """A non-ground cluster of the right size: the box placed on it (``centre``, xy, world), its extent along
-    and across the searched box's heading (m), its number of points, the time it was seen (s), and how many of
-    its points the searched box (scaled by ``hold_scale``) holds."""
+    and across the searched box's heading (m), its number of points, the time it was seen (s), how many of
+    its points the searched box (scaled by ``hold_scale``) holds, and whether the cluster reaches the searched
+    region's side (``cut``: its extent and centre are those of the part inside)."""
 
     centre: np.ndarray
     extent: np.ndarray
     count: int
     time_s: float
     held: int = 0
+    cut: bool = False
 
 
 def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: float, min_points: int,
                        size_margin: float, time_s: float, centred: bool = False,
-                       hold_scale: float = 1.0) -> list[Candidate]:
+                       hold_scale: float = 1.0, region: Box | None = None) -> list[Candidate]:
     """The clusters of ``points`` (non-ground, world) on a BEV grid of ``cell`` metres (8-connected cells) that
     hold at least ``min_points`` points and fit ``box``'s length and width + ``size_margin``, each with ``box``
     placed on it: along an axis where the cluster is shorter than the box and the line of sight from ``sensor``
@@ -70,7 +72,9 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     :func:`start_shift`); else, or with ``centred``, the box is centred on the cluster's extent (which end of the
     object a short cluster shows is ambiguous for a track that was lost: the near end seen, the near end hidden by
     an occluder, the roof of a far car; centred, the box is off by at most half the unseen length). ``held``: the
-    cluster's points inside ``box`` scaled by ``hold_scale`` (whether the box already holds that object)."""
+    cluster's points inside ``box`` scaled by ``hold_scale`` (whether the box already holds that object).
+    ``region``: the searched region (a box with ``box``'s heading); a cluster with points within ``cell`` of its
+    sides is ``cut``."""
     if len(points) < min_points:
         return []
     c, s = np.cos(box.heading), np.sin(box.heading)
@@ -106,7 +110,14 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     placed = np.where(faced & (extent[keep] < 2.0 * half) & (not centred), placed, mid)
     world = box.center[:2] + placed[:, :1] * np.array([c, s]) + placed[:, 1:] * np.array([-s, c])
     held = np.bincount(label[points_in_box(points, box, hold_scale)], minlength=count)
-    return [Candidate(world[i], extent[k], int(sizes[k]), time_s, int(held[k])) for i, k in enumerate(keep)]
+    cut = np.zeros(count, dtype=bool)
+    if region is not None:
+        r = region.center[:2] - box.center[:2]
+        centre = np.array([r @ np.array([c, s]), r @ np.array([-s, c])])
+        inner = 0.5 * np.array([region.length, region.width]) - cell
+        cut = np.any((low < centre - inner) | (high > centre + inner), axis=1)
+    return [Candidate(world[i], extent[k], int(sizes[k]), time_s, int(held[k]), bool(cut[k]))
+            for i, k in enumerate(keep)]
 
 
 def box_holds_against(box: Box, centre: np.ndarray, points: np.ndarray, hold_ties: bool, crop_scale: float) -> bool:

@@ -10,8 +10,9 @@ from tracker_synthetic import BOX_SIZE, SyntheticSequence, car_points, ground_po
 
 from tracker import get_preset, refine_offline, track
 from tracker.frames import LidarFrame
-from tracker.geometry import Box, invert_transform, make_transform, rotation_z, transform_points
+from tracker.geometry import Box, invert_transform, make_transform, points_in_box, rotation_z, transform_points
 from tracker.metrics import iou_3d_batch
+from tracker.reacquire import cluster_candidates, search_region
 
 REACQUIRE = {"reacquire.mode": "clusters"}
 NO_REACQUIRE = {"reacquire.mode": "none"}     # `full` re-acquires: the comparisons switch it off
@@ -178,23 +179,25 @@ def test_a_car_the_hidden_target_passed_does_not_capture_the_track(occluder_velo
     assert _iou(result, boxes)[hidden.stop + 2:].min() > 0.7             # held again once it re-appears
 
 
-@pytest.mark.parametrize("centre_in_reach", [False, True])
-def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(centre_in_reach):
+@pytest.mark.parametrize("guard", [None, "centre_in_reach", "whole_candidates"])
+def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     """The target drives at 1 m/s (0.1 m per frame) toward a car parked 9 m ahead in its lane and is hidden for 12
     frames. The search region grows around the prediction (reach + growth x lost time) and the parked car's rear
     comes into it: its two-frame motion (0 m/s) is within the velocity gate of the predicted 1 m/s, it is ahead
     (on the path), and the empty coasting box holds none of its points, so it captures the track. Its centre is
     further from the prediction (7 m) than the object can have strayed in that time; with
-    ``reacquire.centre_in_reach`` the candidate's centre must lie within that bound, the track coasts on and holds
-    the target as it re-appears."""
+    ``reacquire.centre_in_reach`` the candidate's centre must lie within that bound; with
+    ``reacquire.whole_candidates`` a cluster that reaches the region's side (the part of the parked car inside it,
+    which grows and seems to move as the region grows) is not taken. Either way the track coasts on and holds the
+    target as it re-appears."""
     boxes = _straight(30, (10.0, 4.0), 0.0, 0.1)
     parked = [Box(19.0, 4.0, 0.0, 0.0, *BOX_SIZE)] * 30
     hidden = range(8, 20)
     seq = _scene(boxes, 0, hidden=hidden, others=(parked,), ground_half=24.0)
-    result = _track(seq, **REACQUIRE, **{"reacquire.centre_in_reach": centre_in_reach})
+    result = _track(seq, **REACQUIRE, **({} if guard is None else {f"reacquire.{guard}": True}))
     iou = _iou(result, boxes)
     relocked = [k for k, e in enumerate(result.estimates) if "reacquired" in e.flags]
-    if centre_in_reach:
+    if guard is not None:
         assert not relocked and iou[1:hidden.stop].min() > 0.7 and iou[hidden.stop + 1:].min() > 0.7
     else:
         assert relocked and relocked[0] < hidden.stop and iou[hidden.stop:].max() < 0.1   # on the parked car
@@ -277,3 +280,43 @@ def test_the_travel_target_in_a_steady_turn_is_the_heading_at_the_next_frame():
     chord_lag = rate * (0.25 + dt)                          # what the plain chord direction would lag by
     assert chord_lag > np.deg2rad(2.0)
     assert 0.0 < weight < 5.0                                # faded (the window turns) but not off
+
+
+def test_a_cluster_that_reaches_the_regions_side_is_cut():
+    """Two car-sized blocks of points: one inside the searched region, one straddling its front side (the region
+    holds only its rear 1.5 m). Both are candidates; only the second is ``cut``: its extent (1.5 m, not 4.5 m) and
+    centre are those of the part inside."""
+    box = Box(0.0, 0.0, 0.0, 0.3, *BOX_SIZE)
+    region = search_region(box, 4.0, 4.0, 2.0)
+    u, v = np.meshgrid(np.arange(-2.25, 2.26, 0.1), np.arange(-0.9, 0.91, 0.1))
+    block = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, 0.5)])
+    front = 0.5 * region.length                  # the region's front side, along the heading from its centre
+    shift = region.center[:2] - box.center[:2]
+    along = np.array([np.cos(box.heading), np.sin(box.heading)]) @ shift
+    ahead = block + [along + front + 2.25 - 1.5, 0.0, 0.0]
+    world = transform_points(make_transform(rotation_z(box.heading), box.center), np.vstack([block, ahead]))
+    points = world[points_in_box(world, region, 1.0)]
+    candidates = cluster_candidates(points, box, np.array([-30.0, 0.0, 1.0]), 0.4, 2, 1.0, 0.0, centred=True,
+                                    region=region)
+    assert len(candidates) == 2
+    inside, cut = sorted(candidates, key=lambda k: float(np.linalg.norm(k.centre - box.center[:2])))
+    assert not inside.cut and cut.cut
+    assert np.linalg.norm(inside.centre - box.center[:2]) < 0.1 and cut.extent[0] < 1.6
+
+
+def test_a_sparse_car_hidden_for_8_frames_is_relocked_on_the_coarser_lost_track_grid():
+    """A car 30 m away with 1.5 points per m^2 of its faces toward the sensor (its points lie 0.5-1 m apart),
+    hidden for 8 frames. On the 0.4 m grid its re-appeared points fall apart into fragments, none of them the car
+    (each centred off it, or their extents jumping between frames past ``size_gate``): no tracker seed re-locks it
+    with IoU >= 0.5 over the 3 frames after it re-appears. On a lost track's 0.6 m grid
+    (``reacquire.track_cell``) they connect into one cluster of the car, and two of three seeds do."""
+    boxes = _straight(20, (30.0, 4.0), 0.0, 0.4)
+    hidden = range(8, 16)
+    held = {}
+    for cell in (0.0, 0.6):
+        held[cell] = 0
+        for seed in range(3):
+            seq = _scene(boxes, seed, hidden=hidden, density=lambda r: 1.5, ground_centre=(36.0, 4.0))
+            iou = _iou(_track(seq, **{"reacquire.track_cell": cell}), boxes)
+            held[cell] += int(iou[hidden.stop + 1:hidden.stop + 4].min() >= 0.5)
+    assert held[0.0] == 0 and held[0.6] >= 2

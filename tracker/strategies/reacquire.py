@@ -25,7 +25,8 @@ one of the previous frame's candidates in position, size and motion: for a lost 
 of the last supported frame along its heading, the way it moves: a hidden vehicle does not end up behind where
 it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
 the predicted path: a vehicle a lane over is another one; with ``centre_in_reach`` (off in full) its centre within
-``reach`` + ``growth`` x the time since of the predicted box centre); for a lost start a velocity along the start box's
+``reach`` + ``growth`` x the time since of the predicted box centre; with ``whole_candidates`` (off in full) not
+a cluster the region cuts); for a lost start a velocity along the start box's
 heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance
 travelled from the start box since the start.
 """
@@ -154,6 +155,8 @@ class ClusterReacquire(Reacquire):
         previous, self._previous = self._previous, candidates
         best: tuple[float, Relock] | None = None
         for now in candidates:
+            if now.cut and start is None and c.whole_candidates:
+                continue
             for before in previous:
                 dt = now.time_s - before.time_s
                 if dt <= 0 or np.any(np.abs(now.extent - before.extent) > c.size_gate):
