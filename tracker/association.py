@@ -42,21 +42,13 @@ def random_subset(points: np.ndarray, max_points: int, rng: np.random.Generator)
 
 def fit_rigid_2d(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """Least-squares 2D rotation angle and translation with dst ~ R(angle) @ src + t (closed form)."""
-    if weights is None:   # unit weights: the same sums without the products by 1.0 (x * 1.0 is x)
-        wsum = max(float(len(src)), 1e-12)
-        cs = _add(src, axis=0) / wsum
-        cd = _add(dst, axis=0) / wsum
-        a, b = src - cs, dst - cd
-        cos_sum = float(_add(a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
-        sin_sum = float(_add(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
-    else:
-        w = weights
-        wsum = max(float(w.sum()), 1e-12)
-        cs = (w[:, None] * src).sum(axis=0) / wsum
-        cd = (w[:, None] * dst).sum(axis=0) / wsum
-        a, b = src - cs, dst - cd
-        cos_sum = float((w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])).sum())
-        sin_sum = float((w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])).sum())
+    w = np.ones(len(src)) if weights is None else weights
+    wsum = max(float(w.sum()), 1e-12)
+    cs = (w[:, None] * src).sum(axis=0) / wsum
+    cd = (w[:, None] * dst).sum(axis=0) / wsum
+    a, b = src - cs, dst - cd
+    cos_sum = float((w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])).sum())
+    sin_sum = float((w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])).sum())
     angle = float(np.arctan2(sin_sum, cos_sum))
     c, s = np.cos(angle), np.sin(angle)
     t = cd - np.array([c * cs[0] - s * cs[1], s * cs[0] + c * cs[1]])
