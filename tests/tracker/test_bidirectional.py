@@ -54,7 +54,7 @@ def test_offline_reaches_lost_frames_that_a_10_frame_window_cannot(far_approach)
     assert iou_off[1:].mean() >= iou_lag[1:].mean()
     lead = config.refinement.backward_lag_lead
     assert iou_lag[4:first + lead - 10].max() < 0.1 and iou_off[4:first + lead - 10].min() > 0.7
-    lead = config.refinement.backward_lag_lead                          # the window's own frames are revised
+    # the window's own frames are revised
     assert np.median(iou_lag[first + lead - 10:first]) > 0.5         # (dead reckoning there: no points)
 
 
