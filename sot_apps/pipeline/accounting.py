@@ -62,11 +62,12 @@ def schedule_balance(schedule: dict, workers: int) -> dict:
 
 
 def main_accounting(phases: dict, startup: bool = True) -> dict:
-    """The run's own process: its start-up before the run (interpreter, imports: wall and CPU), planning, the
-    workers' preparation (Dask: the cluster and every worker opening the sequences), the tracking stage's wall and
-    this process's CPU meanwhile (scheduling, collecting results; Dask's scheduler and nannies live here), and
-    the end (apps, manifest). ``startup=False``: a run inside a longer process (a benchmark), whose age says
-    nothing about the run."""
+    """The run's own process: its start-up before the run (interpreter, imports: wall and CPU), planning, the workers'
+    preparation (a Dask LocalCluster: waiting for it; a cluster by address: every worker opening the sequences), the
+    tracking stage's wall and this process's CPU meanwhile (scheduling, collecting results; Dask's scheduler and
+    nannies live here), and the end (apps, manifest). ``startup=False``: a run inside a longer process (a
+    benchmark), whose age says nothing about the run.
+    """
     def at(name: str) -> float:
         return float(phases.get(name, {}).get("at_s", 0.0))
 
@@ -100,7 +101,8 @@ def predicted_makespan(schedule: dict, phases: dict, workers: int) -> dict:
     if not tasks or "opened" not in phases:
         return {}
     # the chunking's CPU (the cost estimate) is in the run's CPU at "opened" when it ran before the workers' preparation
-    serial = float(phases["opened"]["cpu_s"]) + (0.0 if "chunked" in phases else float(schedule.get("chunking_cpu_s", 0.0)))
+    chunking = 0.0 if "chunked" in phases else float(schedule.get("chunking_cpu_s", 0.0))
+    serial = float(phases["opened"]["cpu_s"]) + chunking
     run_pid = schedule.get("run_pid")
     first: dict[int, dict] = {}
     for t in sorted(tasks, key=lambda t: t["start_s"]):
