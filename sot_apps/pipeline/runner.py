@@ -163,7 +163,7 @@ def _run_units(units: list[_Unit], out: Path, session: ExecutorSession, desc: st
 class _TrackingPlan:
     digests: dict[str, str]      # per object key: its unit digest
     chunks: list[list]           # the unfinished objects in chunks (plan.track_chunks), costliest first
-    chunking: tuple[float, float]   # wall and CPU seconds the chunking took (the cost estimate)
+    chunking: tuple[float, float]   # wall and CPU (this thread's) seconds the chunking took (the cost estimate)
 
 
 def _plan_tracking(plan: Plan, out: Path, stage, session: ExecutorSession) -> _TrackingPlan:
@@ -173,9 +173,9 @@ def _plan_tracking(plan: Plan, out: Path, stage, session: ExecutorSession) -> _T
     digests = {o.key: _unit_digest({"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage})
                for o in plan.objects}
     todo = [o for o in plan.objects if not _marker(out, f"track/{o.key}").is_done(digests[o.key])]
-    start = time.perf_counter(), time.process_time()
+    start = time.perf_counter(), time.thread_time()   # this thread's: a LocalCluster starts on another meanwhile
     chunks = track_chunks(todo, session.worker_count(), estimate=estimate_costs) if todo else []
-    return _TrackingPlan(digests, chunks, (time.perf_counter() - start[0], time.process_time() - start[1]))
+    return _TrackingPlan(digests, chunks, (time.perf_counter() - start[0], time.thread_time() - start[1]))
 
 
 def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession, tracking: _TrackingPlan,
