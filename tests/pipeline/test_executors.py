@@ -36,9 +36,9 @@ def test_dask_local_cluster_matches_local():
 
 @pytest.mark.slow
 def test_dask_workers_open_each_sequence_once(tiny_worlds, tmp_path):
-    """The worker-local cache: every LocalCluster worker opens the sequence once (at its first task here: this
-    session's fork server was not warmed with it), and the tracking tasks reuse it (nothing is re-opened between
-    tasks or stages). A cluster given by address: tests/pipeline/test_pipeline.py."""
+    """The worker-local cache: every LocalCluster worker opens the sequence once (in its fork server when that was
+    warmed with it, else at its first task), and the tracking tasks reuse it (nothing is re-opened between tasks or
+    stages). A cluster given by address: tests/pipeline/test_pipeline.py."""
     from sot_apps.pipeline.config import PipelineConfig
     from sot_apps.pipeline.executors import ExecutorSession
     from sot_apps.pipeline.plan import worker_cache_info
