@@ -421,8 +421,6 @@ class OfflineParams:
     window_start_moved: float = 0.5     # ... only when the window moved some centre farther than this (m) from the
                                         # online one
     window_start_margin: float = 1.05   # ... kept when its boxes hold more than this x the first solve's points
-    window_keep_states: bool = False    # ... and the window pass's own states are kept instead of the solve's when
-                                        # their boxes hold more than window_start_margin x its points
     gauge_window: int = 0               # > 0 (offline, with window_start): the trajectory is moved by the mean object-
                                         # frame offset from its states to the window pass's over frames 1..this
     gauge_window_max: float = 0.3       # ... only when that offset's centre part is under this (m)

@@ -834,16 +834,6 @@ def _window_start(source: FrameSource | None, result: TrackResult, config: Track
     return states, shape, points
 
 
-def _window_kept(points: list[np.ndarray], window: np.ndarray, states: np.ndarray, shape: np.ndarray | None,
-                 size: np.ndarray, params: OfflineParams) -> tuple[np.ndarray, np.ndarray | None]:
-    """``window_keep_states``: the window pass's own states (and their shape) where their boxes hold more than
-    ``window_start_margin`` x the points the solve's boxes hold (a whole-sequence solve that lost a stretch the
-    window holds); else the solve's."""
-    if _support(points, window, size) > params.window_start_margin * _support(points, states, size):
-        return window, _rebuild_shape(points, window, size, params.voxel)
-    return states, shape
-
-
 def refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig | None = None,
                    params: OfflineParams | None = None, points: list[np.ndarray] | None = None) -> TrackResult:
     """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
@@ -873,8 +863,6 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
 
         window = window_states(points, result, params.window_start, config)
         states, shape, points = _window_start(source, result, config, params, points, online, window, states, shape)
-        if params.window_keep_states:
-            states, shape = _window_kept(points, window, states, shape, np.asarray(result.size), params)
         if params.gauge_window > 0:
             gauged = _window_gauge(states, window, params.gauge_window, params.gauge_window_max)
             if gauged is not states:

@@ -65,26 +65,3 @@ def test_the_second_solve_runs_only_where_the_window_moved_a_state(held_off):
     without = refine_offline(seq, on_the_car, config.updated({"refinement.offline.window_start": 0}))
     assert np.array_equal([e.box.to_array() for e in with_second.estimates],
                           [e.box.to_array() for e in without.estimates])
-
-
-def test_the_window_states_are_kept_only_where_their_boxes_hold_more_points(held_off):
-    """``window_keep_states``: the window pass's own states replace the solve's where their boxes hold more of the
-    frames' points (the truth against the held-off online states), never where they hold fewer."""
-    from tracker.offline import _support, _window_kept, gather_frame_points
-
-    seq, boxes, online, config = held_off
-    params = config.refinement.offline
-    size = np.array(boxes[0].size)
-    truth = np.array([b.to_array()[:4] for b in boxes])
-    held = np.array([e.state.to_array() for e in online.estimates])
-    on_the_car = TrackResult([FrameEstimate(k, State.from_array(b.to_array()[:4]), b, 50, 1.0, (), 1.0,
-                                            np.zeros((0, 3))) for k, b in enumerate(boxes)],
-                             online.size, online.shape, config)
-    points = gather_frame_points(seq, on_the_car, config, params)             # each frame's points around the car
-    assert _support(points, truth, size) > _support(points, held, size)
-    kept, shape = _window_kept(points, truth, held, None, size, params)
-    assert kept is truth and shape is not None and len(shape) > 100
-    kept, shape = _window_kept(points, held, truth, None, size, params)
-    assert kept is truth and shape is None                                     # the solve's, as it was
-    refined = refine_offline(seq, online, config.updated({"refinement.offline.window_keep_states": True}))
-    assert _iou(refined, boxes).mean() >= _iou(refine_fixed_lag(seq, online, 10, config), boxes).mean()
