@@ -396,6 +396,9 @@ class OfflineParams:
                                         # points' mean (no pull of the frames onto the grid's half-voxel layers)
     shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
     min_shape_points: int = 10
+    shape_frames: int = 0               # > 0: a frame's fold shape only from the frames of its block of this many
+                                        # frames and the two next to it (views of the same aspect; a too small one:
+                                        # the whole fold's)
     folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
     first_frame_weight: float = 1.0     # data weight of frame 0 (its registration sets the gauge)
     gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"

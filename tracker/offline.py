@@ -428,10 +428,16 @@ class _Solver:
         local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame,
                                       self._object_frame(states))
         downsample = voxel_downsample_means if p.shape_voxel == "means" else voxel_downsample_centres
-        for f in range(folds):
+        blocks = -(-self.k // p.shape_frames) if p.shape_frames > 0 else 1
+        for g in range(folds * blocks):   # group g: fold g % folds, block g // folds (shape_frames)
+            f = g % folds
             shape = downsample(local[frame % folds != f], p.voxel)
             if len(shape) < p.min_shape_points:
                 return False
+            if blocks > 1:   # the frames of the block and its neighbours only, where they give a shape
+                near = (frame % folds != f) & (np.abs(frame // p.shape_frames - g // folds) <= 1)
+                local_shape = downsample(local[near], p.voxel)
+                shape = local_shape if len(local_shape) >= p.min_shape_points else shape
             self.shapes.append(shape)
             self.trees.append(cKDTree(shape))
             self.nearest.append(VoxelNearest(shape, p.voxel, self.trees[-1]))   # the tree's answers, most by look-up
@@ -505,7 +511,10 @@ class _Solver:
         scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
         self.slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()  # (frame, block entry) of _data
-        self.fold_rows = [np.flatnonzero(self.frame_idx % self.folds == f) for f in range(self.folds)]
+        group = self.frame_idx % self.folds
+        if p.shape_frames > 0:
+            group = group + self.folds * (self.frame_idx // p.shape_frames)
+        self.fold_rows = [np.flatnonzero(group == g) for g in range(len(self.shapes))]
         self._matched = self._residual = None
 
     def _residuals(self, states: np.ndarray, pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):

@@ -25,8 +25,8 @@ def _steady_turn(k: int = 30, speed: float = 1.0, rate: float = 0.04) -> np.ndar
     return np.c_[centre, np.full(k, 0.75), heading]
 
 
-def _solver(states: np.ndarray, **params) -> _Solver:
-    points = [np.zeros((0, 3)) for _ in states]
+def _solver(states: np.ndarray, points: list[np.ndarray] | None = None, **params) -> _Solver:
+    points = points if points is not None else [np.zeros((0, 3)) for _ in states]
     return _Solver(points, states, np.array([4.5, 1.9, 1.5]), dataclasses.replace(OFFLINE_PARAMS, **params),
                    np.random.default_rng(0))
 
@@ -72,3 +72,25 @@ def test_travel_target_with_the_rear_axle_is_the_true_heading_in_a_turn():
     straight = _steady_turn(rate=1e-9)
     axle._travel_targets(straight)
     np.testing.assert_allclose(axle._travel[0][inner], straight[inner, 3], atol=1e-6)
+
+
+def test_shape_frames_builds_each_frame_shape_from_the_other_fold_of_its_own_and_next_blocks():
+    """``shape_frames`` = 5: frame k matches a shape made only of the other fold's frames in k's block of 5 frames
+    and the two next to it (each frame's points sit at their own place along the box, so a shape point names its
+    frame); without it, of the whole other fold."""
+    k, block = 30, 5
+    states = np.zeros((k, 4))
+    points = [np.c_[np.full(8, -2.0 + 0.125 * j), np.linspace(-0.5, 0.5, 8), np.zeros(8)] for j in range(k)]
+    frame_of = lambda shape: np.unique(np.rint((shape[:, 0] + 2.0) / 0.125).astype(int))   # noqa: E731
+    for blocks, shape_frames in ((1, 0), (k // block, block)):
+        solver = _solver(states, points, min_shape_points=1, shape_frames=shape_frames)
+        assert solver.set_shapes(states)
+        assert len(solver.shapes) == 2 * blocks
+        solver.select(states)
+        for g, shape in enumerate(solver.shapes):
+            fold, b = g % 2, g // 2
+            expected = [j for j in range(k) if j % 2 != fold and (blocks == 1 or abs(j // block - b) <= 1)]
+            np.testing.assert_array_equal(frame_of(shape), expected)
+            rows = solver.fold_rows[g]     # the data points matched against it: frames of that fold and block
+            frames = np.unique(solver.frame_idx[rows])
+            assert all(j % 2 == fold and (blocks == 1 or j // block == b) for j in frames) and len(frames)
