@@ -410,14 +410,14 @@ class OfflineParams:
     travel_sigma_heading: float = 0.0   # > 0: heading from travel, each heading toward the direction of the chord
                                         # through the states travel_frames before and after it, this sigma (rad)
     travel_frames: int = 2
+    travel_min_step: float = 0.3        # m per frame over the chord: slower frames get no travel term (full
+                                        # weight from twice this)
     travel_rear_axle: float = 0.0       # > 0 (m): in a turn the box centre does not move along the heading (a vehicle's
                                         # rear axle does): the travel target is the chord's direction minus the
                                         # centre's sideslip asin(this x heading rate / speed), rear axle this far back
     smooth_turn: bool = False           # True: the x, y smoothness expects the velocity to turn with the heading
                                         # (second difference - 2 tan(heading rate / 2) x the perpendicular of the
                                         # centred velocity, held through a step) instead of a straight line
-    travel_min_step: float = 0.3        # m per frame over the chord: slower frames get no travel term (full
-                                        # weight from twice this)
     window_start: int = 0               # > 0 (offline): a second solve starts from the states of a fixed-lag window
                                         # pass of this lag (refinement.lag's solve) and is kept when its boxes hold
                                         # more points (tracker/offline.py, step 6)
