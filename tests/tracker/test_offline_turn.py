@@ -1,7 +1,7 @@
 """The offline solve's priors on an analytic steady turn (a kinematic bicycle, box centre ahead of the rear axle):
 ``smooth_turn`` leaves the turn where it is (the straight-line smoothness pulls it flat), and heading from travel
 with ``travel_rear_axle`` aims at the true heading (the box centre's direction of travel is off it by the
-sideslip)."""
+sideslip); ``shape_frames`` builds each frame's shape from nearby frames only."""
 
 from __future__ import annotations
 
@@ -81,7 +81,10 @@ def test_shape_frames_builds_each_frame_shape_from_the_other_fold_of_its_own_and
     k, block = 30, 5
     states = np.zeros((k, 4))
     points = [np.c_[np.full(8, -2.0 + 0.125 * j), np.linspace(-0.5, 0.5, 8), np.zeros(8)] for j in range(k)]
-    frame_of = lambda shape: np.unique(np.rint((shape[:, 0] + 2.0) / 0.125).astype(int))   # noqa: E731
+
+    def frame_of(shape: np.ndarray) -> np.ndarray:
+        return np.unique(np.rint((shape[:, 0] + 2.0) / 0.125).astype(int))
+
     for blocks, shape_frames in ((1, 0), (k // block, block)):
         solver = _solver(states, points, min_shape_points=1, shape_frames=shape_frames)
         assert solver.set_shapes(states)
