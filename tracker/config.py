@@ -396,6 +396,9 @@ class OfflineParams:
                                         # points' mean (no pull of the frames onto the grid's half-voxel layers)
     shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
     min_shape_points: int = 10
+    shape_frames: int = 0               # > 0: a frame's fold shape only from the frames of its block of this many
+                                        # frames and the two next to it (views of the same aspect; a too small one:
+                                        # the whole fold's)
     folds: int = 2                      # frame k registers to the shape of the frames not in fold k % folds
     first_frame_weight: float = 1.0     # data weight of frame 0 (its registration sets the gauge)
     gauge: str = "regauge"              # "regauge": all free, then moved so frame 0 is the start box; "fix_first"
@@ -409,6 +412,12 @@ class OfflineParams:
     travel_frames: int = 2
     travel_min_step: float = 0.3        # m per frame over the chord: slower frames get no travel term (full
                                         # weight from twice this)
+    travel_rear_axle: float = 0.0       # > 0 (m): in a turn the box centre does not move along the heading (a vehicle's
+                                        # rear axle does): the travel target is the chord's direction minus the
+                                        # centre's sideslip asin(this x heading rate / speed), rear axle this far back
+    smooth_turn: bool = False           # True: the x, y smoothness expects the velocity to turn with the heading
+                                        # (second difference - 2 tan(heading rate / 2) x the perpendicular of the
+                                        # centred velocity, held through a step) instead of a straight line
     window_start: int = 0               # > 0 (offline): a second solve starts from the states of a fixed-lag window
                                         # pass of this lag (refinement.lag's solve) and is kept when its boxes hold
                                         # more points (tracker/offline.py, step 6)

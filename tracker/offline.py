@@ -412,6 +412,7 @@ class _Solver:
                 1.0 / np.asarray(anchors.sigma, dtype=np.float64) ** 2, len(anchors.frames))
         self._matched: tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self._travel = (np.zeros(self.k), np.zeros(self.k))  # heading targets and weights (_travel_targets)
+        self._turn = np.zeros((max(self.k - 2, 0), 2))  # x, y second differences of a turn (_turn_targets)
         self._object_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._residual: tuple[np.ndarray, tuple] | None = None   # the last states' residuals (_residuals)
 
@@ -427,10 +428,16 @@ class _Solver:
         local, frame = _object_points(self.stacked, states, self.size, p.shape_points_per_frame,
                                       self._object_frame(states))
         downsample = voxel_downsample_means if p.shape_voxel == "means" else voxel_downsample_centres
-        for f in range(folds):
+        blocks = -(-self.k // p.shape_frames) if p.shape_frames > 0 else 1
+        for g in range(folds * blocks):   # group g: fold g % folds, block g // folds (shape_frames)
+            f = g % folds
             shape = downsample(local[frame % folds != f], p.voxel)
             if len(shape) < p.min_shape_points:
                 return False
+            if blocks > 1:   # the frames of the block and its neighbours only, where they give a shape
+                near = (frame % folds != f) & (np.abs(frame // p.shape_frames - g // folds) <= 1)
+                local_shape = downsample(local[near], p.voxel)
+                shape = local_shape if len(local_shape) >= p.min_shape_points else shape
             self.shapes.append(shape)
             self.trees.append(cKDTree(shape))
             self.nearest.append(VoxelNearest(shape, p.voxel, self.trees[-1]))   # the tree's answers, most by look-up
@@ -504,7 +511,10 @@ class _Solver:
         scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
         self.slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()  # (frame, block entry) of _data
-        self.fold_rows = [np.flatnonzero(self.frame_idx % self.folds == f) for f in range(self.folds)]
+        group = self.frame_idx % self.folds
+        if p.shape_frames > 0:
+            group = group + self.folds * (self.frame_idx // p.shape_frames)
+        self.fold_rows = [np.flatnonzero(group == g) for g in range(len(self.shapes))]
         self._matched = self._residual = None
 
     def _residuals(self, states: np.ndarray, pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
@@ -580,6 +590,8 @@ class _Solver:
 
     def _prior(self, states: np.ndarray) -> tuple[float, np.ndarray]:
         diff2 = _second_difference(states)
+        if self.params.smooth_turn:   # x, y: the departure from a turn at the heading's rate, not from a line
+            diff2[:, :2] -= self._turn
         dev = states - self.online
         cost = float(np.sum(diff2**2 / self.sig**2) + np.sum(dev**2 / self.anchor**2))
         grad = _second_difference_transpose(diff2 / self.sig**2, self.k) + dev / self.anchor**2
@@ -613,9 +625,24 @@ class _Solver:
         offset = np.where(np.abs(offset) > 0.5 * np.pi, wrap_angle(offset + np.pi), offset)  # reversing
         weight = np.clip(step / p.travel_min_step - 1.0, 0.0, 1.0) / p.travel_sigma_heading**2
         weight = np.where(np.abs(offset) > 0.5, 0.0, weight)
+        if p.travel_rear_axle > 0:   # the centre's sideslip in a turn (forward only): travel = heading + slip
+            rate = wrap_angle(states[2 * m:, 3] - states[:-2 * m, 3]) / (2 * m)
+            slip = np.arcsin(np.clip(p.travel_rear_axle * rate / np.maximum(step, 1e-6), -0.5, 0.5))
+            offset = offset - np.where(np.abs(wrap_angle(direction - heading)) > 0.5 * np.pi, 0.0, slip)
         target, w = np.zeros(k), np.zeros(k)
         target[m:k - m], w[m:k - m] = heading + offset, weight
         self._travel = (target, w)
+
+    def _turn_targets(self, states: np.ndarray) -> None:
+        """The x, y second differences of a steady turn (``smooth_turn``): at frame k the velocity turns with the
+        heading, p_k+1 - 2 p_k + p_k-1 = 2 tan(w / 2) J (p_k+1 - p_k-1) / 2 with w = (heading_k+1 - heading_k-1) / 2
+        and J the quarter turn (exact for a constant turn rate and speed); held through a Gauss-Newton step."""
+        if not self.params.smooth_turn or self.k < 3:
+            return
+        rate = wrap_angle(states[2:, 3] - states[:-2, 3]) / 2.0
+        chord = (states[2:, :2] - states[:-2, :2]) / 2.0
+        scale = 2.0 * np.tan(np.clip(rate, -0.5, 0.5) / 2.0)
+        self._turn = scale[:, None] * np.stack([-chord[:, 1], chord[:, 0]], axis=1)
 
     def _travel_cost(self, states: np.ndarray) -> tuple[float, np.ndarray]:
         target, w = self._travel
@@ -626,6 +653,7 @@ class _Solver:
         return self._data(states, False, pairs)[0] + self._prior(states)[0] + self._travel_cost(states)[0]
 
     def step(self, states: np.ndarray) -> np.ndarray:
+        self._turn_targets(states)
         cost_d, blocks, grads = self._data(states, True)
         assert self._matched is not None   # _data without pairs records the pairs it matched at ``states``
         pairs = self._matched[1] if self.params.trial_pairs == "fixed" else None  # the pairs at ``states``
