@@ -317,6 +317,10 @@ class ReacquireConfig:
                                          # its predicted path (a hidden vehicle keeps its lane or changes it slowly)
     centre_in_reach: bool = False        # a lost track's candidate's centre is within reach + growth x lost time of
                                          # the predicted box centre, not only some of its points (off in full)
+    drift_gate: float = 0.0              # > 0: a lost track's candidate's centre is within reach + (this x |its
+                                         # velocity - the predicted one| + lateral_growth) x lost time of the
+                                         # predicted box centre: an object found far from the prediction moves
+                                         # unlike it (a parked car ahead does not; 0: off, as in full)
     whole_candidates: bool = False       # a lost track is not re-locked on a cluster cut by the region's side (its
                                          # centre and motion are those of the part inside: a parked car the growing
                                          # region reaches into); off: any candidate
@@ -342,8 +346,9 @@ class ReacquireConfig:
     def __post_init__(self) -> None:
         _choice("reacquire.mode", self.mode, ("none", "clusters"))
         _positive(self, "reacquire", "lost_frames", "cell", "max_speed", "hold_share")
-        if self.track_cell < 0:
-            raise ValueError(f"reacquire.track_cell must be >= 0, got {self.track_cell}")
+        if self.track_cell < 0 or self.drift_gate < 0:
+            raise ValueError(f"reacquire.track_cell and reacquire.drift_gate must be >= 0, got {self.track_cell}, "
+                             f"{self.drift_gate}")
         if self.hold_frames < 0 or self.hold_share > 1.0:
             raise ValueError(f"reacquire.hold_frames must be >= 0 and reacquire.hold_share <= 1, got "
                              f"{self.hold_frames}, {self.hold_share}")
