@@ -26,7 +26,9 @@ of the last supported frame along its heading, the way it moves: a hidden vehicl
 it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
 the predicted path: a vehicle a lane over is another one; with ``centre_in_reach`` (off in full) its centre within
 ``reach`` + ``growth`` x the time since of the predicted box centre; with ``whole_candidates`` (off in full) not
-a cluster the region cuts); for a lost start a velocity along the start box's
+a cluster the region cuts; with ``drift_gate`` > 0 (off in full) its centre within ``reach`` + (``drift_gate`` x
+|the velocity of its uncut end - the predicted one| + ``lateral_growth``) x the time since of the predicted box
+centre: a candidate far from the prediction must move unlike it); for a lost start a velocity along the start box's
 heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance
 travelled from the start box since the start.
 """
@@ -200,9 +202,11 @@ class ClusterReacquire(Reacquire):
         # where the motion model put it has moved unlike the model, by about d / (lost time) on average; a
         # candidate moving like the prediction but far from it is something else. The motion is that of the
         # cluster's own end (``own``: a parked car's part that the growing region cuts seems to move with the
-        # region, its uncut end does not)
-        if self.c.drift_gate > 0 and float(np.linalg.norm(now.centre - box.center[:2])) > self.c.reach + (
-                self.c.drift_gate * float(np.linalg.norm(own - predicted)) + self.c.lateral_growth) * lost_s:
+        # region, its uncut end does not). Never less than a box length: the box may have slid that far off its
+        # object along a partial view before the support was lost (then the object moves like the prediction)
+        if self.c.drift_gate > 0 and float(np.linalg.norm(now.centre - box.center[:2])) > max(self.c.reach + (
+                self.c.drift_gate * float(np.linalg.norm(own - predicted)) + self.c.lateral_growth) * lost_s,
+                box.length):
             return None
         return Relock(now.centre, predicted.copy())
 
