@@ -190,7 +190,8 @@ def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     ``reacquire.whole_candidates`` a cluster that reaches the region's side (the part of the parked car inside it,
     which grows and seems to move as the region grows) is not taken; with ``reacquire.drift_gate`` (2) its centre
     must lie within reach + (2 x |its own end's velocity - the predicted one| + lateral_growth) x lost time of the
-    prediction (the parked car's uncut rear is at rest: 1 m/s from the prediction, 7 m off it after a second).
+    prediction, or a box length (the parked car's uncut rear is at rest: 1 m/s from the prediction, 7 m off it
+    after a second).
     Each way the track coasts on and holds the target as it re-appears."""
     boxes = _straight(30, (10.0, 4.0), 0.0, 0.1)
     parked = [Box(19.0, 4.0, 0.0, 0.0, *BOX_SIZE)] * 30
