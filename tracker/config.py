@@ -320,7 +320,8 @@ class ReacquireConfig:
     drift_gate: float = 0.0              # > 0: a lost track's candidate's centre is within reach + (this x |its
                                          # velocity - the predicted one| + lateral_growth) x lost time of the
                                          # predicted box centre (at least a box length): an object found far from
-                                         # the prediction moves unlike it (a parked car ahead does not; 0: off)
+                                         # the prediction moves unlike it (a parked car ahead does not; 0: off;
+                                         # 2 in full)
     whole_candidates: bool = False       # a lost track is not re-locked on a cluster cut by the region's side (its
                                          # centre and motion are those of the part inside: a parked car the growing
                                          # region reaches into); off: any candidate
