@@ -29,8 +29,8 @@ the predicted path: a vehicle a lane over is another one; with ``centre_in_reach
 a cluster the region cuts; with ``drift_gate`` > 0 (2 in full) its centre within ``reach`` + (``drift_gate`` x
 |the velocity of its uncut end - the predicted one| + ``lateral_growth``) x the time since of the predicted box
 centre, or a box length: a candidate far from the prediction must move unlike it); for a lost start a velocity
-along the start box's heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance
-travelled from the start box since the start.
+along the start box's heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees
+with the distance travelled from the start box since the start.
 """
 
 from __future__ import annotations
