@@ -317,6 +317,11 @@ class ReacquireConfig:
                                          # its predicted path (a hidden vehicle keeps its lane or changes it slowly)
     centre_in_reach: bool = False        # a lost track's candidate's centre is within reach + growth x lost time of
                                          # the predicted box centre, not only some of its points (off in full)
+    drift_gate: float = 0.0              # > 0: a lost track's candidate's centre is within reach + (this x |its
+                                         # velocity - the predicted one| + lateral_growth) x lost time of the
+                                         # predicted box centre (at least a box length): an object found far from
+                                         # the prediction moves unlike it (a parked car ahead does not; 0: off;
+                                         # 2 in full)
     whole_candidates: bool = False       # a lost track is not re-locked on a cluster cut by the region's side (its
                                          # centre and motion are those of the part inside: a parked car the growing
                                          # region reaches into); off: any candidate
@@ -342,8 +347,9 @@ class ReacquireConfig:
     def __post_init__(self) -> None:
         _choice("reacquire.mode", self.mode, ("none", "clusters"))
         _positive(self, "reacquire", "lost_frames", "cell", "max_speed", "hold_share")
-        if self.track_cell < 0:
-            raise ValueError(f"reacquire.track_cell must be >= 0, got {self.track_cell}")
+        if self.track_cell < 0 or self.drift_gate < 0:
+            raise ValueError(f"reacquire.track_cell and reacquire.drift_gate must be >= 0, got {self.track_cell}, "
+                             f"{self.drift_gate}")
         if self.hold_frames < 0 or self.hold_share > 1.0:
             raise ValueError(f"reacquire.hold_frames must be >= 0 and reacquire.hold_share <= 1, got "
                              f"{self.hold_frames}, {self.hold_share}")
@@ -682,7 +688,7 @@ _FULL = TrackerConfig(
                         consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
-    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2),
+    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, drift_gate=2.0),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0)),
 )
 # faithful: the authors' implementation (docs/tracker.md)

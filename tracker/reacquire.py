@@ -51,8 +51,10 @@ def start_shift(local: np.ndarray, box: Box, ahead: float, behind: float, min_po
 class Candidate:
     """A non-ground cluster of the right size: the box placed on it (``centre``, xy, world), its extent along
     and across the searched box's heading (m), its number of points, the time it was seen (s), how many of
-    its points the searched box (scaled by ``hold_scale``) holds, and whether the cluster reaches the searched
-    region's side (``cut``: its extent and centre are those of the part inside)."""
+    its points the searched box (scaled by ``hold_scale``) holds, whether the cluster reaches the searched
+    region's side (``cut``: its extent and centre are those of the part inside), and ``anchor`` (xy, world): per
+    axis of the box, the cluster's end that the region does not cut where only one end is cut, else the middle of
+    its extent (the part of a cut cluster that moves with the object, not with the region)."""
 
     centre: np.ndarray
     extent: np.ndarray
@@ -60,6 +62,14 @@ class Candidate:
     time_s: float
     held: int = 0
     cut: bool = False
+    anchor: np.ndarray | None = None
+
+
+def _anchor(low: np.ndarray, high: np.ndarray, cut_low: np.ndarray, cut_high: np.ndarray) -> np.ndarray:
+    """Per cluster and axis (box frame) the point of its extent that is the object's own: the end the region
+    does not cut where only one end is cut (the other is the region's side, which moves with the region), else
+    the middle."""
+    return np.where(cut_low & ~cut_high, high, np.where(cut_high & ~cut_low, low, 0.5 * (low + high)))
 
 
 def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: float, min_points: int,
@@ -110,13 +120,16 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     placed = np.where(faced & (extent[keep] < 2.0 * half) & (not centred), placed, mid)
     world = box.center[:2] + placed[:, :1] * np.array([c, s]) + placed[:, 1:] * np.array([-s, c])
     held = np.bincount(label[points_in_box(points, box, hold_scale)], minlength=count)
-    cut = np.zeros(count, dtype=bool)
+    cut_low = cut_high = np.zeros((count, 2), dtype=bool)
     if region is not None:
         r = region.center[:2] - box.center[:2]
         centre = np.array([r @ np.array([c, s]), r @ np.array([-s, c])])
         inner = 0.5 * np.array([region.length, region.width]) - cell
-        cut = np.any((low < centre - inner) | (high > centre + inner), axis=1)
-    return [Candidate(world[i], extent[k], int(sizes[k]), time_s, int(held[k]), bool(cut[k]))
+        cut_low, cut_high = low < centre - inner, high > centre + inner
+    cut = np.any(cut_low | cut_high, axis=1)
+    own = _anchor(low[keep], high[keep], cut_low[keep], cut_high[keep])
+    anchor = box.center[:2] + own[:, :1] * np.array([c, s]) + own[:, 1:] * np.array([-s, c])
+    return [Candidate(world[i], extent[k], int(sizes[k]), time_s, int(held[k]), bool(cut[k]), anchor[i])
             for i, k in enumerate(keep)]
 
 

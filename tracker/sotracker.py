@@ -378,7 +378,7 @@ class Tracker:
         r = c.reacquire
         candidates = cluster_candidates(points, self.box, sensor, r.grid(start is not None), r.cluster_points,
                                         r.size_margin, time_s, centred=start is None, hold_scale=c.search.crop_scale,
-                                        region=region if r.whole_candidates else None)   # (cut: read only then)
+                                        region=region if r.whole_candidates or r.drift_gate else None)
         supported = estimate.num_points >= r.min_points and "prior_only" not in estimate.flags
         held = start is None and s.reacquire.holds_object(candidates, self.box, supported)
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)

@@ -179,7 +179,7 @@ def test_a_car_the_hidden_target_passed_does_not_capture_the_track(occluder_velo
     assert _iou(result, boxes)[hidden.stop + 2:].min() > 0.7             # held again once it re-appears
 
 
-@pytest.mark.parametrize("guard", [None, "centre_in_reach", "whole_candidates"])
+@pytest.mark.parametrize("guard", [None, "centre_in_reach", "whole_candidates", "drift_gate"])
 def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     """The target drives at 1 m/s (0.1 m per frame) toward a car parked 9 m ahead in its lane and is hidden for 12
     frames. The search region grows around the prediction (reach + growth x lost time) and the parked car's rear
@@ -188,19 +188,41 @@ def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     further from the prediction (7 m) than the object can have strayed in that time; with
     ``reacquire.centre_in_reach`` the candidate's centre must lie within that bound; with
     ``reacquire.whole_candidates`` a cluster that reaches the region's side (the part of the parked car inside it,
-    which grows and seems to move as the region grows) is not taken. Either way the track coasts on and holds the
-    target as it re-appears."""
+    which grows and seems to move as the region grows) is not taken; with ``reacquire.drift_gate`` (2 in ``full``)
+    its centre must lie within reach + (2 x |its own end's velocity - the predicted one| + lateral_growth) x lost
+    time of the prediction, or a box length (the parked car's uncut rear is at rest: 1 m/s from the prediction, 7 m
+    off it after a second). Each way the track coasts on and holds the target as it re-appears."""
     boxes = _straight(30, (10.0, 4.0), 0.0, 0.1)
     parked = [Box(19.0, 4.0, 0.0, 0.0, *BOX_SIZE)] * 30
     hidden = range(8, 20)
     seq = _scene(boxes, 0, hidden=hidden, others=(parked,), ground_half=24.0)
-    result = _track(seq, **REACQUIRE, **({} if guard is None else {f"reacquire.{guard}": True}))
+    # ``full`` has drift_gate 2: the unguarded track and the other guards run without it
+    changes = {} if guard == "drift_gate" else {"reacquire.drift_gate": 0.0}
+    if guard not in (None, "drift_gate"):
+        changes[f"reacquire.{guard}"] = True
+    result = _track(seq, **REACQUIRE, **changes)
     iou = _iou(result, boxes)
     relocked = [k for k, e in enumerate(result.estimates) if "reacquired" in e.flags]
     if guard is not None:
         assert not relocked and iou[1:hidden.stop].min() > 0.7 and iou[hidden.stop + 1:].min() > 0.7
     else:
         assert relocked and relocked[0] < hidden.stop and iou[hidden.stop:].max() < 0.1   # on the parked car
+
+
+@pytest.mark.parametrize("drift_gate", [0.0, 2.0])
+def test_a_car_that_speeds_up_while_hidden_is_relocked_within_3_frames_of_reappearing(drift_gate):
+    """The target drives at 5 m/s (0.5 m per frame), is hidden for 10 frames, and speeds up to 10 m/s at once
+    when it is hidden: it re-appears 5 m ahead of the prediction. Its own motion (5 m/s faster than predicted)
+    explains that distance, so ``reacquire.drift_gate`` lets its candidate through: re-locked within 3 frames of
+    re-appearing either way."""
+    steps = [0.5] * 8 + [1.0] * 20
+    xs = 10.0 + np.concatenate([[0.0], np.cumsum(steps[:-1])])
+    boxes = [Box(float(x), 4.0, 0.0, 0.0, *BOX_SIZE) for x in xs]
+    hidden = range(8, 18)
+    seq = _scene(boxes, 0, hidden=hidden, ground_centre=(24.0, 4.0), ground_half=20.0)
+    iou = _iou(_track(seq, **REACQUIRE, **{"reacquire.drift_gate": drift_gate}), boxes)
+    assert iou[hidden.stop - 1] < 0.1                    # the prediction is off the car when it re-appears
+    assert iou[hidden.stop:hidden.stop + 3].max() >= 0.5 and iou[hidden.stop + 3:].min() > 0.5
 
 
 def test_a_far_sparse_start_that_approaches_is_found_before_it_is_within_30_m():
@@ -302,6 +324,10 @@ def test_a_cluster_that_reaches_the_regions_side_is_cut():
     inside, cut = sorted(candidates, key=lambda k: float(np.linalg.norm(k.centre - box.center[:2])))
     assert not inside.cut and cut.cut
     assert np.linalg.norm(inside.centre - box.center[:2]) < 0.1 and cut.extent[0] < 1.6
+    # the anchor: a whole cluster's middle; the cut one's rear end (the front is the region's side)
+    assert np.linalg.norm(inside.anchor - inside.centre) < 1e-9
+    rear = box.center[:2] + (along + front - 1.5) * np.array([np.cos(box.heading), np.sin(box.heading)])
+    assert np.linalg.norm(cut.anchor - rear) < 0.1
 
 
 def test_a_sparse_car_hidden_for_8_frames_is_relocked_on_the_coarser_lost_track_grid():

@@ -26,9 +26,11 @@ of the last supported frame along its heading, the way it moves: a hidden vehicl
 it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
 the predicted path: a vehicle a lane over is another one; with ``centre_in_reach`` (off in full) its centre within
 ``reach`` + ``growth`` x the time since of the predicted box centre; with ``whole_candidates`` (off in full) not
-a cluster the region cuts); for a lost start a velocity along the start box's
-heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees with the distance
-travelled from the start box since the start.
+a cluster the region cuts; with ``drift_gate`` > 0 (2 in full) its centre within ``reach`` + (``drift_gate`` x
+|the velocity of its uncut end - the predicted one| + ``lateral_growth``) x the time since of the predicted box
+centre, or a box length: a candidate far from the prediction must move unlike it); for a lost start a velocity
+along the start box's heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees
+with the distance travelled from the start box since the start.
 """
 
 from __future__ import annotations
@@ -163,7 +165,7 @@ class ClusterReacquire(Reacquire):
                     continue
                 v = (now.centre - before.centre) / dt
                 relock = (self._from_start(now, v, start) if start is not None else
-                          self._from_track(now, v, box, velocity))
+                          self._from_track(now, v, box, velocity, _own_velocity(now, before, dt)))
                 if relock is None:
                     continue
                 # a lost track: the candidate nearest the prediction; a lost start: the steadiest motion
@@ -173,7 +175,8 @@ class ClusterReacquire(Reacquire):
                     best = (score, relock)
         return None if best is None else best[1]
 
-    def _from_track(self, now: Candidate, v: np.ndarray, box: Box, velocity: np.ndarray | None) -> Relock | None:
+    def _from_track(self, now: Candidate, v: np.ndarray, box: Box, velocity: np.ndarray | None,
+                    own: np.ndarray) -> Relock | None:
         predicted = np.zeros(2) if velocity is None else velocity
         if np.linalg.norm(v - predicted) > self.c.velocity_gate:
             return None
@@ -195,6 +198,16 @@ class ClusterReacquire(Reacquire):
         if self.c.centre_in_reach and float(np.linalg.norm(now.centre - box.center[:2])) > min(
                 self.c.reach + self.c.growth * lost_s, self.c.max_reach):
             return None
+        # nor further from the prediction than its own motion explains (``drift_gate``): an object found d m from
+        # where the motion model put it has moved unlike the model, by about d / (lost time) on average; a
+        # candidate moving like the prediction but far from it is something else. The motion is that of the
+        # cluster's own end (``own``: a parked car's part that the growing region cuts seems to move with the
+        # region, its uncut end does not). Never less than a box length: the box may have slid that far off its
+        # object along a partial view before the support was lost (then the object moves like the prediction)
+        if self.c.drift_gate > 0 and float(np.linalg.norm(now.centre - box.center[:2])) > max(self.c.reach + (
+                self.c.drift_gate * float(np.linalg.norm(own - predicted)) + self.c.lateral_growth) * lost_s,
+                box.length):
+            return None
         return Relock(now.centre, predicted.copy())
 
     def _from_start(self, now: Candidate, v: np.ndarray, start: Box) -> Relock | None:
@@ -213,6 +226,13 @@ class ClusterReacquire(Reacquire):
         if not c.min_speed <= abs(mean) <= c.max_speed or abs(abs(mean) - speed) > c.velocity_gate:
             return None
         return Relock(now.centre, mean * axis)
+
+
+def _own_velocity(now: Candidate, before: Candidate, dt: float) -> np.ndarray:
+    """The velocity of a candidate's own end between two frames (its ``anchor``; the centre without one)."""
+    if now.anchor is None or before.anchor is None:
+        return (now.centre - before.centre) / dt
+    return (now.anchor - before.anchor) / dt
 
 
 def choose_reacquire(config: ReacquireConfig) -> Reacquire:
