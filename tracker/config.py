@@ -320,8 +320,8 @@ class ReacquireConfig:
     drift_gate: float = 0.0              # > 0: a lost track's candidate's centre is within reach + (this x |its
                                          # velocity - the predicted one| + lateral_growth) x lost time of the
                                          # predicted box centre (at least a box length): an object found far from
-                                         # the prediction moves unlike it (a parked car ahead does not; 0: off;
-                                         # 2 in full)
+                                         # the prediction moves unlike it (a parked car ahead does not; 0: off,
+                                         # also in full)
     whole_candidates: bool = False       # a lost track is not re-locked on a cluster cut by the region's side (its
                                          # centre and motion are those of the part inside: a parked car the growing
                                          # region reaches into); off: any candidate
@@ -688,7 +688,7 @@ _FULL = TrackerConfig(
                         consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
-    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, drift_gate=2.0),
+    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0)),
 )
 # faithful: the authors' implementation (docs/tracker.md)

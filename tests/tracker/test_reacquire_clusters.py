@@ -188,7 +188,7 @@ def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     further from the prediction (7 m) than the object can have strayed in that time; with
     ``reacquire.centre_in_reach`` the candidate's centre must lie within that bound; with
     ``reacquire.whole_candidates`` a cluster that reaches the region's side (the part of the parked car inside it,
-    which grows and seems to move as the region grows) is not taken; with ``reacquire.drift_gate`` (2 in ``full``)
+    which grows and seems to move as the region grows) is not taken; with ``reacquire.drift_gate`` (2)
     its centre must lie within reach + (2 x |its own end's velocity - the predicted one| + lateral_growth) x lost
     time of the prediction, or a box length (the parked car's uncut rear is at rest: 1 m/s from the prediction, 7 m
     off it after a second). Each way the track coasts on and holds the target as it re-appears."""
@@ -196,11 +196,8 @@ def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     parked = [Box(19.0, 4.0, 0.0, 0.0, *BOX_SIZE)] * 30
     hidden = range(8, 20)
     seq = _scene(boxes, 0, hidden=hidden, others=(parked,), ground_half=24.0)
-    # ``full`` has drift_gate 2: the unguarded track and the other guards run without it
-    changes = {} if guard == "drift_gate" else {"reacquire.drift_gate": 0.0}
-    if guard not in (None, "drift_gate"):
-        changes[f"reacquire.{guard}"] = True
-    result = _track(seq, **REACQUIRE, **changes)
+    value = 2.0 if guard == "drift_gate" else True
+    result = _track(seq, **REACQUIRE, **({} if guard is None else {f"reacquire.{guard}": value}))
     iou = _iou(result, boxes)
     relocked = [k for k, e in enumerate(result.estimates) if "reacquired" in e.flags]
     if guard is not None:

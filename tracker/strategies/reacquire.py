@@ -26,7 +26,7 @@ of the last supported frame along its heading, the way it moves: a hidden vehicl
 it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
 the predicted path: a vehicle a lane over is another one; with ``centre_in_reach`` (off in full) its centre within
 ``reach`` + ``growth`` x the time since of the predicted box centre; with ``whole_candidates`` (off in full) not
-a cluster the region cuts; with ``drift_gate`` > 0 (2 in full) its centre within ``reach`` + (``drift_gate`` x
+a cluster the region cuts; with ``drift_gate`` > 0 (off in full) its centre within ``reach`` + (``drift_gate`` x
 |the velocity of its uncut end - the predicted one| + ``lateral_growth``) x the time since of the predicted box
 centre, or a box length: a candidate far from the prediction must move unlike it); for a lost start a velocity
 along the start box's heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees
