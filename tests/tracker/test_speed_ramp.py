@@ -106,4 +106,7 @@ def test_an_accelerating_car_is_followed_closer_with_the_ramp():
         return np.array([e.box.x - b.x for e, b in zip(result.estimates, boxes, strict=True)])
 
     plain, ramp = along_errors({}), along_errors({"motion.ramp_frames": 10})
-    assert np.abs(ramp[15:]).mean() < np.abs(plain[15:]).mean()
+    # full trails the car by 0.12-0.21 m through the ramp (the MP term pulls toward the lagging average); the
+    # ramp's prediction takes a third of that
+    assert np.abs(plain[15:]).mean() > 0.12
+    assert np.abs(ramp[15:]).mean() < 0.4 * np.abs(plain[15:]).mean()
