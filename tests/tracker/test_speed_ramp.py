@@ -107,6 +107,6 @@ def test_an_accelerating_car_is_followed_closer_with_the_ramp():
 
     plain, ramp = along_errors({}), along_errors({"motion.ramp_frames": 10})
     # full trails the car by 0.12-0.21 m through the ramp (the MP term pulls toward the lagging average); the
-    # ramp's prediction takes a third of that
+    # ramp's prediction takes less than half of that
     assert np.abs(plain[15:]).mean() > 0.12
-    assert np.abs(ramp[15:]).mean() < 0.4 * np.abs(plain[15:]).mean()
+    assert np.abs(ramp[15:]).mean() < 0.5 * np.abs(plain[15:]).mean()
