@@ -48,6 +48,19 @@ def test_a_constant_acceleration_is_predicted_at_the_speed_it_reaches():
     np.testing.assert_allclose(ramp[15:], truth[15:], atol=1e-9)
 
 
+def test_a_ramp_that_ends_is_let_go_within_half_a_window():
+    # 2 m/s, +3 m/s^2 from 0.5 s to 2.5 s, then 8 m/s steady: the whole window's line would drive on accelerating
+    t_mid = (np.arange(50) - 0.5) * DT
+    speeds = 2.0 + 3.0 * np.clip(t_mid - 0.5, 0.0, 2.0)
+    average, ramp = _feed(_models(), speeds)
+    truth = speeds[1:]
+    # frame 26 is the first at 8 m/s (entry 24): the ramp overshoots by at most 0.35 m/s for four frames (the
+    # average is 0.6 m/s slow there); from the fifth, the recent half of the window is flat and it is the average's
+    assert (ramp[24:30] - truth[24:30]).max() < 0.35
+    assert (truth[24:27] - average[24:27]).min() > 0.35
+    np.testing.assert_array_equal(ramp[30:], average[30:])
+
+
 def test_a_braking_ramp_stops_at_zero_and_never_reverses():
     # 8 m/s braking at 4 m/s^2 to a stop at frame 20, then standing
     speeds = np.maximum(8.0 - 4.0 * np.arange(40) * DT, 0.0)
