@@ -205,6 +205,11 @@ class MotionConfig:
                                          # trend, and the next is predicted that share of the way from the average
                                          # to the trend's prediction (sparse: the average; 0: the trend's alone)
     trend_velocity: bool = True          # False: the trend acts on the turn rate only
+    ramp_frames: int = 0                 # > 0 (>= 3), "average" models: the speed ramp (tracker/speed_ramp.py): the
+                                         # predicted speed follows the line through the last this many registered
+                                         # speeds, as far as they lie on it (0: off)
+    ramp_min_t: float = 4.0              # the ramp's weight: 0 up to slope / standard error = this, 1 from twice it
+    ramp_min_accel: float = 1.0          # m/s^2 (per_second; else per frame^2): a flatter ramp has no weight
     prior_weight: float = 0.1            # MP (paper 0.1; 0: off)
     prior_reference: str = "prior"
     consistency_weight: float = 0.1      # MC (paper 0.1; 0: off)
@@ -235,6 +240,8 @@ class MotionConfig:
             raise ValueError(f"motion.trend: must be in [0, 1], got {self.trend}")
         if self.trend_points < 0:
             raise ValueError(f"motion.trend_points: must be >= 0, got {self.trend_points}")
+        if self.ramp_frames != 0 and self.ramp_frames < 3:
+            raise ValueError(f"motion.ramp_frames: must be 0 (off) or >= 3, got {self.ramp_frames}")
 
 
 @dataclass(frozen=True)

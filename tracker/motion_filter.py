@@ -30,6 +30,7 @@ import numpy as np
 
 from .geometry import Box, wrap_angle
 from .motion import MotionPrior
+from .speed_ramp import SpeedRamp
 from .terms import apply_motion
 
 __all__ = ["CTRVParams", "CTRVFilter", "ctrv_arc", "ctrv_predict_state", "travel_heading", "HeightFilter",
@@ -269,8 +270,10 @@ class AverageMotion:
 
     def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
                  first_along_heading: bool = False, trend: float = 0.0, trend_points: int = 0,
-                 trend_velocity: bool = True, first_turn_points: int = 0, first_turn_max: float = 0.0) -> None:
+                 trend_velocity: bool = True, first_turn_points: int = 0, first_turn_max: float = 0.0,
+                 ramp: SpeedRamp | None = None) -> None:
         self.prior = MotionPrior(alpha, frame, trend, trend_velocity)
+        self.ramp = ramp
         self.trend_points = trend_points
         self._support = 1.0  # the last update's support: the share of the trend's prediction
         self.coast_yaw_decay = coast_yaw_decay
@@ -281,7 +284,13 @@ class AverageMotion:
 
     def predict(self, box: Box, dt: float, coasting: int = 0) -> np.ndarray:
         interval = dt if self.per_second else 1.0
-        out = self.prior.predict(box.heading, interval, 0.0 if coasting else self._support) * interval
+        out = self.prior.predict(box.heading, interval, 0.0 if coasting else self._support)
+        if self.ramp is not None:
+            if coasting:
+                self.ramp.reset()  # a run without data breaks the ramp; it is not extrapolated over a loss
+            else:
+                out = self._on_ramp(out, interval)
+        out = out * interval
         out[3] *= self.coast_yaw_decay ** coasting  # coasting keeps the velocity, the turn rate dies out
         return out
 
@@ -310,6 +319,20 @@ class AverageMotion:
             motion = motion.copy()
             motion[3] = np.clip(motion[3], -self.first_turn_max, self.first_turn_max)
         self._support = points / (points + self.trend_points) if self.trend_points > 0 else 1.0
-        self.prior.update(motion / dt if self.per_second else motion, box.heading, dt if self.per_second else 1.0,
-                          self._support)
+        rate, interval = (motion / dt, dt) if self.per_second else (motion, 1.0)
+        self.prior.update(rate, box.heading, interval, self._support)
+        if self.ramp is not None:
+            self.ramp.add(float(np.hypot(rate[0], rate[1])), interval)
         return x
+
+    def _on_ramp(self, out: np.ndarray, interval: float) -> np.ndarray:
+        """The predicted motion (per unit of interval) with its speed moved toward the speed ramp's, as far as
+        the ramp is trusted; its direction stays the average's."""
+        assert self.ramp is not None
+        speed, weight = self.ramp.speed(interval)
+        average = float(np.hypot(out[0], out[1]))
+        if weight <= 0 or average < 1e-6:
+            return out
+        out = out.copy()
+        out[:2] *= (average + weight * (speed - average)) / average
+        return out

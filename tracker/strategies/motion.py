@@ -8,6 +8,7 @@ from __future__ import annotations
 from ..config import MotionConfig
 from ..geometry import Box
 from ..motion_filter import AverageMotion, CTRVMotion, CTRVParams
+from ..speed_ramp import SpeedRamp
 
 __all__ = ["choose_motion_model"]
 
@@ -23,4 +24,6 @@ def choose_motion_model(params: MotionConfig, box: Box) -> AverageMotion | CTRVM
     return AverageMotion(params.alpha, _AVERAGE_FRAMES[params.model], params.coast_yaw_decay, params.per_second,
                          params.first_motion_along_heading, params.trend, params.trend_points,
                          params.trend_velocity, params.first_turn_points,
-                         params.first_turn_max)
+                         params.first_turn_max,
+                         SpeedRamp(params.ramp_frames, params.ramp_min_t, params.ramp_min_accel)
+                         if params.ramp_frames > 0 else None)
