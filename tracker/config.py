@@ -210,6 +210,9 @@ class MotionConfig:
                                          # speeds, as far as they lie on it (0: off)
     ramp_min_t: float = 4.0              # the ramp's weight: 0 up to slope / standard error = this, 1 from twice it
     ramp_min_accel: float = 1.0          # m/s^2 (per_second; else per frame^2): a flatter ramp has no weight
+    ramp_accelerating_only: bool = False  # True: only a rising speed line (accelerating) has weight; a braking
+                                         # vehicle keeps the average's prediction (its lag offsets the registration's
+                                         # along-track bias behind a car seen from behind)
     prior_weight: float = 0.1            # MP (paper 0.1; 0: off)
     prior_reference: str = "prior"
     consistency_weight: float = 0.1      # MC (paper 0.1; 0: off)

@@ -25,5 +25,6 @@ def choose_motion_model(params: MotionConfig, box: Box) -> AverageMotion | CTRVM
                          params.first_motion_along_heading, params.trend, params.trend_points,
                          params.trend_velocity, params.first_turn_points,
                          params.first_turn_max,
-                         SpeedRamp(params.ramp_frames, params.ramp_min_t, params.ramp_min_accel)
+                         SpeedRamp(params.ramp_frames, params.ramp_min_t, params.ramp_min_accel,
+                                   params.ramp_accelerating_only)
                          if params.ramp_frames > 0 else None)
