@@ -16,11 +16,12 @@ DT = 0.1
 BOX = Box(0.0, 0.0, 0.0, 0.3, *BOX_SIZE)
 
 
-def _models(frames: int = 10) -> tuple[AverageMotion, AverageMotion]:
+def _models(frames: int = 10, accelerating_only: bool = False) -> tuple[AverageMotion, AverageMotion]:
     """full's moving average (turn frame, alpha 0.6, per second) without and with the speed ramp (the defaults of
-    motion.ramp_min_t and motion.ramp_min_accel)."""
+    motion.ramp_min_t and motion.ramp_min_accel; ``accelerating_only``: motion.ramp_accelerating_only)."""
     return (AverageMotion(0.6, "turn", 0.5, per_second=True),
-            AverageMotion(0.6, "turn", 0.5, per_second=True, ramp=SpeedRamp(frames, 4.0, 1.0)))
+            AverageMotion(0.6, "turn", 0.5, per_second=True,
+                          ramp=SpeedRamp(frames, 4.0, 1.0, accelerating_only=accelerating_only)))
 
 
 def _feed(models: tuple[AverageMotion, ...], speeds: np.ndarray) -> list[np.ndarray]:
@@ -80,6 +81,35 @@ def test_a_steady_track_keeps_the_averages_prediction():
     rng = np.random.default_rng(3)
     speeds = 10.0 + rng.normal(0.0, 0.3, 400)
     average, ramp = _feed(_models(), speeds)
+    np.testing.assert_array_equal(ramp, average)
+
+
+def test_accelerating_only_follows_a_constant_acceleration():
+    # as above (2 m/s, +3 m/s^2 from frame 5 on): a rising line is taken as with both directions
+    t_mid = (np.arange(40) - 0.5) * DT
+    speeds = 2.0 + 3.0 * np.clip(t_mid - 0.5, 0.0, None)
+    average, ramp = _feed(_models(accelerating_only=True), speeds)
+    truth = speeds[1:]
+    assert average[-1] - truth[-1] == pytest.approx(-0.75, abs=1e-6)
+    np.testing.assert_allclose(ramp[15:], truth[15:], atol=1e-9)
+
+
+def test_accelerating_only_leaves_braking_to_the_average():
+    # 8 m/s braking at 4 m/s^2 to a stop, then standing; and 12 m/s braking at 8 m/s^2 with registration noise:
+    # every prediction is the moving average's, bit for bit (the both-directions ramp follows the braking)
+    rng = np.random.default_rng(5)
+    for speeds in (np.maximum(8.0 - 4.0 * np.arange(40) * DT, 0.0),
+                   np.maximum(12.0 - 8.0 * np.arange(30) * DT, 0.0) + rng.normal(0.0, 0.05, 30)):
+        average, ramp = _feed(_models(accelerating_only=True), speeds)
+        np.testing.assert_array_equal(ramp, average)
+        both = _feed(_models(), speeds)[1]
+        assert np.abs(both - average).max() > 0.5
+
+
+def test_accelerating_only_keeps_a_steady_track_bit_for_bit():
+    rng = np.random.default_rng(3)
+    speeds = 10.0 + rng.normal(0.0, 0.3, 400)
+    average, ramp = _feed(_models(accelerating_only=True), speeds)
     np.testing.assert_array_equal(ramp, average)
 
 
