@@ -7,9 +7,9 @@ middle of the next interval the speed the next motion is predicted to have. The 
 the speeds lie on it: with t = |slope| / (its standard error) the weight is 0 up to t = ``min_t`` and 1 from
 2 ``min_t`` (linear between), and 0 where |slope| < ``min_accel``; it is then scaled by how much of the slope the
 recent half of the window still shows (a ramp that ends is let go within a few frames). With
-``accelerating_only`` a falling line (braking) has no weight: the prediction stays the average's. A steady track's speeds
-scatter about a flat line (t small): its prediction stays the average's. A sparse or partly seen object's
-registered speeds scatter widely: the same. A run of motions that is broken (a frame without data) starts the
+``accelerating_only`` a falling line (braking) has no weight: the prediction stays the average's. A steady
+track's speeds scatter about a flat line (t small): its prediction stays the average's. A sparse or partly seen
+object's registered speeds scatter widely: the same. A run of motions that is broken (a frame without data) starts the
 ramp afresh.
 """
 
