@@ -20,7 +20,11 @@ of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
 the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
 ``reacquired``) only on a candidate matched to
-one of the previous frame's candidates in position, size and motion: for a lost track a velocity within
+one of the previous frame's candidates in position, size and motion (with ``relock_points`` > 0, 3 in full, each
+of the two holding at least that many points where the candidate would move a lost track, i.e. is not within
+``hold_distance`` of its box: a 1-2-point blob's frame pair reads metres per second of noise; a lost start's
+candidates need no more than ``cluster_points``):
+for a lost track a velocity within
 ``velocity_gate`` of the predicted one and a place on the object's path (not more than ``reach`` behind the box
 of the last supported frame along its heading, the way it moves: a hidden vehicle does not end up behind where
 it was lost, something it passed is there; not more than ``reach`` + ``lateral_growth`` x the time since across
@@ -159,9 +163,16 @@ class ClusterReacquire(Reacquire):
         for now in candidates:
             if now.cut and start is None and c.whole_candidates:
                 continue
+            # ``relock_points``: a candidate that moves a lost track (not one within ``hold_distance`` of its box,
+            # which ends the search where the box is) holds at least that many points on both frames; a lost
+            # start's does not (a far car coming into view shows 2-3-point fragments first)
+            moves = start is None and float(np.linalg.norm(now.centre - box.center[:2])) >= c.hold_distance
+            floor = c.relock_points if moves else 0
+            if now.count < floor:
+                continue
             for before in previous:
                 dt = now.time_s - before.time_s
-                if dt <= 0 or np.any(np.abs(now.extent - before.extent) > c.size_gate):
+                if dt <= 0 or before.count < floor or np.any(np.abs(now.extent - before.extent) > c.size_gate):
                     continue
                 v = (now.centre - before.centre) / dt
                 relock = (self._from_start(now, v, start) if start is not None else
