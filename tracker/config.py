@@ -346,7 +346,7 @@ class ReacquireConfig:
     relock_points: int = 0               # > 0: a lost track's candidate that moves it (not within hold_distance of
                                          # its box) holds at least this many points on both frames of its pair (a
                                          # 1-2-point blob's frame pair reads several m/s of noise and passes the
-                                         # gates; a lost start's candidates are not limited; 0: off; 3 in full)
+                                         # gates; a lost start's candidates are not limited; 0: off, also in full)
     size_margin: float = 1.0             # m: a candidate's extent is at most the box's length / width + this
     size_gate: float = 1.0               # m: a candidate's extent changes at most this between frames
     velocity_gate: float = 4.0           # m/s: its velocity differs at most this from the predicted one
@@ -704,7 +704,7 @@ _FULL = TrackerConfig(
                         consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
-    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, relock_points=3),
+    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0)),
 )
 # faithful: the authors' implementation (docs/tracker.md)

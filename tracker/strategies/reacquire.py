@@ -20,7 +20,7 @@ of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
 the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
 ``reacquired``) only on a candidate matched to
-one of the previous frame's candidates in position, size and motion (with ``relock_points`` > 0, 3 in full, each
+one of the previous frame's candidates in position, size and motion (with ``relock_points`` > 0, off in full, each
 of the two holding at least that many points where the candidate would move a lost track, i.e. is not within
 ``hold_distance`` of its box: a 1-2-point blob's frame pair reads metres per second of noise; a lost start's
 candidates need no more than ``cluster_points``):
