@@ -62,12 +62,11 @@ def schedule_balance(schedule: dict, workers: int) -> dict:
 
 
 def main_accounting(phases: dict, startup: bool = True) -> dict:
-    """The run's own process: its start-up before the run (interpreter, imports: wall and CPU), planning, the workers'
-    preparation (a Dask LocalCluster: waiting for it; a cluster by address: every worker opening the sequences), the
-    tracking stage's wall and this process's CPU meanwhile (scheduling, collecting results; Dask's scheduler and
-    nannies live here), and the end (apps, manifest). ``startup=False``: a run inside a longer process (a
-    benchmark), whose age says nothing about the run.
-    """
+    """The run's own process: its start-up before the run (interpreter, imports: wall and CPU), planning, the
+    workers' preparation (Dask: the cluster and every worker opening the sequences), the tracking stage's wall and
+    this process's CPU meanwhile (scheduling, collecting results; Dask's scheduler and nannies live here), and
+    the end (apps, manifest). ``startup=False``: a run inside a longer process (a benchmark), whose age says
+    nothing about the run."""
     def at(name: str) -> float:
         return float(phases.get(name, {}).get("at_s", 0.0))
 
@@ -76,11 +75,9 @@ def main_accounting(phases: dict, startup: bool = True) -> dict:
 
     if "started" not in phases:
         return {}
-    prepared = "chunked" if "chunked" in phases else "planned"
     return {"startup_wall_s": round(-at("started"), 3) if startup else None,
             "startup_cpu_s": round(cpu("started"), 3) if startup else None, "plan_wall_s": round(at("planned"), 3), "plan_cpu_s": round(cpu("planned") - cpu("started"), 3),
-            # the chunking (schedule's chunking_s) before the workers' preparation ("chunked": runs since this field)
-            "open_wall_s": round(at("opened") - at(prepared), 3), "open_cpu_s": round(cpu("opened") - cpu(prepared), 3),
+            "open_wall_s": round(at("opened") - at("planned"), 3), "open_cpu_s": round(cpu("opened") - cpu("planned"), 3),
             "track_wall_s": round(at("tracked") - at("opened"), 3),
             "track_cpu_s": round(cpu("tracked") - cpu("opened"), 3),
             "end_wall_s": round(at("finished") - at("tracked"), 3), "end_cpu_s": round(cpu("finished") - cpu("tracked"), 3)}
@@ -100,9 +97,7 @@ def predicted_makespan(schedule: dict, phases: dict, workers: int) -> dict:
     tasks = [t for t in schedule.get("tasks", []) if "pid" in t]
     if not tasks or "opened" not in phases:
         return {}
-    # the chunking's CPU (the cost estimate) is in the run's CPU at "opened" when it ran before the workers' preparation
-    chunking = 0.0 if "chunked" in phases else float(schedule.get("chunking_cpu_s", 0.0))
-    serial = float(phases["opened"]["cpu_s"]) + chunking
+    serial = float(phases["opened"]["cpu_s"]) + float(schedule.get("chunking_cpu_s", 0.0))
     run_pid = schedule.get("run_pid")
     first: dict[int, dict] = {}
     for t in sorted(tasks, key=lambda t: t["start_s"]):

@@ -384,24 +384,11 @@ class ExecutorSession:
                 pool.submit(_import_modules, tuple(modules))
 
     def worker_count(self) -> int:
-        """How many tasks can run at once: the local workers, a LocalCluster's workers (known before it stands: the
-        caller need not wait for it), or the workers of the Dask cluster given by address now."""
+        """How many tasks can run at once: the local workers, or the Dask cluster's workers now."""
         spec = self.spec
-        if spec.kind == "dask" and spec.address:
+        if spec.kind == "dask":
             return max(1, len(self._dask_client().scheduler_info().get("workers", {})))
         return 1 if spec.kind == "inline" else max(1, spec.workers)
-
-    def prepare_workers(self, fn: Callable[..., Any], *args: Any) -> None:
-        """Make the workers ready for the first batch. A Dask cluster given by address: its workers (not started by
-        this process) run ``fn(*args)`` once each, e.g. to open the run's sequences into their caches. A
-        LocalCluster: wait until it stands (its workers are forked from this process's fork server, warmed with the
-        run's sequences by :meth:`prestart`; a worker without them opens a sequence at its first task, as a local
-        pool's worker does). Local pools and inline runs: nothing (a 1-worker run's tasks open what they need)."""
-        if self.spec.kind != "dask":
-            return
-        client = self._dask_client()
-        if self.spec.address:
-            client.run(fn, *args)
 
     def on_every_worker(self, fn: Callable[..., Any], *args: Any) -> list[Any]:
         """Run ``fn(*args)`` once in every worker, e.g. to fill its worker-local caches before a batch; returns
@@ -480,8 +467,7 @@ class ExecutorSession:
                     else:
                         self._cluster = self._start_local_cluster()
                 self._client = Client(self._cluster)
-            if self.spec.address:   # a LocalCluster's workers have them from their fork server (or Dask's nanny)
-                self._client.run(_single_threaded_env)
+            self._client.run(_single_threaded_env)
         return self._client
 
     def _start_local_cluster(self):

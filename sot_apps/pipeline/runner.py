@@ -159,31 +159,18 @@ def _run_units(units: list[_Unit], out: Path, session: ExecutorSession, desc: st
     return records
 
 
-@dataclass(frozen=True)
-class _TrackingPlan:
-    digests: dict[str, str]      # per object key: its unit digest
-    chunks: list[list]           # the unfinished objects in chunks (plan.track_chunks), costliest first
-    chunking: tuple[float, float]   # wall and CPU (this thread's) seconds the chunking took (the cost estimate)
-
-
-def _plan_tracking(plan: Plan, out: Path, stage, session: ExecutorSession) -> _TrackingPlan:
-    """The tracking stage's chunks of the unfinished objects, sized by the session's workers. Done before the
-    workers' preparation: a LocalCluster's size is known before it stands, so the cost estimate overlaps its start."""
+def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession,
+                  progress: bool) -> tuple[list[UnitRecord], dict[str, float], dict]:
+    """The tracking stage: every unfinished object, in chunks of one sequence each tracked in one pass
+    (:func:`~sot_apps.pipeline.plan.track_chunks`); one record per object (a chunk's time shared by its objects'
+    CPU time) and the stage's time breakdown summed over the chunks (read, ground, step, refine, write, overhead)."""
     track_stage = dataclasses.asdict(stage)
     digests = {o.key: _unit_digest({"object": o.to_json(), "seq": o.sequence_path, "stage": track_stage})
                for o in plan.objects}
     todo = [o for o in plan.objects if not _marker(out, f"track/{o.key}").is_done(digests[o.key])]
-    start = time.perf_counter(), time.thread_time()   # this thread's: a LocalCluster starts on another meanwhile
+    chunking = time.perf_counter(), time.process_time()
     chunks = track_chunks(todo, session.worker_count(), estimate=estimate_costs) if todo else []
-    return _TrackingPlan(digests, chunks, (time.perf_counter() - start[0], time.thread_time() - start[1]))
-
-
-def _run_tracking(plan: Plan, out: Path, stage, session: ExecutorSession, tracking: _TrackingPlan,
-                  progress: bool) -> tuple[list[UnitRecord], dict[str, float], dict]:
-    """The tracking stage: every unfinished object, in the chunks of ``tracking``, each tracked in one pass
-    (:func:`~sot_apps.pipeline.plan.track_chunks`); one record per object (a chunk's time shared by its objects'
-    CPU time) and the stage's time breakdown summed over the chunks (read, ground, step, refine, write, overhead)."""
-    digests, chunks, chunking = tracking.digests, tracking.chunks, tracking.chunking
+    chunking = time.perf_counter() - chunking[0], time.process_time() - chunking[1]
     tasks = [Task(f"track/{c[0].sequence}/chunk{i}", st.track_objects,
                   kwargs={"out": str(out), "plans": c, "stage": stage,
                           "digests": {o.object_id: digests[o.key] for o in c}})
@@ -369,22 +356,17 @@ def _run_with_session(config: PipelineConfig, executor: ExecutorSpec, progress: 
     track_times: dict[str, float] = {}
     track_schedule: dict = {}
 
-    # ---- 0. the tracking chunks, then the workers' preparation: a LocalCluster stands (its workers are forked from
-    # the warmed fork server, or open a sequence at their first task); a cluster given by address has every worker
-    # open the planned sequences into its cache once (tasks then reuse them)
-    tracking = _plan_tracking(plan, out, stages.track, session) if stages.track.enabled else None
-    phase("chunked")
+    # ---- 0. every Dask worker opens the planned sequences into its cache once (tasks then reuse them)
     start = time.perf_counter()
-    session.prepare_workers(open_sequences, [(s.path, s.format) for s in plan.sequences])
+    session.on_every_worker(open_sequences, [(s.path, s.format) for s in plan.sequences])
     stage_seconds["open"] = time.perf_counter() - start
     phase("opened")
 
     # ---- 1. tracking: one task per (sequence, chunk of its objects), one pass over the sweeps each
     finished: dict[str, list[str]] = {s.name: [] for s in plan.sequences}
-    if tracking is not None:
+    if stages.track.enabled:
         start = time.perf_counter()
-        track_records, stage_times, track_schedule = _run_tracking(plan, out, stages.track, session, tracking,
-                                                                   progress)
+        track_records, stage_times, track_schedule = _run_tracking(plan, out, stages.track, session, progress)
         stage_seconds["track"] = time.perf_counter() - start
         phase("tracked")
         records += track_records

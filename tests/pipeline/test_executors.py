@@ -36,9 +36,8 @@ def test_dask_local_cluster_matches_local():
 
 @pytest.mark.slow
 def test_dask_workers_open_each_sequence_once(tiny_worlds, tmp_path):
-    """The worker-local cache: every LocalCluster worker opens the sequence once (in its fork server when that was
-    warmed with it, else at its first task), and the tracking tasks reuse it (nothing is re-opened between tasks or
-    stages). A cluster given by address: tests/pipeline/test_pipeline.py."""
+    """The worker-local cache: every Dask worker opens the sequence once, before the first batch, and the tracking
+    tasks reuse it (nothing is re-opened between tasks or stages)."""
     from sot_apps.pipeline.config import PipelineConfig
     from sot_apps.pipeline.executors import ExecutorSession
     from sot_apps.pipeline.plan import worker_cache_info
@@ -55,7 +54,7 @@ def test_dask_workers_open_each_sequence_once(tiny_worlds, tmp_path):
         infos = session.on_every_worker(worker_cache_info)
     assert len(infos) == 2 and len({i["pid"] for i in infos}) == 2
     for info in infos:
-        assert info["opened"] == 1                      # opened once
+        assert info["opened"] == 1                      # opened once, when the runner filled the cache
     assert sum(info["reused"] for info in infos) >= 3   # every tracking task reused it
 
 

@@ -165,29 +165,6 @@ def test_dask_local_cluster_gives_the_same_outputs(reference_run, tiny_worlds, t
     assert output_checksums(out) == reference_sums
 
 
-@pytest.mark.slow
-def test_dask_cluster_by_address_gives_the_same_outputs(reference_run, tiny_worlds, tmp_path):
-    """``--dask tcp://...``: a cluster this process did not start (its workers are not forked from our fork server).
-    The outputs are the local executor's, byte for byte, and every worker opened each planned sequence once before
-    the first batch (the runner's preparation; a worker without a task of a sequence still has it)."""
-    from distributed import LocalCluster
-
-    from sot_apps.pipeline.executors import ExecutorSession
-    from sot_apps.pipeline.plan import worker_cache_info
-
-    _, reference_sums = reference_run
-    out = tmp_path / "out"
-    config = PipelineConfig.from_json(pipeline_doc(tiny_worlds, out))
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        spec = ExecutorSpec("dask", address=cluster.scheduler_address)
-        with ExecutorSession(spec) as session:
-            result = run_pipeline(config, spec, progress=False, session=session)
-            infos = session.on_every_worker(worker_cache_info)
-    assert result.failed == []
-    assert output_checksums(out) == reference_sums
-    assert len(infos) == 2 and [info["opened"] for info in infos] == [2, 2]
-
-
 def test_object_without_points_fails_while_the_others_finish(tiny_worlds, tmp_path, capsys):
     from sot_apps.cli.main import main
     from sot_apps.io import open_sequence

@@ -143,9 +143,6 @@ def test_predicted_makespan_schedules_the_tasks_cpu_after_the_serial_start():
     assert (p["tasks_cpu_s"], p["end_s"], p["makespan_s"], p["even_s"]) == (14.0, 0.1, 8.5, 8.5)
     schedule["tasks"][0]["cpu_s"] = 7.0   # {7, 2} against {4, 3}: the tail
     assert predicted_makespan(schedule, phases, 2)["makespan_s"] == 10.5
-    # a run that chunked before the workers' preparation has the estimate's CPU in its CPU at "opened" already
-    chunked = {**phases, "chunked": {"at_s": 0.25, "cpu_s": 0.85}}
-    assert predicted_makespan(schedule, chunked, 2)["serial_s"] == 0.9
     inline = {"run_pid": 1, "tasks": [{"pid": 1, "start_s": 0.4, "cpu_s": 14.0, "process_cpu_before_s": 1.3}]}
     p = predicted_makespan(inline, phases, 1)
     assert (p["first_task_s"], p["makespan_s"], p["server_s"]) == (1.3, 15.4, None)
