@@ -139,10 +139,11 @@ def trials_for(command: str, trials: int, rng: random.Random, world: Path, root:
     reference = checksums(clean_out)
     i = 0
     # a trial whose command finishes first, or whose signal comes before Python's handler is installed, exercises
-    # nothing: a few extra trials, earlier into the run, until one interrupt was handled
-    while i < trials or (result.handled == 0 and i < trials + 4):
-        high = max(0.6, seconds) if i < trials else max(0.35, 0.7 * seconds)
-        delay = rng.uniform(0.3, high)
+    # nothing: a few extra trials, earlier into the run (a command that takes 0.3 s on a fast machine finishes
+    # before any signal at 0.3 s or later), until one interrupt was handled
+    while i < trials or (result.handled == 0 and i < trials + 6):
+        low, high = (0.3, max(0.6, seconds)) if i < trials else (min(0.3, 0.3 * seconds), max(0.35, 0.7 * seconds))
+        delay = rng.uniform(low, high)
         rc, stderr, _, exit_seconds = _run(_argv(command, world, out, pipeline), delay, timeout)
         result.delays.append(round(delay, 2))
         result.exit_codes.append(rc)
