@@ -234,7 +234,7 @@ def main(argv: Seq[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C while shutting down prints nothing more
-        sys.stderr.write("interrupted: finished outputs are kept; rerun to resume\n")
+        _report_interrupt()
         return 130
     except BrokenPipeError:
         return 0
@@ -266,6 +266,27 @@ def main(argv: Seq[str] | None = None) -> int:
         _INTERRUPT_PENDING = False
 
 
+def _end_progress_lines() -> None:
+    """Close every progress bar still open: a Ctrl-C inside a loop leaves its tqdm bar drawn on the current line.
+
+    Closing a bar clears its line (``leave=False``) or ends it with a newline, so what is printed next starts a line
+    of its own. A bar that cannot be closed (its stream gone) gets a newline instead.
+    """
+    tqdm_std = sys.modules.get("tqdm.std")   # no bar can be open if tqdm was never imported
+    if tqdm_std is None:
+        return
+    for bar in list(getattr(tqdm_std.tqdm, "_instances", ())):
+        try:
+            bar.close()
+        except Exception:  # noqa: BLE001 - the interrupt's line must still be printed
+            sys.stderr.write("\n")
+
+
+def _report_interrupt() -> None:
+    _end_progress_lines()
+    sys.stderr.write("interrupted: finished outputs are kept; rerun to resume\n")
+
+
 def _caused_by_interrupt(exc: BaseException | None) -> bool:
     """Some library code wraps a Ctrl-C in another exception (e.g. a RuntimeError from ``__set_name__``)."""
     seen = set()
@@ -279,7 +300,7 @@ def _caused_by_interrupt(exc: BaseException | None) -> bool:
 
 def _unexpected(exc: BaseException, debug: bool) -> int:
     if _caused_by_interrupt(exc):
-        sys.stderr.write("interrupted: finished outputs are kept; rerun to resume\n")
+        _report_interrupt()
         return 130
     if debug:
         traceback.print_exc()

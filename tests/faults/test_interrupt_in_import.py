@@ -57,3 +57,33 @@ def test_interrupt_in_ordinary_code_raises_and_disarms(alarm_recorder):
         _call_from("/some/module.py", _handle_sigint_here)
     assert not cli_main._INTERRUPT_PENDING
     assert signal.getitimer(signal.ITIMER_REAL)[0] == 0.0   # one KeyboardInterrupt per Ctrl-C
+
+
+@pytest.mark.parametrize("leave", [False, True])
+def test_interrupt_line_starts_its_own_line_when_a_progress_bar_is_open(leave, monkeypatch, capsys):
+    """Seen in CI: a Ctrl-C while a bar showed 0 % printed 'interrupted: ...' on the bar's line, with no newline."""
+    import argparse
+
+    from tqdm import tqdm
+
+    def interrupted_in_a_loop(args):
+        bar = tqdm(total=10, desc="work", file=sys.stderr, mininterval=0, leave=leave)   # e.g. the executors' bar
+        bar.refresh()   # drawn at 0 %; the traceback keeps this frame, and the bar open, while main handles it
+        raise KeyboardInterrupt
+
+    def parser_of(command=None):
+        parser = argparse.ArgumentParser()
+        parser.add_argument("command")
+        parser.set_defaults(func=interrupted_in_a_loop)
+        return parser
+
+    monkeypatch.setattr(cli_main, "build_parser", parser_of)
+    previous_int = signal.getsignal(signal.SIGINT)
+    try:
+        assert cli_main.main(["loop"]) == 130
+    finally:
+        signal.signal(signal.SIGINT, previous_int)
+    err = capsys.readouterr().err
+    assert "work" in err   # the bar was drawn
+    last_line = err.replace("\r", "\n").rstrip("\n").splitlines()[-1]
+    assert last_line == "interrupted: finished outputs are kept; rerun to resume"
