@@ -261,11 +261,11 @@ def _neighbour_covariances(shape: np.ndarray, k: int, tree: cKDTree, rows: np.nd
     _, idx = tree.query(shape if rows is None else shape[rows], k=k)
     # the neighbours' coordinates as (3, k, M) rows, summed over k one row at a time: the mean and the products'
     # sums in the order numpy sums them over the neighbour axis of shape[idx] (mean(axis=1), and einsum
-    # "mk,mk->m" of two of its strided coordinates, from 0), in whole-array operations
+    # "mk,mk->m" of two of its strided coordinates, from 0), in whole-array operations. A reduction over the
+    # middle axis adds its rows in order into the first one (((row 0 + row 1) + row 2) + ...; the pairwise
+    # summation is for the contiguous last axis only), as mean(axis=1) does.
     nb = shape.T[:, idx.T]
-    mean = nb[:, 0].copy()
-    for j in range(1, k):
-        mean += nb[:, j]
+    mean = np.add.reduce(nb, axis=1)
     nb -= (mean / k)[:, None]
     sums = np.zeros((6, len(idx)))
     products = np.empty((6, len(idx)))
@@ -360,6 +360,14 @@ def _z_trend(online_z: np.ndarray, frames: int) -> np.ndarray:
     cum = np.r_[0.0, np.cumsum(online_z)]
     smooth = (cum[np.arange(k) + m_at + 1] - cum[np.arange(k) - m_at]) / (2 * m_at + 1)
     return np.diff(smooth)
+
+
+# The entries (a, b), a <= b, of a frame's symmetric 4x4 J'WJ that _Solver._data sums over the points (row by row),
+# and where the diagonal and the (x, theta), (y, theta) entries sit among them; per point: these 10 and 4 gradients.
+_UPPER_A, _UPPER_B = np.triu_indices(4)
+_DIAGONAL = [int(np.flatnonzero((_UPPER_A == a) & (_UPPER_B == a))[0]) for a in range(4)]
+_THETA_X, _THETA_Y = (int(np.flatnonzero((_UPPER_A == a) & (_UPPER_B == 3))[0]) for a in (0, 1))
+_BLOCK = len(_UPPER_A) + 4
 
 
 def _d_transpose(c: np.ndarray, s: np.ndarray, lx: np.ndarray, ly: np.ndarray, v: np.ndarray,
@@ -510,7 +518,7 @@ class _Solver:
         scale = np.where(counts > 0, np.minimum(1.0, p.effective_points / np.maximum(counts, 1.0)), 0.0)
         scale[0] *= p.first_frame_weight
         self.point_scale = scale[self.frame_idx] / p.point_sigma**2
-        self.slots = (self.frame_idx[:, None] * 20 + np.arange(20)).ravel()  # (frame, block entry) of _data
+        self.slots = (self.frame_idx[:, None] * _BLOCK + np.arange(_BLOCK)).ravel()  # (frame, block entry) of _data
         group = self.frame_idx % self.folds
         if p.shape_frames > 0:
             group = group + self.folds * (self.frame_idx // p.shape_frames)
@@ -552,7 +560,8 @@ class _Solver:
 
     def _data(self, states: np.ndarray, with_jacobian: bool,
               pairs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
-        """Data cost and, optionally, per-frame 4x4 Gauss-Newton blocks J'WJ and gradients J'Wr.
+        """Data cost and, optionally, per-frame 4x4 Gauss-Newton blocks J'WJ and gradients J'Wr. J'WJ is symmetric:
+        only its upper triangle is summed over the points, and mirrored.
 
         Residual r = A e with e = local - m and A = (1 - beta) n n' + beta I, i.e.
         r = (1 - beta) n (n.e) + beta e. ``pairs``: (distance, shape point, normal) of each data point to
@@ -568,25 +577,26 @@ class _Solver:
         # and J'r = D'A'r = (1 - beta) (D'n)(n.e) + beta D'r (n.r = n.e); D'D is 1 on the diagonal but
         # (theta, theta) = lx^2 + ly^2, with (tx, theta) = -c ly - s lx and (ty, theta) = c lx - s ly.
         nj = _d_transpose(c, si, lx, ly, n, np.empty((len(w), 4)))  # D'n, (P, 4)
-        per_point = np.empty((len(w), 20))
-        jtj = per_point[:, :16].reshape(-1, 4, 4)
-        np.multiply(nj[:, :, None], ((1.0 - beta**2) * nj)[:, None, :], out=jtj)
+        per_point = np.empty((len(w), _BLOCK))   # the upper triangle of J'J (_UPPER_A, _UPPER_B), then J'r
+        jtj = per_point[:, :len(_UPPER_A)]
+        np.multiply(nj[:, _UPPER_A], ((1.0 - beta**2) * nj)[:, _UPPER_B], out=jtj)
         b2 = beta**2
-        for a in range(3):
-            jtj[:, a, a] += b2
-        jtj[:, 3, 3] += b2 * (lx**2 + ly**2)
-        for a, g in ((0, -c * ly - si * lx), (1, c * lx - si * ly)):
+        for col in _DIAGONAL[:3]:
+            jtj[:, col] += b2
+        jtj[:, _DIAGONAL[3]] += b2 * (lx**2 + ly**2)
+        for col, g in ((_THETA_X, -c * ly - si * lx), (_THETA_Y, c * lx - si * ly)):
             g *= b2
-            jtj[:, a, 3] += g
-            jtj[:, 3, a] += g
-        gradient = per_point[:, 16:]
+            jtj[:, col] += g
+        gradient = per_point[:, len(_UPPER_A):]
         np.multiply((1.0 - beta) * nj, ne[:, None], out=gradient)
         dr = _d_transpose(c, si, lx, ly, r, nj)  # D'r (in nj's place: nj is no longer needed)
         dr *= beta
         gradient += dr
         per_point *= w[:, None]
-        sums = np.bincount(self.slots, weights=per_point.ravel(), minlength=20 * self.k).reshape(self.k, 20)
-        return cost, sums[:, :16].reshape(self.k, 4, 4), sums[:, 16:]
+        sums = np.bincount(self.slots, weights=per_point.ravel(), minlength=_BLOCK * self.k).reshape(self.k, _BLOCK)
+        blocks = np.empty((self.k, 4, 4))   # symmetric: each upper entry mirrored below the diagonal
+        blocks[:, _UPPER_A, _UPPER_B] = blocks[:, _UPPER_B, _UPPER_A] = sums[:, :len(_UPPER_A)]
+        return cost, blocks, sums[:, len(_UPPER_A):]
 
     def _prior(self, states: np.ndarray) -> tuple[float, np.ndarray]:
         diff2 = _second_difference(states)
