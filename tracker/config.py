@@ -351,8 +351,8 @@ class ReacquireConfig:
                                          # its box) is refused when this share of its points lie within
                                          # static_radius (BEV) of the non-ground points of the sweep where the
                                          # support was lost (outside the box grown by reach): something that was
-                                         # already there, e.g. a parked car the growing region reaches (0: off,
-                                         # also in full)
+                                         # already there, e.g. a parked car the growing region reaches (0: off;
+                                         # 0.5 in full)
     static_radius: float = 0.5           # m
     size_margin: float = 1.0             # m: a candidate's extent is at most the box's length / width + this
     size_gate: float = 1.0               # m: a candidate's extent changes at most this between frames
@@ -714,7 +714,7 @@ _FULL = TrackerConfig(
                         consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
-    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2),
+    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, static_share=0.5),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0)),
 )
 # faithful: the authors' implementation (docs/tracker.md)

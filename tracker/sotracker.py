@@ -33,7 +33,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .local_region import LocalCrop, local_region, road_within
 from .motion_limits import limit_motion
-from .reacquire import box_holds_against, cluster_candidates, search_region, start_shift
+from .reacquire import EarlierSweep, box_holds_against, cluster_candidates, search_region, start_shift
 from .registration import box_moved
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .strategies.choose import choose_strategies
@@ -377,7 +377,7 @@ class Tracker:
         sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
         r = c.reacquire
         if r.static_share > 0 and start is None and s.reacquire.earlier is None:
-            s.reacquire.earlier = self._earlier_points(frame)
+            s.reacquire.earlier = EarlierSweep(self._earlier_points(frame))
         candidates = cluster_candidates(points, self.box, sensor, r.grid(start is not None), r.cluster_points,
                                         r.size_margin, time_s, centred=start is None, hold_scale=c.search.crop_scale,
                                         region=region if r.whole_candidates or r.drift_gate else None,

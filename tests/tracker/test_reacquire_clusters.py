@@ -12,7 +12,7 @@ from tracker import get_preset, refine_offline, track
 from tracker.frames import LidarFrame
 from tracker.geometry import Box, invert_transform, make_transform, points_in_box, rotation_z, transform_points
 from tracker.metrics import iou_3d_batch
-from tracker.reacquire import cluster_candidates, search_region
+from tracker.reacquire import EarlierSweep, cluster_candidates, search_region
 
 REACQUIRE = {"reacquire.mode": "clusters"}
 NO_REACQUIRE = {"reacquire.mode": "none"}     # `full` re-acquires: the comparisons switch it off
@@ -193,15 +193,16 @@ def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     which grows and seems to move as the region grows) is not taken; with ``reacquire.drift_gate`` (2)
     its centre must lie within reach + (2 x |its own end's velocity - the predicted one| + lateral_growth) x lost
     time of the prediction, or a box length (the parked car's uncut rear is at rest: 1 m/s from the prediction, 7 m
-    off it after a second); with ``reacquire.static_share`` (0.5) a candidate whose points lie where the sweep of
-    the loss already had points is not taken (the parked car was there then). Each way the track coasts on and
-    holds the target as it re-appears."""
+    off it after a second); with ``reacquire.static_share`` (0.5, as in ``full``) a candidate whose points lie where
+    the sweep of the loss already had points is not taken (the parked car was there then). Each guard alone: the
+    track coasts on and holds the target as it re-appears."""
     boxes = _straight(30, (10.0, 4.0), 0.0, 0.1)
     parked = [Box(19.0, 4.0, 0.0, 0.0, *BOX_SIZE)] * 30
     hidden = range(8, 20)
     seq = _scene(boxes, 0, hidden=hidden, others=(parked,), ground_half=24.0)
-    value = {"drift_gate": 2.0, "static_share": 0.5}.get(guard, True)
-    result = _track(seq, **REACQUIRE, **({} if guard is None else {f"reacquire.{guard}": value}))
+    value = {"drift_gate": 2.0, "static_share": 0.5}.get(guard, True)         # static_share 0.5 as in full
+    alone = {"reacquire.static_share": 0.0} | ({} if guard is None else {f"reacquire.{guard}": value})
+    result = _track(seq, **REACQUIRE, **alone)
     iou = _iou(result, boxes)
     relocked = [k for k, e in enumerate(result.estimates) if "reacquired" in e.flags]
     if guard is not None:
@@ -347,7 +348,7 @@ def test_a_candidates_share_of_points_where_an_earlier_sweep_had_points():
     sensor = np.array([0.0, -30.0, 1.0])
     for before, expected in ((earlier, (1.0, 0.0)), (None, (0.0, 0.0))):
         candidates = cluster_candidates(np.vstack([parked, new]), box, sensor, 0.4, 2, 1.0, 0.0, centred=True,
-                                        earlier=before, radius=0.5)
+                                        earlier=None if before is None else EarlierSweep(before), radius=0.5)
         shares = [k.before for k in sorted(candidates, key=lambda k: -float(k.centre[0]))]
         assert shares == pytest.approx(list(expected))
 

@@ -32,7 +32,7 @@ the predicted path: a vehicle a lane over is another one; with ``centre_in_reach
 ``reach`` + ``growth`` x the time since of the predicted box centre; with ``whole_candidates`` (off in full) not
 a cluster the region cuts; with ``drift_gate`` > 0 (off in full) its centre within ``reach`` + (``drift_gate`` x
 |the velocity of its uncut end - the predicted one| + ``lateral_growth``) x the time since of the predicted box
-centre, or a box length: a candidate far from the prediction must move unlike it; with ``static_share`` > 0 (off in
+centre, or a box length: a candidate far from the prediction must move unlike it; with ``static_share`` > 0 (0.5 in
 full) fewer than that share of its points within ``static_radius`` of the non-ground points of the sweep where the
 support was lost, outside the box grown by ``reach``: not something that was already there, e.g. a parked car
 the growing region reaches); for a lost start a velocity
@@ -46,7 +46,7 @@ import numpy as np
 
 from ..config import ReacquireConfig
 from ..geometry import Box
-from ..reacquire import Candidate, search_region
+from ..reacquire import Candidate, EarlierSweep, search_region
 
 __all__ = ["Reacquire", "NoReacquire", "ClusterReacquire", "Relock", "choose_reacquire"]
 
@@ -61,10 +61,10 @@ class Relock:
 
 
 class Reacquire:
-    """The interface (and the "none" behaviour). ``earlier``: the non-ground points (world) of the sweep where
-    the support was lost, set by the tracker when ``reacquire.static_share`` > 0 (None: not taken yet)."""
+    """The interface (and the "none" behaviour). ``earlier``: the non-ground points of the sweep where the
+    support was lost, set by the tracker when ``reacquire.static_share`` > 0 (None: not taken yet)."""
 
-    earlier: np.ndarray | None = None
+    earlier: EarlierSweep | None = None
 
     def reset(self, time_s: float, centre: np.ndarray) -> None:
         """A track (re)starts at ``time_s`` with its box at ``centre`` (xy, world)."""
