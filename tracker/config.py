@@ -347,6 +347,13 @@ class ReacquireConfig:
                                          # its box) holds at least this many points on both frames of its pair (a
                                          # 1-2-point blob's frame pair reads several m/s of noise and passes the
                                          # gates; a lost start's candidates are not limited; 0: off, also in full)
+    static_share: float = 0.0            # > 0: a lost track's candidate that moves it (not within hold_distance of
+                                         # its box) is refused when this share of its points lie within
+                                         # static_radius (BEV) of the non-ground points of the sweep where the
+                                         # support was lost (outside the box grown by reach): something that was
+                                         # already there, e.g. a parked car the growing region reaches (0: off;
+                                         # 0.5 in full)
+    static_radius: float = 0.5           # m
     size_margin: float = 1.0             # m: a candidate's extent is at most the box's length / width + this
     size_gate: float = 1.0               # m: a candidate's extent changes at most this between frames
     velocity_gate: float = 4.0           # m/s: its velocity differs at most this from the predicted one
@@ -366,6 +373,9 @@ class ReacquireConfig:
                              f"{self.drift_gate}")
         if self.relock_points < 0:
             raise ValueError(f"reacquire.relock_points must be >= 0, got {self.relock_points}")
+        if not 0.0 <= self.static_share <= 1.0 or self.static_radius <= 0:
+            raise ValueError(f"reacquire.static_share must be in [0, 1] and reacquire.static_radius > 0, got "
+                             f"{self.static_share}, {self.static_radius}")
         if self.hold_frames < 0 or self.hold_share > 1.0:
             raise ValueError(f"reacquire.hold_frames must be >= 0 and reacquire.hold_share <= 1, got "
                              f"{self.hold_frames}, {self.hold_share}")
@@ -704,7 +714,7 @@ _FULL = TrackerConfig(
                         consistency="x_only", max_yaw_change=0.03, first_yaw_capped=True),
     height=HeightConfig(model="filter", road="removal"),
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
-    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2),
+    reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, static_share=0.5),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0)),
 )
 # faithful: the authors' implementation (docs/tracker.md)

@@ -19,7 +19,24 @@ import numpy as np
 from .geometry import Box, points_in_box
 from .shape import to_object_frame
 
-__all__ = ["Candidate", "box_holds_against", "cluster_candidates", "search_region", "start_shift"]
+__all__ = ["Candidate", "EarlierSweep", "box_holds_against", "cluster_candidates", "search_region", "start_shift"]
+
+
+class EarlierSweep:
+    """The non-ground points (world) of an earlier sweep, indexed once in BEV: which of a later sweep's points
+    have one of them within a radius."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        from scipy.spatial import cKDTree  # here, not at import: only a search compared with an earlier sweep
+
+        self.size = len(points)
+        self._tree = cKDTree(np.asarray(points, dtype=np.float64).reshape(-1, 3)[:, :2])
+
+    def near(self, points: np.ndarray, radius: float) -> np.ndarray:
+        """Boolean mask of ``points`` (N x 2 or 3, world) with an earlier point within ``radius`` m in BEV."""
+        if self.size == 0 or len(points) == 0:
+            return np.zeros(len(points), dtype=bool)
+        return np.isfinite(self._tree.query(np.asarray(points)[:, :2], distance_upper_bound=radius)[0])
 
 
 def search_region(box: Box, ahead: float, behind: float, across: float = 0.5, rise: float = 0.0) -> Box:
@@ -54,7 +71,9 @@ class Candidate:
     its points the searched box (scaled by ``hold_scale``) holds, whether the cluster reaches the searched
     region's side (``cut``: its extent and centre are those of the part inside), and ``anchor`` (xy, world): per
     axis of the box, the cluster's end that the region does not cut where only one end is cut, else the middle of
-    its extent (the part of a cut cluster that moves with the object, not with the region)."""
+    its extent (the part of a cut cluster that moves with the object, not with the region), and ``before``: the
+    share of its points that have a point of the earlier sweep it is compared with within a radius (1 at rest
+    where something already was; 0 when not compared)."""
 
     centre: np.ndarray
     extent: np.ndarray
@@ -63,6 +82,7 @@ class Candidate:
     held: int = 0
     cut: bool = False
     anchor: np.ndarray | None = None
+    before: float = 0.0
 
 
 def _anchor(low: np.ndarray, high: np.ndarray, cut_low: np.ndarray, cut_high: np.ndarray) -> np.ndarray:
@@ -74,7 +94,8 @@ def _anchor(low: np.ndarray, high: np.ndarray, cut_low: np.ndarray, cut_high: np
 
 def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: float, min_points: int,
                        size_margin: float, time_s: float, centred: bool = False,
-                       hold_scale: float = 1.0, region: Box | None = None) -> list[Candidate]:
+                       hold_scale: float = 1.0, region: Box | None = None,
+                       earlier: EarlierSweep | None = None, radius: float = 0.5) -> list[Candidate]:
     """The clusters of ``points`` (non-ground, world) on a BEV grid of ``cell`` metres (8-connected cells) that
     hold at least ``min_points`` points and fit ``box``'s length and width + ``size_margin``, each with ``box``
     placed on it: along an axis where the cluster is shorter than the box and the line of sight from ``sensor``
@@ -84,7 +105,8 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     an occluder, the roof of a far car; centred, the box is off by at most half the unseen length). ``held``: the
     cluster's points inside ``box`` scaled by ``hold_scale`` (whether the box already holds that object).
     ``region``: the searched region (a box with ``box``'s heading); a cluster with points within ``cell`` of its
-    sides is ``cut``."""
+    sides is ``cut``. ``earlier``: the non-ground points of an earlier sweep; each candidate's ``before`` is the
+    share of its points with one of them within ``radius`` m in BEV."""
     if len(points) < min_points:
         return []
     c, s = np.cos(box.heading), np.sin(box.heading)
@@ -129,8 +151,14 @@ def cluster_candidates(points: np.ndarray, box: Box, sensor: np.ndarray, cell: f
     cut = np.any(cut_low | cut_high, axis=1)
     own = _anchor(low[keep], high[keep], cut_low[keep], cut_high[keep])
     anchor = box.center[:2] + own[:, :1] * np.array([c, s]) + own[:, 1:] * np.array([-s, c])
-    return [Candidate(world[i], extent[k], int(sizes[k]), time_s, int(held[k]), bool(cut[k]), anchor[i])
-            for i, k in enumerate(keep)]
+    before = np.zeros(count)
+    if earlier is not None:   # only the candidates' points are looked up
+        mine = np.isin(label, keep)
+        near = np.bincount(label[mine], weights=earlier.near(points[mine], radius).astype(np.float64),
+                           minlength=count)
+        before = near / np.maximum(sizes, 1)
+    return [Candidate(world[i], extent[k], int(sizes[k]), time_s, int(held[k]), bool(cut[k]), anchor[i],
+                      float(before[k])) for i, k in enumerate(keep)]
 
 
 def box_holds_against(box: Box, centre: np.ndarray, points: np.ndarray, hold_ties: bool, crop_scale: float) -> bool:

@@ -33,7 +33,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .local_region import LocalCrop, local_region, road_within
 from .motion_limits import limit_motion
-from .reacquire import box_holds_against, cluster_candidates, search_region, start_shift
+from .reacquire import EarlierSweep, box_holds_against, cluster_candidates, search_region, start_shift
 from .registration import box_moved
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .strategies.choose import choose_strategies
@@ -376,9 +376,13 @@ class Tracker:
         points = points[points_in_box(points, region, 1.0)]
         sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
         r = c.reacquire
+        if r.static_share > 0 and start is None and s.reacquire.earlier is None:
+            s.reacquire.earlier = EarlierSweep(self._earlier_points(frame))
         candidates = cluster_candidates(points, self.box, sensor, r.grid(start is not None), r.cluster_points,
                                         r.size_margin, time_s, centred=start is None, hold_scale=c.search.crop_scale,
-                                        region=region if r.whole_candidates or r.drift_gate else None)
+                                        region=region if r.whole_candidates or r.drift_gate else None,
+                                        earlier=s.reacquire.earlier if start is None else None,
+                                        radius=r.static_radius)
         supported = estimate.num_points >= r.min_points and "prior_only" not in estimate.flags
         held = start is None and s.reacquire.holds_object(candidates, self.box, supported)
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)
@@ -392,6 +396,18 @@ class Tracker:
             return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
                            time_ms=(time.perf_counter() - t0) * 1e3)
         return self._relock(frame, relock, start is None, t0)
+
+    def _earlier_points(self, frame: LidarFrame) -> np.ndarray:
+        """The frame's non-ground points (world) as far around the box as the search ever reaches
+        (``reacquire.max_reach``), less those in the box grown by ``reacquire.reach`` (the object's own place):
+        the sweep where the support was lost, against which ``reacquire.static_share`` compares candidates."""
+        c, s = self.config, self.strategies
+        r = c.reacquire
+        wide = search_region(self.box, r.max_reach, r.max_reach, r.max_reach, r.rise)
+        points = local_region(frame, wide, 1.0, s.ground, s.road, c.ground.margin, c.deskew,
+                              self._previous_pose).points
+        own = search_region(self.box, r.reach, r.reach, r.reach, r.rise)
+        return points[points_in_box(points, wide, 1.0) & ~points_in_box(points, own, 1.0)]
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
         """Restart the track at a confirmed candidate, its velocity seeding the motion model; with

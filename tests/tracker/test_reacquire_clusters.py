@@ -12,7 +12,7 @@ from tracker import get_preset, refine_offline, track
 from tracker.frames import LidarFrame
 from tracker.geometry import Box, invert_transform, make_transform, points_in_box, rotation_z, transform_points
 from tracker.metrics import iou_3d_batch
-from tracker.reacquire import cluster_candidates, search_region
+from tracker.reacquire import EarlierSweep, cluster_candidates, search_region
 
 REACQUIRE = {"reacquire.mode": "clusters"}
 NO_REACQUIRE = {"reacquire.mode": "none"}     # `full` re-acquires: the comparisons switch it off
@@ -73,11 +73,13 @@ def _track(seq: SyntheticSequence, **changes):
     return track(seq, seq.boxes[0], 0, len(seq) - 1, get_preset("full", seed=0, **changes))
 
 
+@pytest.mark.parametrize("static_share", [0.0, 0.5])
 @pytest.mark.parametrize("hidden_frames", [5, 10])
-def test_a_car_hidden_for_k_frames_is_relocked_within_2_frames_where_the_motion_model_says(hidden_frames):
+def test_a_car_hidden_for_k_frames_is_relocked_within_2_frames_where_the_motion_model_says(hidden_frames,
+                                                                                          static_share):
     boxes = _straight(8 + hidden_frames + 6, (10.0, 4.0), 0.0, 1.0)
     hidden = range(8, 8 + hidden_frames)
-    result = _track(_scene(boxes, 0, hidden=hidden), **REACQUIRE)
+    result = _track(_scene(boxes, 0, hidden=hidden), **REACQUIRE, **{"reacquire.static_share": static_share})
     flags = [e.flags for e in result.estimates]
     assert all("coasting" in flags[k] for k in hidden[1:])           # support lost: flagged from the 2nd frame
     assert not any("coasting" in f for f in flags[:8])
@@ -179,7 +181,7 @@ def test_a_car_the_hidden_target_passed_does_not_capture_the_track(occluder_velo
     assert _iou(result, boxes)[hidden.stop + 2:].min() > 0.7             # held again once it re-appears
 
 
-@pytest.mark.parametrize("guard", [None, "centre_in_reach", "whole_candidates", "drift_gate"])
+@pytest.mark.parametrize("guard", [None, "centre_in_reach", "whole_candidates", "drift_gate", "static_share"])
 def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     """The target drives at 1 m/s (0.1 m per frame) toward a car parked 9 m ahead in its lane and is hidden for 12
     frames. The search region grows around the prediction (reach + growth x lost time) and the parked car's rear
@@ -191,13 +193,16 @@ def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
     which grows and seems to move as the region grows) is not taken; with ``reacquire.drift_gate`` (2)
     its centre must lie within reach + (2 x |its own end's velocity - the predicted one| + lateral_growth) x lost
     time of the prediction, or a box length (the parked car's uncut rear is at rest: 1 m/s from the prediction, 7 m
-    off it after a second). Each way the track coasts on and holds the target as it re-appears."""
+    off it after a second); with ``reacquire.static_share`` (0.5, as in ``full``) a candidate whose points lie where
+    the sweep of the loss already had points is not taken (the parked car was there then). Each guard alone: the
+    track coasts on and holds the target as it re-appears."""
     boxes = _straight(30, (10.0, 4.0), 0.0, 0.1)
     parked = [Box(19.0, 4.0, 0.0, 0.0, *BOX_SIZE)] * 30
     hidden = range(8, 20)
     seq = _scene(boxes, 0, hidden=hidden, others=(parked,), ground_half=24.0)
-    value = 2.0 if guard == "drift_gate" else True
-    result = _track(seq, **REACQUIRE, **({} if guard is None else {f"reacquire.{guard}": value}))
+    value = {"drift_gate": 2.0, "static_share": 0.5}.get(guard, True)         # static_share 0.5 as in full
+    alone = {"reacquire.static_share": 0.0} | ({} if guard is None else {f"reacquire.{guard}": value})
+    result = _track(seq, **REACQUIRE, **alone)
     iou = _iou(result, boxes)
     relocked = [k for k, e in enumerate(result.estimates) if "reacquired" in e.flags]
     if guard is not None:
@@ -206,18 +211,20 @@ def test_a_parked_car_ahead_does_not_capture_a_slow_hidden_track(guard):
         assert relocked and relocked[0] < hidden.stop and iou[hidden.stop:].max() < 0.1   # on the parked car
 
 
-@pytest.mark.parametrize("drift_gate", [0.0, 2.0])
-def test_a_car_that_speeds_up_while_hidden_is_relocked_within_3_frames_of_reappearing(drift_gate):
+@pytest.mark.parametrize(("drift_gate", "static_share"), [(0.0, 0.0), (2.0, 0.0), (0.0, 0.5)])
+def test_a_car_that_speeds_up_while_hidden_is_relocked_within_3_frames_of_reappearing(drift_gate, static_share):
     """The target drives at 5 m/s (0.5 m per frame), is hidden for 10 frames, and speeds up to 10 m/s at once
     when it is hidden: it re-appears 5 m ahead of the prediction. Its own motion (5 m/s faster than predicted)
-    explains that distance, so ``reacquire.drift_gate`` lets its candidate through: re-locked within 3 frames of
-    re-appearing either way."""
+    explains that distance, so ``reacquire.drift_gate`` lets its candidate through, and so does
+    ``reacquire.static_share`` (nothing was where it re-appears when it was lost): re-locked within 3 frames of
+    re-appearing every way."""
     steps = [0.5] * 8 + [1.0] * 20
     xs = 10.0 + np.concatenate([[0.0], np.cumsum(steps[:-1])])
     boxes = [Box(float(x), 4.0, 0.0, 0.0, *BOX_SIZE) for x in xs]
     hidden = range(8, 18)
     seq = _scene(boxes, 0, hidden=hidden, ground_centre=(24.0, 4.0), ground_half=20.0)
-    iou = _iou(_track(seq, **REACQUIRE, **{"reacquire.drift_gate": drift_gate}), boxes)
+    iou = _iou(_track(seq, **REACQUIRE, **{"reacquire.drift_gate": drift_gate,
+                                           "reacquire.static_share": static_share}), boxes)
     assert iou[hidden.stop - 1] < 0.1                    # the prediction is off the car when it re-appears
     assert iou[hidden.stop:hidden.stop + 3].max() >= 0.5 and iou[hidden.stop + 3:].min() > 0.5
 
@@ -325,6 +332,25 @@ def test_a_cluster_that_reaches_the_regions_side_is_cut():
     assert np.linalg.norm(inside.anchor - inside.centre) < 1e-9
     rear = box.center[:2] + (along + front - 1.5) * np.array([np.cos(box.heading), np.sin(box.heading)])
     assert np.linalg.norm(cut.anchor - rear) < 0.1
+
+
+def test_a_candidates_share_of_points_where_an_earlier_sweep_had_points():
+    """Two car-sized blocks of points; the earlier sweep held the first one 0.1 m from where it is now (a parked
+    car seen again from a moved sensor) and, 0.7 m beside where the second one is now, only points of a wall. Each
+    candidate's ``before`` is the share of its points with an earlier point within ``radius`` (0.5 m, BEV): 1 for
+    the first, 0 for the second; without an earlier sweep both are 0."""
+    box = Box(0.0, 0.0, 0.0, 0.0, *BOX_SIZE)
+    u, v = np.meshgrid(np.arange(-2.25, 2.26, 0.1), np.arange(-0.9, 0.91, 0.1))
+    block = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, 0.5)])
+    parked, new = block + [6.0, 0.0, 0.0], block + [-6.0, 0.0, 0.0]
+    wall = np.column_stack([np.arange(-8.25, -3.74, 0.1), np.full(46, 1.6), np.full(46, 0.5)])   # 0.7 m beside
+    earlier = np.vstack([parked + [0.1, 0.05, 0.0], wall])
+    sensor = np.array([0.0, -30.0, 1.0])
+    for before, expected in ((earlier, (1.0, 0.0)), (None, (0.0, 0.0))):
+        candidates = cluster_candidates(np.vstack([parked, new]), box, sensor, 0.4, 2, 1.0, 0.0, centred=True,
+                                        earlier=None if before is None else EarlierSweep(before), radius=0.5)
+        shares = [k.before for k in sorted(candidates, key=lambda k: -float(k.centre[0]))]
+        assert shares == pytest.approx(list(expected))
 
 
 def test_a_sparse_car_hidden_for_8_frames_is_relocked_on_the_coarser_lost_track_grid():

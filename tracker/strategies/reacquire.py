@@ -32,7 +32,10 @@ the predicted path: a vehicle a lane over is another one; with ``centre_in_reach
 ``reach`` + ``growth`` x the time since of the predicted box centre; with ``whole_candidates`` (off in full) not
 a cluster the region cuts; with ``drift_gate`` > 0 (off in full) its centre within ``reach`` + (``drift_gate`` x
 |the velocity of its uncut end - the predicted one| + ``lateral_growth``) x the time since of the predicted box
-centre, or a box length: a candidate far from the prediction must move unlike it); for a lost start a velocity
+centre, or a box length: a candidate far from the prediction must move unlike it; with ``static_share`` > 0 (0.5 in
+full) fewer than that share of its points within ``static_radius`` of the non-ground points of the sweep where the
+support was lost, outside the box grown by ``reach``: not something that was already there, e.g. a parked car
+the growing region reaches); for a lost start a velocity
 along the start box's heading line (within ``max_angle``, between ``min_speed`` and ``max_speed``) that agrees
 with the distance travelled from the start box since the start.
 """
@@ -43,7 +46,7 @@ import numpy as np
 
 from ..config import ReacquireConfig
 from ..geometry import Box
-from ..reacquire import Candidate, search_region
+from ..reacquire import Candidate, EarlierSweep, search_region
 
 __all__ = ["Reacquire", "NoReacquire", "ClusterReacquire", "Relock", "choose_reacquire"]
 
@@ -58,7 +61,10 @@ class Relock:
 
 
 class Reacquire:
-    """The interface (and the "none" behaviour)."""
+    """The interface (and the "none" behaviour). ``earlier``: the non-ground points of the sweep where the
+    support was lost, set by the tracker when ``reacquire.static_share`` > 0 (None: not taken yet)."""
+
+    earlier: EarlierSweep | None = None
 
     def reset(self, time_s: float, centre: np.ndarray) -> None:
         """A track (re)starts at ``time_s`` with its box at ``centre`` (xy, world)."""
@@ -97,6 +103,7 @@ class ClusterReacquire(Reacquire):
         self.reset(0.0, np.zeros(2))
 
     def reset(self, time_s: float, centre: np.ndarray) -> None:
+        self.earlier = None                          # the support is held: no sweep of its loss yet
         self._held_s, self._held_at = time_s, np.asarray(centre, dtype=np.float64)[:2].copy()
         self._misses = 0
         self._lost = False
@@ -169,6 +176,11 @@ class ClusterReacquire(Reacquire):
             moves = start is None and float(np.linalg.norm(now.centre - box.center[:2])) >= c.hold_distance
             floor = c.relock_points if moves else 0
             if now.count < floor:
+                continue
+            # ``static_share``: a candidate that moves a lost track is not something that was already there when
+            # the support was lost (a parked car the growing region reaches: at a slow car's speed it passes the
+            # velocity gate, and ahead it is on the path)
+            if moves and 0 < c.static_share <= now.before:
                 continue
             for before in previous:
                 dt = now.time_s - before.time_s
