@@ -36,7 +36,7 @@ from .motion_limits import limit_motion
 from .reacquire import EarlierSweep, box_holds_against, cluster_candidates, search_region, start_shift
 from .registration import box_moved
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
-from .strategies.choose import choose_strategies
+from .strategies.choose import Strategies, choose_strategies
 from .strategies.first_frame import FrameOne
 from .strategies.metric import FrameTarget
 from .strategies.motion import choose_motion_model
@@ -364,25 +364,21 @@ class Tracker:
     def _search(self, frame: LidarFrame, estimate: FrameEstimate, velocity: np.ndarray, start: Box | None,
                 t0: float) -> FrameEstimate:
         """Re-acquisition (``reacquire.mode``, tracker/strategies/reacquire.py): the frame's estimate (the motion
-        model's prediction where the points did not hold it) is flagged ``coasting`` while the non-ground clusters
-        of the box's size in the strategy's region are searched; a candidate consistent with the previous frame's
-        restarts the track there (flag ``reacquired``). ``velocity``: the predicted velocity (m/s, xy);
-        ``start``: the start box of a lost start (searched along its heading), else None."""
+        model's prediction where the points did not hold it) is flagged ``coasting`` while the box-sized non-ground
+        clusters of the strategy's region are searched; a candidate consistent with the previous frame's restarts
+        the track there (``reacquired``). ``velocity``: predicted (m/s, xy); ``start``: a lost start's box, else None."""
         c, s = self.config, self.strategies
         time_s = int(frame.timestamp_ns) * 1e-9
         region = s.reacquire.region(self.box, time_s, start)
-        points = local_region(frame, region, 1.0, s.ground, s.road, c.ground.margin, c.deskew,
-                              self._previous_pose).points
-        points = points[points_in_box(points, region, 1.0)]
+        points = _non_ground_points_in(frame, region, c, s, self._previous_pose)
         sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
         r = c.reacquire
-        if r.static_share > 0 and start is None and s.reacquire.earlier is None:
-            s.reacquire.earlier = EarlierSweep(self._earlier_points(frame))
+        if r.static_share > 0 and start is None and s.reacquire.earlier is None:   # the sweep where support was lost
+            s.reacquire.earlier = _earlier_sweep(frame, self.box, c, s, self._previous_pose)
         candidates = cluster_candidates(points, self.box, sensor, r.grid(start is not None), r.cluster_points,
                                         r.size_margin, time_s, centred=start is None, hold_scale=c.search.crop_scale,
                                         region=region if r.whole_candidates or r.drift_gate else None,
-                                        earlier=s.reacquire.earlier if start is None else None,
-                                        radius=r.static_radius)
+                                        earlier=s.reacquire.earlier if start is None else None, radius=r.static_radius)
         supported = estimate.num_points >= r.min_points and "prior_only" not in estimate.flags
         held = start is None and s.reacquire.holds_object(candidates, self.box, supported)
         relock = s.reacquire.confirm(candidates, self.box, velocity, start)
@@ -396,18 +392,6 @@ class Tracker:
             return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
                            time_ms=(time.perf_counter() - t0) * 1e3)
         return self._relock(frame, relock, start is None, t0)
-
-    def _earlier_points(self, frame: LidarFrame) -> np.ndarray:
-        """The frame's non-ground points (world) as far around the box as the search ever reaches
-        (``reacquire.max_reach``), less those in the box grown by ``reacquire.reach`` (the object's own place):
-        the sweep where the support was lost, against which ``reacquire.static_share`` compares candidates."""
-        c, s = self.config, self.strategies
-        r = c.reacquire
-        wide = search_region(self.box, r.max_reach, r.max_reach, r.max_reach, r.rise)
-        points = local_region(frame, wide, 1.0, s.ground, s.road, c.ground.margin, c.deskew,
-                              self._previous_pose).points
-        own = search_region(self.box, r.reach, r.reach, r.reach, r.rise)
-        return points[points_in_box(points, wide, 1.0) & ~points_in_box(points, own, 1.0)]
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
         """Restart the track at a confirmed candidate, its velocity seeding the motion model; with
@@ -465,6 +449,25 @@ class Tracker:
         damped when sparse."""
         explained, count = self._explained_of(obj)
         return float(np.clip(explained * min(1.0, count / 20.0), 0.0, 1.0))
+
+
+def _non_ground_points_in(frame: LidarFrame, region: Box, config: TrackerConfig, strategies: Strategies,
+                          previous_pose: tuple[int, np.ndarray] | None) -> np.ndarray:
+    """The frame's non-ground points (world) inside ``region``."""
+    points = local_region(frame, region, 1.0, strategies.ground, strategies.road, config.ground.margin, config.deskew,
+                          previous_pose).points
+    return points[points_in_box(points, region, 1.0)]
+
+
+def _earlier_sweep(frame: LidarFrame, box: Box, config: TrackerConfig, strategies: Strategies,
+                   previous_pose: tuple[int, np.ndarray] | None) -> EarlierSweep:
+    """The frame's non-ground points (world) as far around ``box`` as the search ever reaches
+    (``reacquire.max_reach``), less those in the box grown by ``reacquire.reach`` (the object's own place): the sweep
+    where the support was lost, against which ``reacquire.static_share`` compares candidates."""
+    r = config.reacquire
+    points = _non_ground_points_in(frame, search_region(box, r.max_reach, r.max_reach, r.max_reach, r.rise), config,
+                                   strategies, previous_pose)
+    return EarlierSweep(points[~points_in_box(points, search_region(box, r.reach, r.reach, r.reach, r.rise), 1.0)])
 
 
 def track(source: FrameSource, init_box: Box, start: int = 0, end: int | None = None,
