@@ -18,7 +18,7 @@ from .config import TrackerConfig
 from .geometry import Box, points_in_box, wrap_angle
 from .shape import to_world_frame
 from .solver import solve
-from .strategies.association import Association
+from .strategies.association import Association, Pairs
 from .strategies.inliers import ShapeInliers
 from .strategies.loss import Consistency, DataFreeFrames, IterationReference, PriorReference
 from .strategies.metric import FrameTarget, Metric
@@ -53,7 +53,7 @@ def unmove(x: np.ndarray, points: np.ndarray, pivot: np.ndarray) -> np.ndarray:
 
 
 def frame_pairs(x: np.ndarray, source: NearestNeighbors, pivot: np.ndarray, local: np.ndarray, inside: np.ndarray,
-                max_distance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                max_distance: float) -> Pairs:
     """Frame-to-source pairs: each local point ``inside`` (indices) paired with the source point nearest to it
     once the source is moved by ``x``; pairs farther than ``max_distance`` dropped. The same tuple as
     :meth:`~tracker.strategies.association.Association.pairs`: (source, local index, distance, moved source,
@@ -117,8 +117,10 @@ class _FramePairing:
             return None
         return random_subset(np.flatnonzero(mask), self.config.search.max_points, rng)
 
-    def pairs(self, term: str, assoc: Association, x: np.ndarray, source: np.ndarray, pivot: np.ndarray, nn,
-              mask: np.ndarray, crop, rng: np.random.Generator, local: np.ndarray, inside: np.ndarray | None):
+    def pairs(self, term: str, assoc: Association, x: np.ndarray, source: np.ndarray, pivot: np.ndarray,
+              nn: NearestNeighbors, mask: np.ndarray, crop: NearestNeighbors | None, rng: np.random.Generator,
+              local: np.ndarray, inside: np.ndarray | None) -> Pairs:
+        """``term``'s pairs: the association's (source-to-frame), frame-to-source or both sets together."""
         tree = self.trees.get(term)
         if tree is None or inside is None:
             return assoc.pairs(x, source, pivot, nn, mask, crop, rng)
@@ -127,7 +129,8 @@ class _FramePairing:
         if reg.pairing == "frame":
             return back
         forward = assoc.pairs(x, source, pivot, nn, mask, crop, rng)
-        return tuple(np.concatenate([f, b]) for f, b in zip(forward, back, strict=True))  # type: ignore[return-value]
+        src, idx, dist, moved, tgt = (np.concatenate([f, b]) for f, b in zip(forward, back, strict=True))
+        return src, idx, dist, moved, tgt
 
 
 @dataclass

@@ -81,6 +81,14 @@ def test_paired_frame_to_source_the_roof_no_longer_drags_the_box_onto_the_rear_f
     assert abs(exact) < 0.01
 
 
+def test_both_ways_keeps_the_source_pairs_and_adds_the_frame_pairs():
+    x0 = np.array([0.75, 0.0, 0.0, 0.0])
+    behind, both, exact = (_register(p, x0)[0] - TRUE_MOTION[0] for p in ("source", "both", "frame"))
+    # the roof's pairs still drag the box back, outweighed in part by the frame's (-0.46 m, -0.35 m, 0)
+    assert behind < 0.9 * behind < both < -0.1
+    assert abs(exact) < 0.01
+
+
 def test_a_car_accelerating_away_is_followed_closer_paired_frame_to_source():
     # 3 m/s accelerating at 3 m/s^2 away from a still sensor, 3 m to its side; LiDAR-like density (cos / r^2):
     # ~1200 points at 8 m, ~70 at 27 m, its roof and side thinning faster than its rear face
