@@ -116,9 +116,16 @@ class RegistrationConfig:
     solver_iterations: int = 10          # max Gauss-Newton/LM steps per outer iteration
     anderson_depth: int = 0              # > 0: Anderson acceleration of the outer loop with this history
     convergence_tolerance: float = 1e-4  # stop the outer loop when the update is smaller (m / rad)
+    # which way the data terms pair: "source" each source (shape) point to its nearest frame point; "frame" each
+    # frame point in the search crop to its nearest source (shape) point; "both" (docs/tracker.md)
+    pairing: str = "source"
+    pairing_terms: str = "both"          # the terms ``pairing`` changes: "icp", "shape" or "both"
+    pairing_max_distance: float = 0.5    # frame-to-source pairs farther than this (m) are dropped
 
     def __post_init__(self) -> None:
         _choice("registration.metric", self.metric, ("point", "plane"))
+        _choice("registration.pairing", self.pairing, ("source", "frame", "both"))
+        _choice("registration.pairing_terms", self.pairing_terms, ("icp", "shape", "both"))
         _choice("registration.data_free_frames", self.data_free_frames, ("prior", "motion_terms"))
         _positive(self, "registration", "outer_iterations")
 

@@ -13,30 +13,57 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .association import NearestNeighbors, random_subset
 from .config import TrackerConfig
 from .geometry import Box, points_in_box, wrap_angle
 from .shape import to_world_frame
 from .solver import solve
-from .strategies.association import Association
+from .strategies.association import Association, Pairs
 from .strategies.inliers import ShapeInliers
 from .strategies.loss import Consistency, DataFreeFrames, IterationReference, PriorReference
 from .strategies.metric import FrameTarget, Metric
 from .terms import (
     PairMoments,
     ResidualBlock,
+    apply_motion,
     detection_block,
     motion_prior_block,
     point_pair_block,
     travel_heading_block,
 )
 
-__all__ = ["Anderson", "Registration", "box_moved"]
+__all__ = ["Anderson", "Registration", "box_moved", "frame_pairs", "unmove"]
 
 
 def box_moved(box: Box, x: np.ndarray) -> Box:
     """``box`` moved by the motion [dx, dy, dz, dtheta]."""
     return Box(box.x + x[0], box.y + x[1], box.z + x[2], float(wrap_angle(box.heading + x[3])),
                box.length, box.width, box.height)
+
+
+def unmove(x: np.ndarray, points: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`~tracker.terms.apply_motion`: the points that ``x`` moves onto ``points``."""
+    c, s = np.cos(x[3]), np.sin(x[3])
+    a = points[:, :2] - pivot[:2] - x[:2]
+    out = np.empty_like(points)
+    out[:, 0] = c * a[:, 0] + s * a[:, 1] + pivot[0]
+    out[:, 1] = -s * a[:, 0] + c * a[:, 1] + pivot[1]
+    out[:, 2] = points[:, 2] - x[2]
+    return out
+
+
+def frame_pairs(x: np.ndarray, source: NearestNeighbors, pivot: np.ndarray, local: np.ndarray, inside: np.ndarray,
+                max_distance: float) -> Pairs:
+    """Frame-to-source pairs: each local point ``inside`` (indices) paired with the source point nearest to it
+    once the source is moved by ``x``; pairs farther than ``max_distance`` dropped. The same tuple as
+    :meth:`~tracker.strategies.association.Association.pairs`: (source, local index, distance, moved source,
+    target). Where the source holds more of the object than the frame sees (the shape, or a nearer earlier
+    view), every frame point has its counterpart and the source's unseen parts pull on nothing."""
+    tgt = local[inside]
+    dist, sidx = source.query(unmove(x, tgt, pivot))
+    keep = dist <= max_distance
+    src = source.target[sidx[keep]]
+    return src, inside[keep], dist[keep], apply_motion(x, src, pivot), tgt[keep]
 
 
 class Anderson:
@@ -69,6 +96,44 @@ class Anderson:
 
 
 @dataclass
+class _FramePairing:
+    """Which way each data term pairs (``registration.pairing`` / ``pairing_terms``): trees over the frame's
+    source and shape for frame-to-source pairs, built once per frame and only when a term uses them."""
+
+    config: TrackerConfig
+    trees: dict[str, NearestNeighbors]
+
+    @classmethod
+    def of(cls, config: TrackerConfig, source: np.ndarray, shape: np.ndarray) -> "_FramePairing":
+        reg = config.registration
+        names = ("icp", "shape") if reg.pairing_terms == "both" else (reg.pairing_terms,)
+        sets = {"icp": source, "shape": shape}
+        trees = {} if reg.pairing == "source" else {n: NearestNeighbors(sets[n]) for n in names if len(sets[n])}
+        return cls(config, trees)
+
+    def inside(self, mask: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
+        """Indices of the local points in the search crop ``mask`` (at most ``search.max_points``)."""
+        if not self.trees:
+            return None
+        return random_subset(np.flatnonzero(mask), self.config.search.max_points, rng)
+
+    def pairs(self, term: str, assoc: Association, x: np.ndarray, source: np.ndarray, pivot: np.ndarray,
+              nn: NearestNeighbors, mask: np.ndarray, crop: NearestNeighbors | None, rng: np.random.Generator,
+              local: np.ndarray, inside: np.ndarray | None) -> Pairs:
+        """``term``'s pairs: the association's (source-to-frame), frame-to-source or both sets together."""
+        tree = self.trees.get(term)
+        if tree is None or inside is None:
+            return assoc.pairs(x, source, pivot, nn, mask, crop, rng)
+        reg = self.config.registration
+        back = frame_pairs(x, tree, pivot, local, inside, reg.pairing_max_distance)
+        if reg.pairing == "frame":
+            return back
+        forward = assoc.pairs(x, source, pivot, nn, mask, crop, rng)
+        src, idx, dist, moved, tgt = (np.concatenate([f, b]) for f, b in zip(forward, back, strict=True))
+        return src, idx, dist, moved, tgt
+
+
+@dataclass
 class Registration:
     """The outer loop with its strategies (chosen once by the tracker)."""
 
@@ -96,6 +161,7 @@ class Registration:
         shape_src = assoc.per_frame(to_world_frame(shape, prev), rng) if with_shape else np.zeros((0, 3))
         x = np.asarray(x0, dtype=np.float64).copy()
         reference = None if mp_reference is None else mp_reference.copy()
+        paired = _FramePairing.of(c, source, shape_src)
         info = {"crop": 0, "icp_pairs": 0, "shape_inliers": 0, "iterations": 0}
         ransac_seed = int(rng.integers(2**62))
         accel = Anderson(reg.anderson_depth)
@@ -110,8 +176,10 @@ class Registration:
                 break
             fixed: list = []  # (name, source, target, normals, weight, normaliser floor)
             crop = assoc.crop(local, mask, rng) if enough else None
+            inside = paired.inside(mask, rng) if enough else None
             if enough and reg.icp_weight > 0 and len(source) >= reg.min_points:
-                src, idx, dist, _, tgt = assoc.pairs(x, source, pivot, target.nn, mask, crop, rng)
+                src, idx, dist, _, tgt = paired.pairs("icp", assoc, x, source, pivot, target.nn, mask, crop, rng,
+                                                      local, inside)
                 if reg.max_pair_distance > 0:
                     keep = dist <= reg.max_pair_distance
                     src, idx, tgt = src[keep], idx[keep], tgt[keep]
@@ -119,7 +187,8 @@ class Registration:
                     fixed.append(("icp", src, tgt, self.metric.normals(target, idx), reg.icp_weight, reg.data_norm_min))
                     info["icp_pairs"] = len(src)
             if enough and len(shape_src) >= reg.min_points:
-                src, idx, _, moved, tgt = assoc.pairs(x, shape_src, pivot, target.nn, mask, crop, rng)
+                src, idx, _, moved, tgt = paired.pairs("shape", assoc, x, shape_src, pivot, target.nn, mask, crop,
+                                                       rng, local, inside)
                 src, idx, tgt = self.inliers.select(src, idx, tgt, moved, ransac_seed, rng)
                 if len(src) >= reg.min_points:
                     fixed.append(("shape", src, tgt, self.metric.normals(target, idx), c.shape.weight,

@@ -22,8 +22,11 @@ PARTS = (
 )
 
 
-def car_points(rng: np.random.Generator, box: Box, sensor: np.ndarray, per_m2: float = 80.0) -> np.ndarray:
-    """World points on the faces of the car's parts that face ``sensor``."""
+def car_points(rng: np.random.Generator, box: Box, sensor: np.ndarray, per_m2: float = 80.0,
+               lidar_density: float = 0.0) -> np.ndarray:
+    """World points on the faces of the car's parts that face ``sensor``. ``lidar_density`` > 0: as a LiDAR
+    samples them instead, lidar_density x cos(incidence) / range^2 points per m^2 of each face (from its
+    centre): a face seen at a grazing angle or far away gets few points."""
     out = []
     world_from_object = box.world_from_object()
     sensor_obj = transform_points(invert_transform(world_from_object), sensor[None])[0]
@@ -39,12 +42,18 @@ def car_points(rng: np.random.Generator, box: Box, sensor: np.ndarray, per_m2: f
                     continue
                 others = [a for a in range(3) if a != axis]
                 area = size[others[0]] * size[others[1]]
-                n = max(1, int(rng.poisson(area * per_m2)))
+                density = per_m2
+                if lidar_density > 0:
+                    ray = sensor_obj - face_centre
+                    distance = float(np.linalg.norm(ray))
+                    density = lidar_density * abs(ray[axis]) / distance ** 3
+                n = int(rng.poisson(area * density))
+                n = max(1, n) if lidar_density <= 0 else n
                 pts = np.repeat(face_centre[None], n, axis=0)
                 for a in others:
                     pts[:, a] += rng.uniform(-half[a], half[a], n)
                 out.append(pts)
-    pts = np.vstack(out)
+    pts = np.vstack(out) if out else np.zeros((0, 3))
     # points hidden inside the other part (body top under the cabin) are dropped
     keep = np.ones(len(pts), dtype=bool)
     for centre, size in PARTS:
@@ -93,15 +102,18 @@ class SyntheticSequence:
 
 def make_sequence(n_frames: int = 24, seed: int = 0, noise: float = 0.01, ego_speed: float = 0.5,
                   empty_frames: tuple[int, ...] = (), nan_frames: tuple[int, ...] = (),
-                  boxes: list[Box] | None = None) -> SyntheticSequence:
-    """``boxes``: the vehicle's trajectory (default: ``trajectory(n_frames)``)."""
+                  boxes: list[Box] | None = None, lidar_density: float = 0.0, ego_yaw_rate: float = 0.02
+                  ) -> SyntheticSequence:
+    """``boxes``: the vehicle's trajectory (default: ``trajectory(n_frames)``); ``lidar_density``: see
+    :func:`car_points`; ``ego_yaw_rate``: the ego's turn per frame (rad)."""
     rng = np.random.default_rng(seed)
     boxes = trajectory(n_frames) if boxes is None else boxes
     frames = []
     for k, box in enumerate(boxes):
-        world_from_ego = make_transform(rotation_z(0.02 * k), np.array([ego_speed * k, 0.0, 1.0]))
+        world_from_ego = make_transform(rotation_z(ego_yaw_rate * k), np.array([ego_speed * k, 0.0, 1.0]))
         sensor = world_from_ego[:3, 3]
-        pts = np.vstack([car_points(rng, box, sensor), ground_points(rng, box.center[:2], 12.0)])
+        car = car_points(rng, box, sensor, lidar_density=lidar_density)
+        pts = np.vstack([car, ground_points(rng, box.center[:2], 12.0)])
         pts += rng.normal(0.0, noise, pts.shape)
         if k in empty_frames:
             pts = np.zeros((0, 3))
