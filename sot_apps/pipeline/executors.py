@@ -300,6 +300,10 @@ class ExecutorSession:
     def close(self, wait: bool = True) -> None:
         """Shut the pool down; ``wait=False`` (after Ctrl-C) cancels queued tasks, tells the workers not to start the
         ones already handed to them, and stops the workers (:func:`sot_apps.interrupts.stop_process_pool`)."""
+        if not wait and (self._client is not None or self._cluster is not None or self._cluster_start is not None):
+            # Ctrl-C: what Dask logs while it stops (cancellations, closing connections, a cluster start still
+            # registering its workers) is expected, and must not follow the command's last line
+            _quieten_dask_logs()
         if self._pool is not None:
             if wait:
                 self._pool.shutdown(wait=True, cancel_futures=True)
@@ -326,7 +330,6 @@ class ExecutorSession:
                 start.result(timeout=None if wait else 60.0).close()
 
     def _interrupt_dask_tasks(self) -> None:
-        _quieten_dask_logs()
         with contextlib.suppress(Exception):
             for _ in range(20):   # again while a task still runs (the exception can land where it is dropped)
                 if not sum(self._client.run(_interrupt_running_tasks).values()):

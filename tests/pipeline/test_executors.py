@@ -198,3 +198,23 @@ def test_dask_prestart_creates_the_cluster_the_first_batch_runs_on(monkeypatch):
         session.prestart(())
     unused = set(SpecCluster._instances) - before
     assert len(unused) == 1 and all(c.status == Status.closed for c in unused)
+
+
+def test_a_session_closed_by_ctrl_c_during_the_cluster_start_logs_nothing_more():
+    """Seen in CI: ``sot-apps run --dask-local 2`` interrupted while prestart's thread created the LocalCluster; the
+    scheduler logged 'Registering Worker plugin shuffle' (INFO) after the command's 'interrupted' line."""
+    import logging
+
+    from sot_apps.pipeline.executors import ExecutorSession
+
+    names = ["distributed", *(n for n in logging.root.manager.loggerDict if n.startswith("distributed"))]
+    levels = {name: logging.getLogger(name).level for name in names}
+    try:
+        session = ExecutorSession(ExecutorSpec("dask", workers=1))
+        session.prestart(())
+        session.close(wait=False)   # as after a Ctrl-C: the start may still be under way
+        for name in [*names, "distributed.scheduler", "distributed.nanny", "distributed.core"]:
+            assert not logging.getLogger(name).isEnabledFor(logging.WARNING), name
+    finally:
+        for name, level in levels.items():
+            logging.getLogger(name).setLevel(level)
