@@ -373,7 +373,7 @@ class Tracker:
         points = _non_ground_points_in(frame, region, c, s, self._previous_pose)
         sensor = transform_points(np.asarray(frame.world_from_ego, dtype=np.float64), np.zeros((1, 3)))[0]
         r = c.reacquire
-        if r.static_share > 0 and start is None and s.reacquire.earlier is None:   # the sweep where support was lost
+        if r.static_share > 0 and start is None and s.reacquire.earlier is None:   # the sweep where the track became lost
             s.reacquire.earlier = _earlier_sweep(frame, self.box, c, s, self._previous_pose)
         candidates = cluster_candidates(points, self.box, sensor, r.grid(start is not None), r.cluster_points,
                                         r.size_margin, time_s, centred=start is None, hold_scale=c.search.crop_scale,
@@ -463,7 +463,7 @@ def _earlier_sweep(frame: LidarFrame, box: Box, config: TrackerConfig, strategie
                    previous_pose: tuple[int, np.ndarray] | None) -> EarlierSweep:
     """The frame's non-ground points (world) as far around ``box`` as the search ever reaches
     (``reacquire.max_reach``), less those in the box grown by ``reacquire.reach`` (the object's own place): the sweep
-    where the support was lost, against which ``reacquire.static_share`` compares candidates."""
+    where the track became lost, against which ``reacquire.static_share`` compares candidates."""
     r = config.reacquire
     points = _non_ground_points_in(frame, search_region(box, r.max_reach, r.max_reach, r.max_reach, r.rise), config,
                                    strategies, previous_pose)
