@@ -283,6 +283,11 @@ def _end_progress_lines() -> None:
 
 
 def _report_interrupt() -> None:
+    """The command's last line. Run as the program, the process logs nothing after it: libraries stopping on other
+    threads (a Dask cluster still starting when the Ctrl-C came, its scheduler registering plugins) would print
+    their INFO lines below it."""
+    if _AS_PROGRAM and "logging" in sys.modules:
+        sys.modules["logging"].disable(sys.modules["logging"].CRITICAL)
     _end_progress_lines()
     sys.stderr.write("interrupted: finished outputs are kept; rerun to resume\n")
 

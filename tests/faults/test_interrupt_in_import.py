@@ -87,3 +87,22 @@ def test_interrupt_line_starts_its_own_line_when_a_progress_bar_is_open(leave, m
     assert "work" in err   # the bar was drawn
     last_line = err.replace("\r", "\n").rstrip("\n").splitlines()[-1]
     assert last_line == "interrupted: finished outputs are kept; rerun to resume"
+
+
+def test_nothing_is_logged_after_the_interrupt_line(monkeypatch, capsys):
+    """Seen in CI: a Dask cluster still starting when the Ctrl-C came logged an INFO line after 'interrupted'."""
+    import logging
+
+    logger = logging.getLogger("sot_apps.test.after_interrupt")
+    handler = logging.StreamHandler(sys.stderr)
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    monkeypatch.setattr(cli_main, "_AS_PROGRAM", True)
+    try:
+        logger.info("before")
+        cli_main._report_interrupt()
+        logger.warning("after")   # e.g. from another thread still stopping
+    finally:
+        logging.disable(logging.NOTSET)
+        logger.removeHandler(handler)
+    assert capsys.readouterr().err.splitlines() == ["before", "interrupted: finished outputs are kept; rerun to resume"]
