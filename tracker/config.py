@@ -117,14 +117,18 @@ class RegistrationConfig:
     anderson_depth: int = 0              # > 0: Anderson acceleration of the outer loop with this history
     convergence_tolerance: float = 1e-4  # stop the outer loop when the update is smaller (m / rad)
     # which way the data terms pair: "source" each source (shape) point to its nearest frame point; "frame" each
-    # frame point in the search crop to its nearest source (shape) point; "both" (docs/tracker.md)
+    # frame point in the search crop to its nearest source (shape) point; "both"; "coverage" per frame and term:
+    # frame-to-source where the source holds more of the object than the frame shows, else source-to-frame
+    # (docs/tracker.md)
     pairing: str = "source"
     pairing_terms: str = "both"          # the terms ``pairing`` changes: "icp", "shape" or "both"
     pairing_max_distance: float = 0.5    # frame-to-source pairs farther than this (m) are dropped
+    coverage_radius: float = 0.5         # "coverage": a point is covered by the other set within this (m)
+    coverage_margin: float = 0.2         # "coverage": frame-to-source when the source's uncovered share exceeds the frame's by this
 
     def __post_init__(self) -> None:
         _choice("registration.metric", self.metric, ("point", "plane"))
-        _choice("registration.pairing", self.pairing, ("source", "frame", "both"))
+        _choice("registration.pairing", self.pairing, ("source", "frame", "both", "coverage"))
         _choice("registration.pairing_terms", self.pairing_terms, ("icp", "shape", "both"))
         _choice("registration.data_free_frames", self.data_free_frames, ("prior", "motion_terms"))
         _positive(self, "registration", "outer_iterations")
@@ -463,6 +467,8 @@ class OfflineParams:
     window_start_moved: float = 0.5     # ... only when the window moved some centre farther than this (m) from the
                                         # online one
     window_start_margin: float = 1.05   # ... kept when its boxes hold more than this x the first solve's points
+    window_keep: bool = False           # (with window_start) the window pass's own states are the result when their
+                                        # boxes hold more than window_start_margin x the kept solve's points
     gauge_window: int = 0               # > 0 (offline, with window_start): the trajectory is moved by the mean object-
                                         # frame offset from its states to the window pass's over frames 1..this
     gauge_window_max: float = 0.3       # ... only when that offset's centre part is under this (m)

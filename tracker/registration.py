@@ -9,7 +9,7 @@ reference, Detection); it stops when the update is below ``convergence_tolerance
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -98,24 +98,28 @@ class Anderson:
 @dataclass
 class _FramePairing:
     """Which way each data term pairs (``registration.pairing`` / ``pairing_terms``): trees over the frame's
-    source and shape for frame-to-source pairs, built once per frame and only when a term uses them."""
+    source and shape for frame-to-source pairs, built once per frame and only when a term uses them. With
+    "coverage" each term's direction is decided once per frame (:meth:`_decide`); its crop subsets are drawn from
+    a generator of its own, so a frame paired source-to-frame is the frame "source" gives."""
 
     config: TrackerConfig
     trees: dict[str, NearestNeighbors]
+    rng: np.random.Generator | None = None
+    directions: dict[str, str] = field(default_factory=dict)
 
     @classmethod
-    def of(cls, config: TrackerConfig, source: np.ndarray, shape: np.ndarray) -> "_FramePairing":
+    def of(cls, config: TrackerConfig, source: np.ndarray, shape: np.ndarray, seed: int) -> "_FramePairing":
         reg = config.registration
         names = ("icp", "shape") if reg.pairing_terms == "both" else (reg.pairing_terms,)
         sets = {"icp": source, "shape": shape}
         trees = {} if reg.pairing == "source" else {n: NearestNeighbors(sets[n]) for n in names if len(sets[n])}
-        return cls(config, trees)
+        return cls(config, trees, np.random.default_rng(seed) if reg.pairing == "coverage" else None)
 
     def inside(self, mask: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
         """Indices of the local points in the search crop ``mask`` (at most ``search.max_points``)."""
         if not self.trees:
             return None
-        return random_subset(np.flatnonzero(mask), self.config.search.max_points, rng)
+        return random_subset(np.flatnonzero(mask), self.config.search.max_points, self.rng or rng)
 
     def pairs(self, term: str, assoc: Association, x: np.ndarray, source: np.ndarray, pivot: np.ndarray,
               nn: NearestNeighbors, mask: np.ndarray, crop: NearestNeighbors | None, rng: np.random.Generator,
@@ -125,12 +129,30 @@ class _FramePairing:
         if tree is None or inside is None:
             return assoc.pairs(x, source, pivot, nn, mask, crop, rng)
         reg = self.config.registration
+        direction = reg.pairing
+        if direction == "coverage":
+            direction = self.directions.setdefault(term, self._decide(tree, x, pivot, local[inside]))
+        if direction == "source":
+            return assoc.pairs(x, source, pivot, nn, mask, crop, rng)
         back = frame_pairs(x, tree, pivot, local, inside, reg.pairing_max_distance)
-        if reg.pairing == "frame":
+        if direction == "frame":
             return back
         forward = assoc.pairs(x, source, pivot, nn, mask, crop, rng)
         src, idx, dist, moved, tgt = (np.concatenate([f, b]) for f, b in zip(forward, back, strict=True))
         return src, idx, dist, moved, tgt
+
+    def _decide(self, source: NearestNeighbors, x: np.ndarray, pivot: np.ndarray, frame: np.ndarray) -> str:
+        """"frame" when the source (moved by ``x``) holds more of the object than the frame's crop points show:
+        the share of source points with no frame point within ``coverage_radius`` exceeds the share of frame
+        points with no source point that near by ``coverage_margin`` (a car receding, an earlier nearer view, a
+        shape of more faces); else "source" (the frame shows faces the source lacks: a turn, a car passing)."""
+        reg = self.config.registration
+        if not len(frame) or not len(source):
+            return "source"
+        placed = unmove(x, frame, pivot)   # the frame in the source's placement: distances are the same
+        frame_uncovered = float(np.mean(source.query(placed)[0] > reg.coverage_radius))
+        source_uncovered = float(np.mean(NearestNeighbors(placed).query(source.target)[0] > reg.coverage_radius))
+        return "frame" if source_uncovered - frame_uncovered > reg.coverage_margin else "source"
 
 
 @dataclass
@@ -161,9 +183,9 @@ class Registration:
         shape_src = assoc.per_frame(to_world_frame(shape, prev), rng) if with_shape else np.zeros((0, 3))
         x = np.asarray(x0, dtype=np.float64).copy()
         reference = None if mp_reference is None else mp_reference.copy()
-        paired = _FramePairing.of(c, source, shape_src)
         info = {"crop": 0, "icp_pairs": 0, "shape_inliers": 0, "iterations": 0}
         ransac_seed = int(rng.integers(2**62))
+        paired = _FramePairing.of(c, source, shape_src, ransac_seed + 1)
         accel = Anderson(reg.anderson_depth)
         motion_terms_only = self.data_free.solves_without_data and not icp_only
         for it in range(outer):

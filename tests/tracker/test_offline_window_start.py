@@ -65,3 +65,18 @@ def test_the_second_solve_runs_only_where_the_window_moved_a_state(held_off):
     without = refine_offline(seq, on_the_car, config.updated({"refinement.offline.window_start": 0}))
     assert np.array_equal([e.box.to_array() for e in with_second.estimates],
                           [e.box.to_array() for e in without.estimates])
+
+
+def test_window_keep_takes_the_window_states_where_they_hold_more_points(held_off):
+    """``window_keep``: with no second solve (``window_start_moved`` beyond any move) the solve from the online
+    states keeps the 2.9 m offset; the window pass's own states hold more of the car's points and are the result
+    (as ``refine_fixed_lag`` gives them); without ``window_keep`` the result is the solve's."""
+    seq, boxes, online, config = held_off
+    no_second = config.updated({"refinement.offline.window_start_moved": 100.0})
+    kept = refine_offline(seq, online, no_second.updated({"refinement.offline.window_keep": True}))
+    solved = refine_offline(seq, online, no_second)
+    lagged = refine_fixed_lag(seq, online, 10, config)
+    assert _iou(kept, boxes).mean() > _iou(solved, boxes).mean() + 0.05
+    np.testing.assert_allclose([e.box.to_array() for e in kept.estimates],
+                               [e.box.to_array() for e in lagged.estimates], atol=1e-6)
+    assert sum(e.num_points for e in kept.estimates) > sum(e.num_points for e in solved.estimates)

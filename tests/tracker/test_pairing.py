@@ -112,3 +112,45 @@ def test_a_car_accelerating_away_is_followed_closer_paired_frame_to_source():
         # every run trails the car (0.04-0.05 m over frames 10-29); paired frame-to-source by a third less
         assert behind < -0.035
         assert abs(closer) < 0.75 * abs(behind)
+
+
+def _decided(source: np.ndarray, frame: np.ndarray, x: np.ndarray) -> str:
+    from tracker.registration import _FramePairing
+
+    config = get_preset("full", **{"registration.pairing": "coverage"})
+    pairing = _FramePairing.of(config, source, np.zeros((0, 3)), seed=0)
+    return pairing._decide(pairing.trees["icp"], x, BOX.center, frame)
+
+
+def test_coverage_pairs_from_the_frame_where_the_source_holds_more_of_the_car():
+    source, frame = _views()
+    assert _decided(source, frame, TRUE_MOTION) == "frame"     # the roof has no counterpart in the frame
+    # the other way round (the frame shows the roof the source lacks: a nearer view, a face turning in):
+    # source-to-frame, as every preset pairs
+    rear_only = source[np.isclose(to_object_frame(source, BOX)[:, 0], -2.25)]
+    assert _decided(rear_only, np.vstack([frame, apply_motion(TRUE_MOTION, source, BOX.center)]),
+                    TRUE_MOTION) == "source"
+    # the same faces in both: source-to-frame
+    assert _decided(source, apply_motion(TRUE_MOTION, source, BOX.center), TRUE_MOTION) == "source"
+
+
+@pytest.mark.parametrize("start", [0.6, 0.9])
+def test_coverage_finds_the_receding_car_as_frame_to_source_does(start):
+    x0 = np.array([start, 0.0, 0.0, 0.0])
+    assert abs(_register("coverage", x0)[0] - TRUE_MOTION[0]) < 0.01
+
+
+def test_coverage_that_pairs_source_to_frame_is_the_source_pairing_bit_for_bit():
+    # a car whose frame shows what the source shows: every frame decided "source", the same boxes as "source"
+    # (a margin no share can exceed): its crop subsets are its own draws, the tracker's random stream is untouched
+    from tracker_synthetic import make_sequence, trajectory
+
+    from tracker import track
+
+    sequence = make_sequence(n_frames=12, seed=2)
+    settings = {"registration.coverage_margin": 2.0}
+    runs = [track(sequence, trajectory(12)[0], 0, 11, get_preset("full", **{"registration.pairing": p} | settings))
+            for p in ("source", "coverage")]
+    assert len(runs[0].estimates) == 12
+    for a, b in zip(*(r.estimates for r in runs), strict=True):
+        assert a.box == b.box
