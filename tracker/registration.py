@@ -131,7 +131,9 @@ class _FramePairing:
         reg = self.config.registration
         direction = reg.pairing
         if direction == "coverage":
-            direction = self.directions.setdefault(term, self._decide(tree, x, pivot, local[inside]))
+            if term not in self.directions:
+                self.directions[term] = self._decide(tree, x, pivot, local[inside])
+            direction = self.directions[term]
         if direction == "source":
             return assoc.pairs(x, source, pivot, nn, mask, crop, rng)
         back = frame_pairs(x, tree, pivot, local, inside, reg.pairing_max_distance)
