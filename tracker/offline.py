@@ -882,15 +882,16 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
 
         window = window_states(points, result, params.window_start, config)
         states, shape, points = _window_start(source, result, config, params, points, online, window, states, shape)
-        if params.window_keep and (_support(points, window, np.asarray(result.size))
-                                   > params.window_start_margin * _support(points, states, np.asarray(result.size))):
+        size = np.asarray(result.size)
+        if params.window_keep and (_support(points, window, size)
+                                   > params.window_start_margin * _support(points, states, size)):
             states = window.copy()
             states[:, 3] = wrap_angle(states[:, 3])
-            shape = _rebuild_shape(points, states, np.asarray(result.size), params.voxel)
+            shape = _rebuild_shape(points, states, size, params.voxel)
         if params.gauge_window > 0:
             gauged = _window_gauge(states, window, params.gauge_window, params.gauge_window_max)
             if gauged is not states:
-                states, shape = gauged, _rebuild_shape(points, gauged, np.asarray(result.size), params.voxel)
+                states, shape = gauged, _rebuild_shape(points, gauged, size, params.voxel)
     assert shape is not None   # with_shape=True
     estimates: list[FrameEstimate] = []
     for est, pts, s in zip(result.estimates, points, states, strict=True):
