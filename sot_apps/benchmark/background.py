@@ -5,7 +5,8 @@ Free ground (:class:`GroundMap`, world frame, square cells of ``cell`` metres) f
 frames, with the points inside any real annotated box (grown by 1.5 m at each end, 0.5 m at each side) left out (real objects are avoided
 per frame, box against box):
 
-- a cell's ground height is the lowest point in it;
+- a cell's ground height is the lowest point in it, or, where that is no road (no points, something standing,
+  off the terrain), the height of the nearest cell that is;
 - a cell is *blocked* when a point stands 0.3-3.5 m above its ground (walls, poles, trees, unannotated
   objects), or when its lowest point is more than 0.6 m off the terrain (the 20th percentile of the cell
   heights over 18 m: roofs, canopies, wall tops) or off an 8 % grade from the terrain under the ego;
@@ -32,7 +33,7 @@ from tracker import Box, invert_transform, points_in_box, transform_points
 from ..io.sequence import Sequence
 from .deps import Sensor, Trajectory
 
-__all__ = ["GroundMap", "build_ground_map", "fit_scan_start", "fitted_sensor", "sensor_path", "ego_from_sensor", "to_states",
+__all__ = ["GroundMap", "MAX_GRADE", "build_ground_map", "fit_scan_start", "fitted_sensor", "sensor_path", "ego_from_sensor", "to_states",
            "STANDING_MIN_M", "STANDING_MAX_M"]
 
 STANDING_MIN_M = 0.3
@@ -46,7 +47,7 @@ MAX_GRADE = 0.08
 class GroundMap:
     origin: np.ndarray        # (2,) world x, y of cell (0, 0)'s corner
     cell: float
-    height: np.ndarray        # (H, W) ground z (nan where unknown); filled from the nearest known cell
+    height: np.ndarray        # (H, W) ground z: a road cell's lowest point; every other cell's from the nearest road cell
     ground: np.ndarray        # (H, W) bool: free ground
     known: np.ndarray         # (H, W) bool: cells with points
     blocked: np.ndarray       # (H, W) bool: something stands there (grown by the margin)
@@ -118,7 +119,19 @@ def build_ground_map(seq: Sequence, frames: list[int], cell: float = 0.5, margin
     blocked = ndimage.binary_dilation(standing.reshape(shape) | off_terrain, iterations=max(1, int(round(margin / cell))))
     reach_cells = max(1, int(round(reach / cell)))
     near_known = ndimage.binary_dilation(known & ~blocked, iterations=reach_cells)
-    return GroundMap(lo, cell, height, near_known & ~blocked, known, blocked)
+    return GroundMap(lo, cell, _road_heights(low.reshape(shape), known & ~standing.reshape(shape) & ~off_terrain,
+                                             height), near_known & ~blocked, known, blocked)
+
+
+def _road_heights(low: np.ndarray, road: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """Every cell's ground height from its nearest *road* cell (known, nothing standing in it, on the terrain).
+
+    Filling a cell with no points from its nearest known cell of any kind gives it the height of a roof, a wall
+    top or a canopy when that is nearest (3-15 m up in a street): an inserted vehicle placed there floated."""
+    if not road.any():
+        return fallback
+    _, (ri, ci) = ndimage.distance_transform_edt(~road, return_indices=True)
+    return np.where(road, low, low[ri, ci])
 
 
 def fit_scan_start(seq: Sequence, frames: list[int], sensor: Sensor) -> float | None:

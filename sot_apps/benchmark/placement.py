@@ -25,7 +25,8 @@ a bounded number of times, then the caller moves on.
 
 An ``occluded`` tracklet gets a second, unlisted inserted vehicle (the occluder) that is on the line of
 sight from the sensor to the target at the middle frame (25-80 % of the way), crossing it along or across
-the road. Ground height: the median ground of the footprint at each frame (running median over 5 frames).
+the road. Ground height: the median ground of the footprint at each frame, smoothed (:func:`ground_profile`:
+a running median over 5 frames, then no step steeper than the road grade).
 """
 
 from __future__ import annotations
@@ -39,11 +40,11 @@ import numpy as np
 from tracker import iou_3d_batch
 
 from ..objects.motion_profiles import MotionPath, MotionSpec, integrate_motion, place_path, sample_motion
-from .background import GroundMap
+from .background import MAX_GRADE, GroundMap
 from .deps import Trajectory
 from .hard_profiles import extra_headings, geometry_ok
 
-__all__ = ["InsertedVehicle", "PlacementContext", "place_vehicle", "place_occluder", "swept_boxes", "EGO_SIZE",
+__all__ = ["InsertedVehicle", "ground_profile", "PlacementContext", "place_vehicle", "place_occluder", "swept_boxes", "EGO_SIZE",
            "STEP_S", "SPEED_SCALES"]
 
 # The ego is kept out by a square around the sensor, whatever its heading: which ego axis points forward is
@@ -370,6 +371,24 @@ def _path(ctx: PlacementContext, spec: MotionSpec) -> tuple[MotionPath, np.ndarr
     return path, times_ns
 
 
+def ground_profile(footprint_z: np.ndarray, step_m: np.ndarray, window: int = 5) -> np.ndarray:
+    """A vehicle's ground height per frame from its footprint's median ground height per frame.
+
+    A running median over ``window`` frames (centred: it narrows towards the ends, so a steady slope is kept and
+    an end frame gets no extra votes), then no step steeper than the road grade (MAX_GRADE of the ``step_m`` metres moved between
+    frames, plus 2 cm), walking out both ways from the frame whose height is the path's median."""
+    n = len(footprint_z)
+    half = np.minimum(np.minimum(np.arange(n), np.arange(n)[::-1]), window // 2)
+    z = np.array([np.median(footprint_z[k - h:k + h + 1]) for k, h in enumerate(half)])
+    bound = MAX_GRADE * np.asarray(step_m, dtype=np.float64) + 0.02
+    anchor = int(np.argmin(np.abs(z - np.median(z))))
+    for k in range(anchor + 1, n):
+        z[k] = np.clip(z[k], z[k - 1] - bound[k - 1], z[k - 1] + bound[k - 1])
+    for k in range(anchor - 1, -1, -1):
+        z[k] = np.clip(z[k], z[k + 1] - bound[k], z[k + 1] + bound[k])
+    return z
+
+
 def _finish(ctx: PlacementContext, vid: str, bank_id: str, label: str, size, spec: MotionSpec, world: np.ndarray,
             times_ns: np.ndarray, boxes: np.ndarray, listed: bool, occluder_of: str | None,
             span: tuple[int, int] | None = None) -> InsertedVehicle:
@@ -379,8 +398,7 @@ def _finish(ctx: PlacementContext, vid: str, bank_id: str, label: str, size, spe
     unit = _unit_grid(max(2, int(math.ceil(size[0] / SAMPLE_M)) + 1), max(2, int(math.ceil(size[1] / SAMPLE_M)) + 1))
     foot = _rigid(unit[None] * [size[0], size[1]], at_frames[:, 0:1], at_frames[:, 1:2], at_frames[:, 2:3])
     ground = np.median(ctx.ground.z(foot.reshape(-1, 2)).reshape(foot.shape[:2]), axis=1)
-    padded = np.pad(ground, 2, mode="edge")
-    ground = np.median(np.lib.stride_tricks.sliding_window_view(padded, 5), axis=1)
+    ground = ground_profile(ground, np.hypot(*np.diff(at_frames[:, :2], axis=0).T))
     z = np.interp(times_ns.astype(np.float64), t, ground) + size[2] / 2
     states = np.column_stack([world[:, 0], world[:, 1], z, world[:, 2]])
     ctx.add(boxes)

@@ -151,3 +151,41 @@ def test_occluder_falls_back_to_a_parked_car_on_the_line_of_sight(background, ba
     d = o[:2] - s
     along, across = float(np.dot(d, u)), float(abs(u[0] * d[1] - u[1] * d[0]))
     assert 0.2 * np.linalg.norm(p - s) < along < 0.85 * np.linalg.norm(p - s) and across < 1.0
+
+
+def test_ground_profile_keeps_a_real_slope_and_drops_what_no_road_does():
+    """A 5 % climb at 1 m per frame is kept exactly; a 1.3 m spike at the first frame and a 14.8 m one in the
+    middle (a roof's or a wall top's height under part of the footprint) leave at most a grade step's trace."""
+    step = np.full(39, 1.0)
+    slope = 0.05 * np.arange(40)
+    assert np.allclose(placement.ground_profile(slope, step), slope)
+    raw = slope.copy()
+    raw[0] += 1.3
+    raw[20:22] += 14.8
+    z = placement.ground_profile(raw, step)
+    assert np.abs(z - slope).max() <= 0.2 + 1e-9
+    assert np.abs(z - slope)[3:19].max() < 1e-9 and np.abs(z - slope)[24:].max() < 1e-9
+    assert np.all(np.abs(np.diff(z)) <= placement.MAX_GRADE * step + 0.02 + 1e-12)
+    standing = placement.ground_profile(np.array([0.4, -0.2, -0.2, -0.2]), np.zeros(3))  # parked: no step at all
+    assert np.allclose(standing, [-0.18, -0.2, -0.2, -0.2])
+
+
+def test_ground_where_no_point_fell_is_the_nearest_road_not_a_roof(tmp_path):
+    """A flat road at z = 0 with a hole (no points: an occluded patch) beside a canopy at 6 m: the hole's cells
+    nearest the canopy are road, 0 m up (they used to take the canopy's 6 m)."""
+    from sot_apps.benchmark.background import build_ground_map
+    from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
+
+    g = np.mgrid[-20:20:0.2, -20:20:0.2].reshape(2, -1).T
+    hole = (np.abs(g[:, 0] - 8.0) < 2.0) & (np.abs(g[:, 1]) < 2.0)
+    canopy = (g[:, 0] >= 10.0) & (g[:, 0] < 13.0) & (np.abs(g[:, 1]) < 2.0)
+    road = g[~hole & ~canopy]
+    xyz = np.vstack([np.column_stack([road, np.zeros(len(road))]),
+                     np.column_stack([g[canopy], np.full(canopy.sum(), 6.0)])]).astype(np.float32)
+    seq = Sequence(id="s", root=tmp_path, format="test", frames=[FrameInfo(0, 0, np.eye(4), None)],
+                   load_sweep=lambda k: Sweep(xyz))
+    ground = build_ground_map(seq, [0], stride=1)
+    assert ground.blocked_at(np.array([[11.5, 0.0]]))[0]  # the canopy is no ground
+    near_canopy = np.array([[9.8, 0.0], [9.8, 1.5], [9.8, -1.5], [8.0, 0.0], [6.2, 0.0]])
+    assert np.allclose(ground.z(near_canopy), 0.0)
+    assert np.allclose(ground.z(np.array([[11.5, 0.0]])), 0.0)
