@@ -189,3 +189,23 @@ def test_ground_where_no_point_fell_is_the_nearest_road_not_a_roof(tmp_path):
     near_canopy = np.array([[9.8, 0.0], [9.8, 1.5], [9.8, -1.5], [8.0, 0.0], [6.2, 0.0]])
     assert np.allclose(ground.z(near_canopy), 0.0)
     assert np.allclose(ground.z(np.array([[11.5, 0.0]])), 0.0)
+
+
+def test_far_sparse_road_takes_the_surface_not_one_low_cell(tmp_path):
+    """Far out the rings leave lone cells with points: a footprint there stands on the road surface around it (the
+    blocks' median), not on whichever lone cell is nearest; here the nearest is 0.45 m low (a stray return)."""
+    from sot_apps.benchmark.background import build_ground_map
+    from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
+
+    rng = np.random.default_rng(0)
+    near = np.mgrid[-10:10:0.2, -10:10:0.2].reshape(2, -1).T          # a dense road around the sensor
+    rings = np.column_stack([rng.uniform(30, 60, 300), rng.uniform(-15, 15, 300)])   # lone far returns
+    xy = np.vstack([near, rings])
+    z = np.zeros(len(xy))
+    xy = np.vstack([xy, [[45.3, 0.3]]])
+    z = np.r_[z, -0.45]
+    seq = Sequence(id="s", root=tmp_path, format="test", frames=[FrameInfo(0, 0, np.eye(4), None)],
+                   load_sweep=lambda k: Sweep(np.column_stack([xy, z]).astype(np.float32)))
+    ground = build_ground_map(seq, [0], stride=1)
+    around = np.array([[45.3 + dx, 0.3 + dy] for dx in (-1.0, -0.5, 0.5, 1.0) for dy in (-0.7, 0.0, 0.7)])
+    assert np.abs(ground.z(around)).max() < 0.1
