@@ -151,3 +151,29 @@ def test_realism_curve_and_plot(small_benchmark, tmp_path, capsys):
 
     image = cv2.imread(str(png))
     assert image is not None and image.shape[0] > 300 and image.shape[1] > 600
+
+
+def test_inserted_vehicles_stand_on_the_road(small_benchmark, background):
+    """Every inserted vehicle's box bottom sits on the background's ground under it (within 0.15 m of the lowest
+    real point around its centre, where the sweeps have one), and never climbs or drops between frames by more
+    than the road grade allows over the distance it moved."""
+    from sot_apps.benchmark.background import MAX_GRADE
+
+    real = open_sequence(background)   # the background's own sweeps: no inserted vehicle in them
+    ground = np.vstack([real.points_world(k) for k in range(len(real))])
+    checked = 0
+    for copy in _copies(small_benchmark):
+        seq = open_sequence(copy)
+        for vid, track in seq.tracks().items():
+            if not vid.startswith("ins_"):
+                continue
+            boxes = [track.box_at(k) for k in range(len(seq))]
+            z = np.array([b.z - b.height / 2 for b in boxes])
+            xy = np.array([[b.x, b.y] for b in boxes])
+            assert np.all(np.abs(np.diff(z)) <= MAX_GRADE * np.hypot(*np.diff(xy, axis=0).T) + 0.02 + 1e-6), vid
+            for b, bottom in zip(boxes, z, strict=True):
+                near = ground[np.hypot(ground[:, 0] - b.x, ground[:, 1] - b.y) < 0.5 * b.width]
+                if len(near) >= 5:
+                    assert abs(bottom - near[:, 2].min()) < 0.15, f"{copy.name} {vid}: {bottom:.2f} vs {near[:, 2].min():.2f}"
+                    checked += 1
+    assert checked > 10
