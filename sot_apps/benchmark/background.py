@@ -149,17 +149,12 @@ def _road_surface(low: np.ndarray, road: np.ndarray, cell: float) -> np.ndarray:
     ids, heights = ids[order], heights[order]
     first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     counts = np.diff(np.r_[first, len(ids)])
+    enough = counts >= ROAD_BLOCK_MIN_CELLS
+    use = enough if enough.any() else np.ones_like(enough)   # no block with enough road: each block's own median
     median = np.full(shape[0] * shape[1], np.nan)
-    median[ids[first]] = 0.5 * (heights[first + (counts - 1) // 2] + heights[first + counts // 2])
-    median[ids[first][counts < ROAD_BLOCK_MIN_CELLS]] = np.nan
+    median[ids[first][use]] = 0.5 * (heights[first + (counts - 1) // 2] + heights[first + counts // 2])[use]
     median = median.reshape(shape)
-    have = np.isfinite(median)
-    if not have.any():   # no block with enough road: every block's own median, however few
-        median = np.full(shape[0] * shape[1], np.nan)
-        median[ids[first]] = 0.5 * (heights[first + (counts - 1) // 2] + heights[first + counts // 2])
-        median = median.reshape(shape)
-        have = np.isfinite(median)
-    _, (bi, bj) = ndimage.distance_transform_edt(~have, return_indices=True)
+    _, (bi, bj) = ndimage.distance_transform_edt(~np.isfinite(median), return_indices=True)
     median = median[bi, bj]
     r = (np.arange(low.shape[0]) + 0.5) / block - 0.5
     c = (np.arange(low.shape[1]) + 0.5) / block - 0.5

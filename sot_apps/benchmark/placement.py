@@ -375,8 +375,9 @@ def ground_profile(footprint_z: np.ndarray, step_m: np.ndarray, window: int = 5)
     """A vehicle's ground height per frame from its footprint's median ground height per frame.
 
     A running median over ``window`` frames (centred: it narrows towards the ends, so a steady slope is kept and
-    an end frame gets no extra votes), then no step steeper than the road grade (MAX_GRADE of the ``step_m`` metres moved between
-    frames, plus 2 cm), walking out both ways from the frame whose height is the path's median."""
+    an end frame gets no extra votes), then no step steeper than the road grade (MAX_GRADE of the ``step_m``
+    metres moved between frames, plus 2 cm), walking out both ways from the frame whose height is the path's
+    median (a loop over frames, not points)."""
     n = len(footprint_z)
     half = np.minimum(np.minimum(np.arange(n), np.arange(n)[::-1]), window // 2)
     z = np.array([np.median(footprint_z[k - h:k + h + 1]) for k, h in enumerate(half)])
