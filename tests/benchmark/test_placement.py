@@ -170,21 +170,27 @@ def test_ground_profile_keeps_a_real_slope_and_drops_what_no_road_does():
     assert np.allclose(standing, [-0.18, -0.2, -0.2, -0.2])
 
 
-def test_ground_where_no_point_fell_is_the_nearest_road_not_a_roof(tmp_path):
-    """A flat road at z = 0 with a hole (no points: an occluded patch) beside a canopy at 6 m: the hole's cells
-    nearest the canopy are road, 0 m up (they used to take the canopy's 6 m)."""
+def _ground_map_of(xyz: np.ndarray, root):
+    """The ground map of one sweep (ego frame = world frame)."""
     from sot_apps.benchmark.background import build_ground_map
     from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
 
+    sweep = Sweep(np.asarray(xyz, dtype=np.float32))
+    seq = Sequence(id="s", root=root, format="test", frames=[FrameInfo(0, 0, np.eye(4), None)],
+                   load_sweep=lambda k: sweep)
+    return build_ground_map(seq, [0], stride=1)
+
+
+def test_ground_where_no_point_fell_is_the_road_not_a_roof(tmp_path):
+    """A flat road at z = 0 with a hole (no points: an occluded patch) beside a canopy at 6 m: the hole's cells
+    nearest the canopy are road, 0 m up (they used to take the canopy's 6 m)."""
     g = np.mgrid[-20:20:0.2, -20:20:0.2].reshape(2, -1).T
     hole = (np.abs(g[:, 0] - 8.0) < 2.0) & (np.abs(g[:, 1]) < 2.0)
     canopy = (g[:, 0] >= 10.0) & (g[:, 0] < 13.0) & (np.abs(g[:, 1]) < 2.0)
     road = g[~hole & ~canopy]
     xyz = np.vstack([np.column_stack([road, np.zeros(len(road))]),
-                     np.column_stack([g[canopy], np.full(canopy.sum(), 6.0)])]).astype(np.float32)
-    seq = Sequence(id="s", root=tmp_path, format="test", frames=[FrameInfo(0, 0, np.eye(4), None)],
-                   load_sweep=lambda k: Sweep(xyz))
-    ground = build_ground_map(seq, [0], stride=1)
+                     np.column_stack([g[canopy], np.full(canopy.sum(), 6.0)])])
+    ground = _ground_map_of(xyz, tmp_path)
     assert ground.blocked_at(np.array([[11.5, 0.0]]))[0]  # the canopy is no ground
     near_canopy = np.array([[9.8, 0.0], [9.8, 1.5], [9.8, -1.5], [8.0, 0.0], [6.2, 0.0]])
     assert np.allclose(ground.z(near_canopy), 0.0)
@@ -194,9 +200,6 @@ def test_ground_where_no_point_fell_is_the_nearest_road_not_a_roof(tmp_path):
 def test_far_sparse_road_takes_the_surface_not_one_low_cell(tmp_path):
     """Far out the rings leave lone cells with points: a footprint there stands on the road surface around it (the
     blocks' median), not on whichever lone cell is nearest; here the nearest is 0.45 m low (a stray return)."""
-    from sot_apps.benchmark.background import build_ground_map
-    from sot_apps.io.sequence import FrameInfo, Sequence, Sweep
-
     rng = np.random.default_rng(0)
     near = np.mgrid[-10:10:0.2, -10:10:0.2].reshape(2, -1).T          # a dense road around the sensor
     rings = np.column_stack([rng.uniform(30, 60, 300), rng.uniform(-15, 15, 300)])   # lone far returns
@@ -204,8 +207,6 @@ def test_far_sparse_road_takes_the_surface_not_one_low_cell(tmp_path):
     z = np.zeros(len(xy))
     xy = np.vstack([xy, [[45.3, 0.3]]])
     z = np.r_[z, -0.45]
-    seq = Sequence(id="s", root=tmp_path, format="test", frames=[FrameInfo(0, 0, np.eye(4), None)],
-                   load_sweep=lambda k: Sweep(np.column_stack([xy, z]).astype(np.float32)))
-    ground = build_ground_map(seq, [0], stride=1)
+    ground = _ground_map_of(np.column_stack([xy, z]), tmp_path)
     around = np.array([[45.3 + dx, 0.3 + dy] for dx in (-1.0, -0.5, 0.5, 1.0) for dy in (-0.7, 0.0, 0.7)])
     assert np.abs(ground.z(around)).max() < 0.1
