@@ -242,6 +242,8 @@ class MotionConfig:
     travel_frames: int = 5               # the direction of travel over this many frames
     travel_max_turn: float = 0.1         # rad: the term fades out as the window's half-chords turn by up to this
     travel_points: int = 100             # the weight x travel_points / (travel_points + object points)
+    travel_scatter: float = 0.0          # > 0 (rad): the weight x s^2 / (s^2 + sigma^2), sigma the chord direction's
+                                         # standard error from the centres' scatter across the window's line (0: off)
     ctrv: CTRVConfig = field(default_factory=CTRVConfig)
 
     def __post_init__(self) -> None:
@@ -256,6 +258,8 @@ class MotionConfig:
             raise ValueError(f"motion.trend_points: must be >= 0, got {self.trend_points}")
         if self.ramp_frames != 0 and self.ramp_frames < 3:
             raise ValueError(f"motion.ramp_frames: must be 0 (off) or >= 3, got {self.ramp_frames}")
+        if self.travel_scatter < 0:
+            raise ValueError(f"motion.travel_scatter: must be >= 0 (0: off), got {self.travel_scatter}")
 
 
 @dataclass(frozen=True)

@@ -308,6 +308,32 @@ def test_the_travel_target_in_a_steady_turn_is_the_heading_at_the_next_frame():
     assert 0.0 < weight < 5.0                                # faded (the window turns) but not off
 
 
+def test_the_travel_weight_falls_with_the_centres_scatter_across_the_path():
+    """Centres 0.8 m apart per frame along +x: on the line the scatter factor is 1 (the same weight as without
+    it); alternating 0.3 m to either side, the chord direction's standard error is sqrt(2) x the RMS of the
+    distances to the line fitted over time (n - 2 degrees of freedom) over the chord's length, and the weight falls by s^2 / (s^2 + sigma^2)."""
+    from tracker.config import MotionConfig
+    from tracker.strategies.travel import TravelHeading
+
+    def weight(across: np.ndarray, scatter: float) -> float:
+        term = TravelHeading(MotionConfig(travel_weight=5.0, travel_scatter=scatter, travel_max_turn=10.0))
+        for k, y in enumerate(across):
+            term.record(Box(0.8 * k, float(y), 0.0, 0.0, *BOX_SIZE), 0.1 * k)
+        return term.target(0.0, 0)[1]
+
+    straight = np.zeros(6)
+    zigzag = 0.3 * np.array([1, -1, 1, -1, 1, -1], dtype=float)
+    assert weight(straight, 0.03) == pytest.approx(weight(straight, 0.0))
+    t = np.arange(6) - 2.5
+    slope = (t @ zigzag) / (t @ t)
+    residual = (zigzag - zigzag.mean() - slope * t) * 0.8 / np.hypot(0.8, slope)   # across the fitted line
+    sigma = np.sqrt(2.0) * np.sqrt(residual @ residual / 4) / np.hypot(4.0, zigzag[-1] - zigzag[0])
+    assert sigma > np.deg2rad(5.0)                                      # a sparse car's jumpy centres
+    expected = 0.03**2 / (0.03**2 + sigma**2)
+    assert weight(zigzag, 0.03) / weight(zigzag, 0.0) == pytest.approx(expected, rel=1e-9)
+    assert expected < 0.1
+
+
 def test_a_cluster_that_reaches_the_regions_side_is_cut():
     """Two car-sized blocks of points: one inside the searched region, one straddling its front side (the region
     holds only its rear 1.5 m). Both are candidates; only the second is ``cut``: its extent (1.5 m, not 4.5 m) and

@@ -11,7 +11,11 @@ rate, which a rotating box feeds, would feed the rotation back); the term still 
 within the window. Its
 weight is ``travel_weight`` x a speed factor (0 below ``travel_min_speed``, rising to 1 at twice that speed) x a
 sparseness factor ``travel_points`` / (``travel_points`` + the previous frame's object points): few points (a far
-or partial view) pin the heading weakly. In
+or partial view) pin the heading weakly; and, with ``travel_scatter`` = s > 0, a scatter factor s^2 / (s^2 +
+sigma^2), sigma the chord direction's standard error: the centres' scatter across the straight line fitted to them
+over time (the residuals' RMS with n - 2 degrees of freedom), times sqrt(2) over the chord's length. A sparse car's
+centres that jump a few decimetres across its path give a direction a few degrees off, which the term would
+otherwise hold the heading to. In
 the solve it is a quadratic term on the heading (tracker/terms.py ``travel_heading_block``) beside the data terms:
 where the points pin the heading (a curved loss in dtheta) they decide, where they pin it weakly (a partial view)
 the travel does. A direction more than ``_MAX_OFFSET`` from the previous heading (a reversal, a re-lock) is not
@@ -50,6 +54,7 @@ class TravelHeading(NoTravel):
         self.min_speed = config.travel_min_speed
         self.points = config.travel_points
         self.max_turn = config.travel_max_turn
+        self.scatter = config.travel_scatter
         self._track: deque[tuple[float, float, float]] = deque(maxlen=max(config.travel_frames, 2) + 1)
 
     def reset(self) -> None:
@@ -85,7 +90,22 @@ class TravelHeading(NoTravel):
             offset = float(wrap_angle(offset + np.pi))
         if abs(offset) > _MAX_OFFSET:
             return None
+        if self.scatter > 0:
+            sigma = _chord_direction_sigma(track)
+            factor *= self.scatter**2 / (self.scatter**2 + sigma**2)
         return heading + offset, self.weight * factor * self.points / (self.points + points)
+
+
+def _chord_direction_sigma(track: np.ndarray) -> float:
+    """The standard error (rad) of the direction of the chord through rows (time, x, y) of ``track`` (>= 3 rows,
+    a positive chord): the rows' scatter across the straight line fitted to x(t), y(t) by least squares."""
+    t = track[:, 0] - track[:, 0].mean()
+    xy = track[:, 1:] - track[:, 1:].mean(axis=0)
+    velocity = t @ xy / (t @ t)
+    across = np.array([-velocity[1], velocity[0]]) / np.linalg.norm(velocity)
+    residual = (xy - np.outer(t, velocity)) @ across
+    rms = float(np.sqrt(residual @ residual / (len(track) - 2)))
+    return float(np.sqrt(2.0) * rms / np.linalg.norm(track[-1, 1:] - track[0, 1:]))
 
 
 def choose_travel(config: MotionConfig) -> NoTravel:
