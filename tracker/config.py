@@ -336,6 +336,10 @@ class ReacquireConfig:
     hold_share: float = 0.9              # ... held: this share of the candidate's points in the box x crop_scale
     supported_holds_ties: bool = False   # a box with support stays against a candidate holding as many points
     start_points: int = 3                # a start box with fewer points is a lost start
+    start_fill_frames: int = 0           # > 0: a lost start whose held box holds >= start_points non-ground points on
+                                         # this many frames in a row starts there (slid along its heading by at most
+                                         # half its length to hold the most): a slow or stopping vehicle gives no
+                                         # moving candidate (0: off)
     reach: float = 1.0                   # m: the lost track's region around the prediction at loss (each side)
     growth: float = 4.0                  # m/s: ... grows by this per second since the support was lost
     lateral_growth: float = 1.5          # m/s: a lost track's candidate is at most reach + this x lost time across
@@ -388,6 +392,8 @@ class ReacquireConfig:
                              f"{self.drift_gate}")
         if self.relock_points < 0:
             raise ValueError(f"reacquire.relock_points must be >= 0, got {self.relock_points}")
+        if self.start_fill_frames < 0:
+            raise ValueError(f"reacquire.start_fill_frames must be >= 0 (0: off), got {self.start_fill_frames}")
         if not 0.0 <= self.static_share <= 1.0 or self.static_radius <= 0:
             raise ValueError(f"reacquire.static_share must be in [0, 1] and reacquire.static_radius > 0, got "
                              f"{self.static_share}, {self.static_radius}")

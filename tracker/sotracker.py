@@ -375,6 +375,8 @@ class Tracker:
         r = c.reacquire
         if r.static_share > 0 and start is None and s.reacquire.earlier is None:   # the sweep where the track became lost
             s.reacquire.earlier = _earlier_sweep(frame, self.box, c, s, self._previous_pose)
+        if start is not None and s.reacquire.start_filled(int(points_in_box(points, start, 1.0).sum())):
+            return self._start_in_place(frame, points, sensor, t0)
         candidates = cluster_candidates(points, self.box, sensor, r.grid(start is not None), r.cluster_points,
                                         r.size_margin, time_s, centred=start is None, hold_scale=c.search.crop_scale,
                                         region=region if r.whole_candidates or r.drift_gate else None,
@@ -392,6 +394,19 @@ class Tracker:
             return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
                            time_ms=(time.perf_counter() - t0) * 1e3)
         return self._relock(frame, relock, start is None, t0)
+
+    def _start_in_place(self, frame: LidarFrame, points: np.ndarray, sensor: np.ndarray, t0: float) -> FrameEstimate:
+        """A lost start whose held box holds its object's points again (``reacquire.start_fill_frames``): the track
+        starts at this frame from the held box slid along its heading (by at most half its length) to where it
+        holds the most of ``points`` (the search region's non-ground points), at rest. Flag ``reacquired``."""
+        held, half = self.box, 0.5 * self.box.length
+        shift = start_shift(points, held, half, half, self.config.reacquire.start_points, sensor) or 0.0
+        moved = box_moved(held, np.array([shift * np.cos(held.heading), shift * np.sin(held.heading), 0.0, 0.0]))
+        first_box, previous = self.first_box, self._previous_pose
+        estimate = self.start(frame, moved, previous, np.zeros(4))
+        self.first_box, self._lost_start = first_box, False
+        return replace(estimate, flags=tuple(f for f in estimate.flags if f != "init") + ("reacquired",),
+                       time_ms=(time.perf_counter() - t0) * 1e3)
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
         """Restart the track at a confirmed candidate, its velocity seeding the motion model; with

@@ -245,6 +245,28 @@ def test_a_far_sparse_start_that_approaches_is_found_before_it_is_within_30_m():
     assert np.allclose(on.estimates[1].box.center, boxes[0].center)     # held while nothing is found
 
 
+@pytest.mark.parametrize("fill_frames", [0, 3])
+def test_a_slow_car_that_shows_itself_in_its_held_start_box_is_started_there(fill_frames):
+    """A car crawling at 1 m/s (below ``reacquire.min_speed``: no candidate of a lost start moves fast enough) shows
+    no points for its first 6 frames, then all of them: its start box, held, holds them from frame 6 on. With
+    ``reacquire.start_fill_frames`` = 3 the track starts there on the third such frame (frame 8), slid to where the
+    box holds the most points (within 0.3 m of the car, which has moved 0.8 m), and follows it; without, the box
+    stays at the start."""
+    boxes = _straight(24, (14.0, 4.0), 0.0, 0.1)
+    seq = _scene(boxes, 0, hidden=range(0, 6))
+    result = _track(seq, **REACQUIRE, **{"reacquire.start_fill_frames": fill_frames})
+    centres = np.array([e.box.center[:2] for e in result.estimates])
+    truth = np.array([b.center[:2] for b in boxes])
+    if fill_frames == 0:
+        assert np.allclose(centres, truth[0])                          # never moves
+        return
+    started = [k for k, e in enumerate(result.estimates) if "reacquired" in e.flags]
+    assert started == [8]
+    assert np.allclose(centres[:8], truth[0])                           # held until then
+    assert np.linalg.norm(centres[8] - truth[8]) < 0.3
+    assert np.linalg.norm(centres[8:] - truth[8:], axis=1).max() < 0.3   # followed from there
+
+
 def test_reacquire_is_deterministic_per_seed():
     boxes = _straight(24, (10.0, 4.0), 0.0, 1.0, side_shift=(10, 3.0, 1))
     seq = _scene(boxes, 0, hidden=range(8, 14))

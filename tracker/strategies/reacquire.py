@@ -18,7 +18,9 @@ from one frame to the next: the object re-appeared where the motion model put th
 it (a partial view's centred candidate may be more than ``hold_distance`` off, and a single frame pair's velocity
 of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
-the time since the start ahead and a third of that behind. The track re-locks (restarts at the candidate, flag
+the time since the start ahead and a third of that behind. With ``start_fill_frames`` > 0 a lost start whose held box
+itself holds ``start_points`` non-ground points on that many frames in a row starts there (the vehicle is where the
+start box said and now shows enough points; a slow or stopping one never gives a candidate moving at ``min_speed``). The track re-locks (restarts at the candidate, flag
 ``reacquired``) only on a candidate matched to
 one of the previous frame's candidates in position, size and motion (with ``relock_points`` > 0, off in full, each
 of the two holding at least that many points where the candidate would move a lost track, i.e. is not within
@@ -73,6 +75,11 @@ class Reacquire:
         """Whether a start box holding ``points`` object points is a lost start."""
         return False
 
+    def start_filled(self, points: int) -> bool:
+        """Whether a lost start's held box, holding ``points`` non-ground points this frame, has held enough on
+        enough frames in a row to start there (``start_fill_frames``)."""
+        return False
+
     def holds(self, points: int, coasted: bool, time_s: float, centre: np.ndarray) -> bool:
         """Whether the frame's support holds the track (``coasted``: the frame continued on the prior; ``centre``:
         the frame's box centre, xy)."""
@@ -110,9 +117,14 @@ class ClusterReacquire(Reacquire):
         self._supported = 0
         self._previous: list[Candidate] = []
         self._held: list[list[Candidate]] = []      # per frame in a row: the candidates the supported box held
+        self._filled = 0                             # a lost start: frames in a row its held box held start_points
 
     def lost_start(self, points: int) -> bool:
         return points < self.c.start_points
+
+    def start_filled(self, points: int) -> bool:
+        self._filled = self._filled + 1 if points >= self.c.start_points else 0
+        return 0 < self.c.start_fill_frames <= self._filled
 
     def holds(self, points: int, coasted: bool, time_s: float, centre: np.ndarray) -> bool:
         supported = points >= self.c.min_points and not coasted
