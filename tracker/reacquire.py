@@ -19,7 +19,8 @@ import numpy as np
 from .geometry import Box, points_in_box
 from .shape import to_object_frame
 
-__all__ = ["Candidate", "EarlierSweep", "box_holds_against", "cluster_candidates", "search_region", "start_shift"]
+__all__ = ["Candidate", "EarlierSweep", "box_holds_against", "cluster_candidates", "filled_start", "search_region",
+           "start_shift"]
 
 
 class EarlierSweep:
@@ -62,6 +63,15 @@ def start_shift(local: np.ndarray, box: Box, ahead: float, behind: float, min_po
     best = shifts[counts == counts.max()]
     sensor_u = float(np.dot(sensor[:2] - box.center[:2], [np.cos(box.heading), np.sin(box.heading)]))
     return float(best.min() if sensor_u > best.mean() else best.max())  # the visible face meets the points
+
+
+def filled_start(points: np.ndarray, box: Box, min_points: int, sensor: np.ndarray) -> np.ndarray:
+    """Where a held start ``box`` that holds its object's points again starts (``reacquire.start_fill_frames``): its
+    centre (xy, world) slid along its heading, by at most half its length, to where it holds the most of ``points``
+    (world; at least ``min_points``; in place if nowhere); ``sensor``: the sensor's world position."""
+    half = 0.5 * box.length
+    shift = start_shift(points, box, half, half, min_points, sensor) or 0.0
+    return box.center[:2] + shift * np.array([np.cos(box.heading), np.sin(box.heading)])
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .local_region import LocalCrop, local_region, road_within
 from .motion_limits import limit_motion
-from .reacquire import EarlierSweep, box_holds_against, cluster_candidates, search_region, start_shift
+from .reacquire import EarlierSweep, box_holds_against, cluster_candidates, filled_start, search_region, start_shift
 from .registration import box_moved
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
 from .strategies.choose import Strategies, choose_strategies
@@ -303,7 +303,7 @@ class Tracker:
         box = box_moved(self.box, x)
         inside = local[points_in_box(local, box, 1.0)]   # the points the quality and (crop 1.0) the shape take
         obj = to_object_frame(inside, box)
-        quality = self._quality_of(obj)
+        quality = _quality(*self._explained_of(obj))
         keyframe = c.shape.aggregate and self.steps % c.shape.keyframe_interval == 0
         shared = (inside, obj) if c.shape.crop_scale == 1.0 else None
         obj_world = self._finish_frame(frame, box, local, keyframe, shared)
@@ -376,7 +376,8 @@ class Tracker:
         if r.static_share > 0 and start is None and s.reacquire.earlier is None:   # the sweep where the track became lost
             s.reacquire.earlier = _earlier_sweep(frame, self.box, c, s, self._previous_pose)
         if start is not None and s.reacquire.start_filled(int(points_in_box(points, start, 1.0).sum())):
-            return self._start_in_place(frame, points, sensor, t0)
+            filled = Relock(filled_start(points, start, r.start_points, sensor), np.zeros(2))   # starts at rest
+            return self._relock(frame, filled, False, t0)
         candidates = cluster_candidates(points, self.box, sensor, r.grid(start is not None), r.cluster_points,
                                         r.size_margin, time_s, centred=start is None, hold_scale=c.search.crop_scale,
                                         region=region if r.whole_candidates or r.drift_gate else None,
@@ -394,19 +395,6 @@ class Tracker:
             return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
                            time_ms=(time.perf_counter() - t0) * 1e3)
         return self._relock(frame, relock, start is None, t0)
-
-    def _start_in_place(self, frame: LidarFrame, points: np.ndarray, sensor: np.ndarray, t0: float) -> FrameEstimate:
-        """A lost start whose held box holds its object's points again (``reacquire.start_fill_frames``): the track
-        starts at this frame from the held box slid along its heading (by at most half its length) to where it
-        holds the most of ``points`` (the search region's non-ground points), at rest. Flag ``reacquired``."""
-        held, half = self.box, 0.5 * self.box.length
-        shift = start_shift(points, held, half, half, self.config.reacquire.start_points, sensor) or 0.0
-        moved = box_moved(held, np.array([shift * np.cos(held.heading), shift * np.sin(held.heading), 0.0, 0.0]))
-        first_box, previous = self.first_box, self._previous_pose
-        estimate = self.start(frame, moved, previous, np.zeros(4))
-        self.first_box, self._lost_start = first_box, False
-        return replace(estimate, flags=tuple(f for f in estimate.flags if f != "init") + ("reacquired",),
-                       time_ms=(time.perf_counter() - t0) * 1e3)
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
         """Restart the track at a confirmed candidate, its velocity seeding the motion model; with
@@ -459,11 +447,10 @@ class Tracker:
         dist, _ = self._shape_nn.query(obj)
         return float((dist <= 0.2).mean()), len(obj)
 
-    def _quality_of(self, obj: np.ndarray) -> float:
-        """Share of the frame's object points ``obj`` (object frame: those in the box) within 0.2 m of the shape,
-        damped when sparse."""
-        explained, count = self._explained_of(obj)
-        return float(np.clip(explained * min(1.0, count / 20.0), 0.0, 1.0))
+
+def _quality(explained: float, count: int) -> float:
+    """A frame's quality: the share of its ``count`` object points within 0.2 m of the shape, damped when sparse."""
+    return float(np.clip(explained * min(1.0, count / 20.0), 0.0, 1.0))
 
 
 def _non_ground_points_in(frame: LidarFrame, region: Box, config: TrackerConfig, strategies: Strategies,
