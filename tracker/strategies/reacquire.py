@@ -18,10 +18,10 @@ from one frame to the next: the object re-appeared where the motion model put th
 it (a partial view's centred candidate may be more than ``hold_distance`` off, and a single frame pair's velocity
 of it is not reliable). A start box with fewer than
 ``start_points`` points is a lost start: its box is held and the region runs along its heading, ``max_speed`` x
-the time since the start ahead and a third of that behind. With ``start_fill_frames`` > 0 a lost start whose held box
-itself holds ``start_points`` non-ground points on that many frames in a row starts there (the vehicle is where the
-start box said and now shows enough points; a slow or stopping one never gives a candidate moving at ``min_speed``). The track re-locks (restarts at the candidate, flag
-``reacquired``) only on a candidate matched to
+the time since the start ahead and a third of that behind. With ``start_fill_frames`` > 0 a lost start whose held
+box itself holds ``start_points`` non-ground points on that many frames in a row starts there (the vehicle is where
+the start box said and now shows enough points; a slow or stopping one never gives a candidate moving at
+``min_speed``). The track re-locks (restarts at the candidate, flag ``reacquired``) only on a candidate matched to
 one of the previous frame's candidates in position, size and motion (with ``relock_points`` > 0, off in full, each
 of the two holding at least that many points where the candidate would move a lost track, i.e. is not within
 ``hold_distance`` of its box: a 1-2-point blob's frame pair reads metres per second of noise; a lost start's

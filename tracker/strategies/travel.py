@@ -102,7 +102,10 @@ def _chord_direction_sigma(track: np.ndarray) -> float:
     t = track[:, 0] - track[:, 0].mean()
     xy = track[:, 1:] - track[:, 1:].mean(axis=0)
     velocity = t @ xy / (t @ t)
-    across = np.array([-velocity[1], velocity[0]]) / np.linalg.norm(velocity)
+    speed = float(np.linalg.norm(velocity))
+    if speed == 0.0:                       # out and back: no direction
+        return float("inf")
+    across = np.array([-velocity[1], velocity[0]]) / speed
     residual = (xy - np.outer(t, velocity)) @ across
     rms = float(np.sqrt(residual @ residual / (len(track) - 2)))
     return float(np.sqrt(2.0) * rms / np.linalg.norm(track[-1, 1:] - track[0, 1:]))
