@@ -375,7 +375,8 @@ class Tracker:
         r = c.reacquire
         if r.static_share > 0 and start is None and s.reacquire.earlier is None:   # the sweep where the track became lost
             s.reacquire.earlier = _earlier_sweep(frame, self.box, c, s, self._previous_pose)
-        if start is not None and s.reacquire.start_filled(int(points_in_box(points, start, 1.0).sum())):
+        if start is not None and r.start_fill_frames > 0 and s.reacquire.start_filled(
+                int(points_in_box(points, start, 1.0).sum())):
             filled = Relock(filled_start(points, start, r.start_points, sensor), np.zeros(2))   # starts at rest
             return self._relock(frame, filled, False, t0)
         candidates = cluster_candidates(points, self.box, sensor, r.grid(start is not None), r.cluster_points,
