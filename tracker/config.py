@@ -506,13 +506,14 @@ LAG_PARAMS = OfflineParams(outer_iterations=1, gn_iterations=2, voxel=0.1, shape
                            max_points=150, trial_pairs="fixed")
 # the whole-sequence solve: a frame 0 with fewer than 30 points in the start box turns the trajectory by only that
 # share of its heading mismatch at the regauge (none without points). Measured with 3 seeds on the choosing sets
-# (docs/tracker.md, "Refinement"): far_approach 81.7 -> 93.4 and 70.9 -> 84.1 Acc, the rest within the seed spread.
-# Heading from travel (travel_sigma_heading 0.05 rad): the solve kept a slow heading drift of the online track where
-# the points pin the heading weakly (its smoothness penalises curvature, not a steady drift); measured with 3 seeds on
-# the choosing sets (docs/tracker.md, "Refinement"): PandaSet-street oblique 81.0 -> 89.9, open-road s2 far approach
-# 84.1 -> 96.7, no group lower beyond the seed spread; but on synthetic world 1 its medium group lost 0.35-0.42 Acc
-# in every seed (63.5 +- 0.2 against 63.9 +- 0.2; easy +1.0), so by the rule for changing full it is off (0) until a
-# variant passes the worlds too. The window keeps its own (off).
+# (docs/tracker-decisions.md, "A sparse frame 0's heading in the regauge"): far_approach 81.7 -> 93.4 and 70.9 -> 84.1
+# Acc, the rest within the seed spread.
+# Heading from travel (travel_sigma_heading 0.05 rad): the solve kept a slow heading drift of the online track where the
+# points pin the heading weakly (its smoothness penalises curvature, not a steady drift); measured with 3 seeds on the
+# choosing sets (docs/tracker-decisions.md, "Heading from travel in the offline solve"): PandaSet-street oblique 81.0 ->
+# 89.9, open-road s2 far approach 84.1 -> 96.7, no group lower beyond the seed spread; but on synthetic world 1 its
+# medium group lost 0.35-0.42 Acc in every seed (63.5 +- 0.2 against 63.9 +- 0.2; easy +1.0), so by the rule for
+# changing full it is off (0) until a variant passes the worlds too. The window keeps its own (off).
 OFFLINE_PARAMS = OfflineParams(gauge_heading_points=30)
 
 

@@ -130,7 +130,7 @@ def test_height_filter_follows_the_road_and_ignores_a_drifting_fit():
 
 def test_height_filter_offset_from_the_fit_absorbs_a_slowly_growing_road_bias():
     """A far road seen with a bias that grows 10 cm over 30 frames (a car driving away from 47 to 64 m on the
-    PandaSet street, docs/tracker.md) and an unbiased registration z (5 cm noise, seeded): with the offset
+    PandaSet street, docs/tracker-decisions.md) and an unbiased registration z (5 cm noise, seeded): with the offset
     learned from the estimate (gain 0.05) the box follows the road's bias up; learned from the registration (gain
     0.2) it stays."""
     rng = np.random.default_rng(0)
@@ -159,7 +159,8 @@ def test_first_frame_hypotheses_span_the_heading_and_score_the_points():
 
 @pytest.mark.parametrize("scene", [0, 1, 2, 3])
 def test_straight_drive_seen_only_from_behind_keeps_its_heading_within_2_degrees(scene):
-    """The issue's bound, on 4 scenes. Measured on 12 such scenes x 3 seeds (docs/tracker.md, "A rear view"):
+    """The issue's bound, on 4 scenes. Measured on 12 such scenes x 3 seeds (`sot-apps bench rear-view`;
+    docs/tracker.md, "First motion along the heading"):
     `full` stays within 1.80 degrees (mean 0.30) since frame 1's motion seeds the prior only along the start
     heading; before that 12 of the 36 runs went above 2 degrees (at most 2.58), the box sliding
     sideways along the face, and this test, on one scene, had passed by luck."""
@@ -185,7 +186,7 @@ def test_a_gap_of_four_frames_is_predicted_with_the_elapsed_time(scene):
     along = offset @ [np.cos(heading), np.sin(heading)]
     # the distance travelled over the gap (measured on 12 scenes x 3 seeds: |along| <= 0.04 m, in all <= 0.13 m;
     # before frame 1's motion seeded the prior along the heading, the box slid sideways along the face, up to
-    # 0.41 m in all: docs/tracker.md "A rear view")
+    # 0.41 m in all; `sot-apps bench rear-view`, docs/tracker.md "First motion along the heading")
     assert abs(along) < 0.1, offset
     assert np.hypot(*offset) < 0.3, offset
 
