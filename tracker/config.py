@@ -448,6 +448,12 @@ class OfflineParams:
     shape_voxel: str = "centres"        # a fold shape's point per voxel: "centres" the voxel's centre; "means" its
                                         # points' mean (no pull of the frames onto the grid's half-voxel layers)
     shape_points_per_frame: int = 0     # > 0: each frame adds at most this many points (an even subsample) to a shape
+    dense_voxel: float = 0.0            # > 0: a solve whose frames hold a median of >= dense_points object points (in
+                                        # the online boxes) builds its fold shapes on this grid, from at most
+                                        # dense_shape_points points per frame (a dense car's frames are pulled onto the
+                                        # coarse grid's voxel centres, centimetres off; a sparse one's shape needs it)
+    dense_points: int = 1000
+    dense_shape_points: int = 500
     min_shape_points: int = 10
     shape_frames: int = 0               # > 0: a frame's fold shape only from the frames of its block of this many
                                         # frames and the two next to it (views of the same aspect; a too small one:
@@ -488,6 +494,8 @@ class OfflineParams:
         _choice("refinement.*.trial_pairs", self.trial_pairs, ("rematch", "fixed"))
         _choice("refinement.*.gauge", self.gauge, ("regauge", "fix_first"))
         _choice("refinement.*.shape_voxel", self.shape_voxel, ("centres", "means"))
+        if self.dense_voxel < 0 or self.dense_points < 0 or self.dense_shape_points < 0:
+            raise ValueError("refinement.*.dense_voxel, dense_points, dense_shape_points: must be >= 0")
 
 
 # the fixed-lag window's solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started);

@@ -365,7 +365,8 @@ def track_keyframes(source: FrameSource, keyframes: Mapping[int, Box], start: in
     points: list[np.ndarray] | None = None
     if params.refine and len(frames) > 2:
         t0 = time.perf_counter()
-        offline = dataclasses.replace(config.refinement.offline, shape_voxel=params.shape_voxel)
+        # voxel means on the offline grid: the dense tracks' finer centre grid (dense_voxel) is the centres' remedy
+        offline = dataclasses.replace(config.refinement.offline, shape_voxel=params.shape_voxel, dense_voxel=0.0)
         points, previous = [], None
         for k, state in zip(frames, online, strict=True):
             frame = source.lidar_frame(k)

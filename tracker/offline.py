@@ -787,6 +787,8 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
     if regauge and params.gauge_heading_points > 0:
         first = points_in_box(points[0], _box(online[0], size), 1.0).sum() if len(points[0]) else 0
         heading_share = min(1.0, float(first) / params.gauge_heading_points)
+    shape_voxel = params.voxel  # the returned shape's grid
+    params = _dense_params(points, online, size, params)
     solver = _Solver(points, online, size, params, np.random.default_rng(seed), fixed, anchors)
     for _ in range(params.outer_iterations):
         if not solver.set_shapes(states):
@@ -802,7 +804,21 @@ def refine_states(points: list[np.ndarray], online_states: np.ndarray, size: np.
     if heading_share < 1.0:
         out[0] = online[0]  # the start box, exact
     out[:, 3] = wrap_angle(out[:, 3])
-    return out, _rebuild_shape(points, states, size, params.voxel) if with_shape else None
+    return out, _rebuild_shape(points, states, size, shape_voxel) if with_shape else None
+
+
+def _dense_params(points: list[np.ndarray], online: np.ndarray, size: np.ndarray, params: OfflineParams
+                  ) -> OfflineParams:
+    """``params`` with the dense grid (``dense_voxel``, ``dense_shape_points``) where the frames hold a median of at
+    least ``dense_points`` object points in their online boxes: fold shapes of voxel centres pull a dense car's frames
+    onto the grid's layers (a bias of up to half a voxel in each axis that the other folds' shapes share), which a
+    sparse car's few points cannot resolve, while its shape needs the coarse grid's neighbours for its normals."""
+    if params.dense_voxel <= 0:
+        return params
+    counts = [int(points_in_box(p, _box(s, size), 1.0).sum()) if len(p) else 0 for p, s in zip(points, online, strict=True)]
+    if float(np.median(counts)) < params.dense_points:
+        return params
+    return dataclasses.replace(params, voxel=params.dense_voxel, shape_points_per_frame=params.dense_shape_points)
 
 
 def _support(points: list[np.ndarray], states: np.ndarray, size: np.ndarray) -> int:

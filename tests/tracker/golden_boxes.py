@@ -11,7 +11,8 @@ float64 boxes x, y, z, heading, l, w, h, and the flags of each frame joined by '
 ``python tests/tracker/golden_boxes.py offline`` writes tests/tracker/golden/dev_tracks_offline_boxes.npz: the same
 tracks with ``full``, seed 0, online and then refined offline (:func:`tracker.refine_offline`), the boxes as above
 (made with today's solve with its voxel look-up reverted to the kd-tree it replaced;
-tests/tracker/test_golden_boxes.py checks today's offline solve gives them bit for bit).
+tests/tracker/test_golden_boxes.py checks today's offline solve gives them bit for bit), with the offline settings
+of ``full`` when the file was made (``OFFLINE_SETTINGS``: no dense grid), so it keeps checking the look-up.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ REPO = Path(__file__).resolve().parents[2]
 GOLDEN = REPO / "tests" / "tracker" / "golden" / "dev_tracks_boxes.npz"
 GOLDEN_OFFLINE = REPO / "tests" / "tracker" / "golden" / "dev_tracks_offline_boxes.npz"
 PRESETS = ("full", "faithful")
+# ``full``'s refinement as the offline file was made (the dense tracks' finer fold grid came later)
+OFFLINE_SETTINGS = {"refinement.offline.dense_voxel": 0.0, "refinement.lag.dense_voxel": 0.0}
 SEEDS = (0, 1, 2)
 
 
@@ -67,7 +70,7 @@ def offline_boxes(source, tracks, seed: int = 0) -> dict[str, tuple[np.ndarray, 
 
     out = {}
     for tid, start, end, box in tracks:
-        config = get_preset("full", seed=seed)
+        config = get_preset("full", seed=seed, **OFFLINE_SETTINGS)
         result = refine_offline(source, track(source, box, start, end, config), config)
         boxes = np.array([e.box.to_array()[:7] for e in result.estimates], dtype=np.float64)
         out[key("offline", seed, tid)] = (boxes, np.array([",".join(e.flags) for e in result.estimates]))
