@@ -748,7 +748,8 @@ _FULL = TrackerConfig(
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
     reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, static_share=0.5,
                               start_fill_frames=3),
-    refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0)),
+    refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0,
+                                                            dense_voxel=0.025)),
 )
 # faithful: the authors' implementation (docs/tracker.md)
 _FAITHFUL = TrackerConfig(
