@@ -8,7 +8,8 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    parameters; cropped with the box scaled ``region_scale``) are gathered once (world frame);
 2. frames are split into ``folds`` interleaved folds (k mod folds). For each fold a shape is rebuilt from
    the frames NOT in it: points in the current boxes (scale 1.0), moved to the object frame, voxelised
-   (5 cm centres), with normals n from a PCA of each shape point's neighbours. A frame is registered
+   (5 cm centres; ``dense_voxel`` where the frames hold a median of ``dense_points`` object points or more), with
+   normals n from a PCA of each shape point's neighbours. A frame is registered
    only to the shape of the other folds: registering a frame to an aggregate that contains its own
    points pins it where it already is (the residuals are ~0 whatever its error);
 3. all states S_0..S_{K-1} minimise, jointly,
