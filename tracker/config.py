@@ -452,7 +452,7 @@ class OfflineParams:
                                         # the online boxes) builds its fold shapes on this grid, from at most
                                         # dense_shape_points points per frame (a dense car's frames are pulled onto the
                                         # coarse grid's voxel centres, centimetres off; a sparse one's shape needs it)
-    dense_points: int = 1000
+    dense_points: int = 500
     dense_shape_points: int = 500
     min_shape_points: int = 10
     shape_frames: int = 0               # > 0: a frame's fold shape only from the frames of its block of this many
