@@ -816,15 +816,20 @@ def _dense_params(points: list[np.ndarray], online: np.ndarray, size: np.ndarray
     sparse car's few points cannot resolve, while its shape needs the coarse grid's neighbours for its normals."""
     if params.dense_voxel <= 0:
         return params
-    counts = [int(points_in_box(p, _box(s, size), 1.0).sum()) if len(p) else 0 for p, s in zip(points, online, strict=True)]
-    if float(np.median(counts)) < params.dense_points:
+    if float(np.median(_box_counts(points, online, size))) < params.dense_points:
         return params
     return dataclasses.replace(params, voxel=params.dense_voxel, shape_points_per_frame=params.dense_shape_points)
 
 
+def _box_counts(points: list[np.ndarray], states: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """Each frame's points inside its box."""
+    return np.array([points_in_box(p, _box(s, size), 1.0).sum() if len(p) else 0
+                     for p, s in zip(points, states, strict=True)], dtype=np.int64)
+
+
 def _support(points: list[np.ndarray], states: np.ndarray, size: np.ndarray) -> int:
     """How many of the frames' points lie inside their boxes (all frames)."""
-    return int(sum(points_in_box(p, _box(s, size), 1.0).sum() for p, s in zip(points, states, strict=True) if len(p)))
+    return int(_box_counts(points, states, size).sum())
 
 
 def _support_bound(points: list[np.ndarray], height: float) -> int:
