@@ -483,6 +483,10 @@ class OfflineParams:
     window_start_moved: float = 0.5     # ... only when the window moved some centre farther than this (m) from the
                                         # online one
     window_start_margin: float = 1.05   # ... kept when its boxes hold more than this x the first solve's points
+    window_start_first_moved: float = 0.0  # > 0: the second start is tried only when the first solve moved some
+                                        # centre farther than this (m) from the online one or the online pass lost
+                                        # some frame (prior-only, coasting, waiting, no sweep); else its window pass
+                                        # is not run
     window_keep: bool = False           # (with window_start) the window pass's own states are the result when their
                                         # boxes hold more than window_start_margin x the kept solve's points
     gauge_window: int = 0               # > 0 (offline, with window_start): the trajectory is moved by the mean object-
@@ -496,6 +500,8 @@ class OfflineParams:
         _choice("refinement.*.shape_voxel", self.shape_voxel, ("centres", "means"))
         if self.dense_voxel < 0 or self.dense_points < 0 or self.dense_shape_points < 0:
             raise ValueError("refinement.*.dense_voxel, dense_points, dense_shape_points: must be >= 0")
+        if not self.window_start_first_moved >= 0:
+            raise ValueError("refinement.*.window_start_first_moved: must be >= 0")
 
 
 # the fixed-lag window's solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started);
@@ -749,7 +755,7 @@ _FULL = TrackerConfig(
     reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, static_share=0.5,
                               start_fill_frames=3),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0,
-                                                            dense_voxel=0.025)),
+                                                            dense_voxel=0.025, window_start_first_moved=0.25)),
 )
 # faithful: the authors' implementation (docs/tracker.md)
 _FAITHFUL = TrackerConfig(

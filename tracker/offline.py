@@ -51,7 +51,10 @@ frames k+1, k+2, .... Given an online :class:`~tracker.sotracker.TrackResult`:
    is one rigid shift, which the gauge removes but the window, part-corrected, no longer is. Given the points and
    no source, the window pass is skipped when the second solution could never be kept: the first one's boxes hold
    so many points that ``window_start_margin`` x that is at least an upper bound of what any boxes hold
-   (:func:`_window_cannot_win`; the result is the same, without the pass's cost).
+   (:func:`_window_cannot_win`; the result is the same, without the pass's cost). With
+   ``window_start_first_moved`` > 0 (``full``: 0.25) the window pass runs only where the online pass lost some
+   frame or the first solve moved some centre farther than that from the online one (:func:`_window_not_needed`):
+   a track whose first solve agrees with its online states has no offset stretch for the window to correct.
 7. gauge from the window (``gauge_window`` = M > 0, with ``window_start``; off by default): the regauge of step 4
    moves every frame by frame 0's own registration error (frame 0 pins the gauge alone; on a sparse start that is
    centimetres, on every frame). The window holds frame 0 at the start box and registers the next frames to it, so
@@ -72,7 +75,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 from scipy.spatial import cKDTree
 
-from .bidirectional import fused_result
+from .bidirectional import fused_result, is_lost
 from .config import OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
@@ -853,6 +856,18 @@ def _window_cannot_win(points: list[np.ndarray], states: np.ndarray, size: np.nd
     return params.window_start_margin * held >= _support_bound(points, float(size[2]))
 
 
+def _window_not_needed(result: TrackResult, online: np.ndarray, states: np.ndarray, params: OfflineParams) -> bool:
+    """Whether step 6 is not tried (``window_start_first_moved``): no online frame lost the car (prior-only,
+    coasting, waiting, no sweep) and the first solve moved no centre farther than ``window_start_first_moved`` from
+    the online one. The second start is for online states the first solve could not move far enough (a lost
+    stretch, a car held off its points: the first solve moves them, not all the way); where it agrees with them,
+    the window pass (the most expensive part of the solve) finds no better start (docs/tracker-decisions.md)."""
+    if params.window_start_first_moved <= 0 or any(is_lost(e, 0) for e in result.estimates):
+        return False
+    moved = np.hypot(states[:, 0] - online[:, 0], states[:, 1] - online[:, 1])
+    return bool(np.max(moved) <= params.window_start_first_moved)
+
+
 def _window_start(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
                   points: list[np.ndarray], online: np.ndarray, window: np.ndarray, states: np.ndarray,
                   shape: np.ndarray | None
@@ -898,7 +913,7 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
     online = np.array([e.state.to_array() for e in result.estimates])
     states, shape = refine_states(points, online, np.asarray(result.size), params, seed=config.seed)
     # (without a source the second solve sees these points only: when it cannot win, its window is not run)
-    if (params.window_start > 0 and len(online) > 2
+    if (params.window_start > 0 and len(online) > 2 and not _window_not_needed(result, online, states, params)
             and not (source is None and _window_cannot_win(points, states, np.asarray(result.size), params))):
         from .fixed_lag import window_states
 

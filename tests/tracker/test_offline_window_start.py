@@ -80,3 +80,44 @@ def test_window_keep_takes_the_window_states_where_they_hold_more_points(held_of
     np.testing.assert_allclose([e.box.to_array() for e in kept.estimates],
                                [e.box.to_array() for e in lagged.estimates], atol=1e-6)
     assert sum(e.num_points for e in kept.estimates) > sum(e.num_points for e in solved.estimates)
+
+
+def _window_calls(monkeypatch) -> list[int]:
+    import tracker.fixed_lag as fixed_lag
+
+    calls: list[int] = []
+    real = fixed_lag.window_states
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fixed_lag, "window_states", counted)
+    return calls
+
+
+def _on_the_car(boxes, online, config, lost_frames=()) -> TrackResult:
+    return TrackResult([FrameEstimate(k, State.from_array(b.to_array()[:4]), b, 50, 1.0,
+                                      ("prior_only",) if k in lost_frames else (), 1.0, np.zeros((0, 3)))
+                        for k, b in enumerate(boxes)], online.size, online.shape, config)
+
+
+@pytest.mark.parametrize("case, runs", [("held_off", True), ("on_the_car", False), ("on_the_car_one_lost", True)])
+def test_the_window_pass_runs_only_where_the_first_solve_moved_a_state_or_a_frame_was_lost(monkeypatch, held_off,
+                                                                                           case, runs):
+    """``window_start_first_moved``: the car held 2.9 m off (the first solve moves those frames ~1 m) and a track
+    with a prior-only frame run the window pass; online states on the car (the first solve moves none 0.25 m) do
+    not, and get the boxes of the pass run every time, bit for bit (its second solve would not have been kept: the
+    window moves no state 0.5 m)."""
+    seq, boxes, online, config = held_off
+    assert config.refinement.offline.window_start_first_moved == 0.25                 # full's
+    track = online if case == "held_off" else _on_the_car(boxes, online, config,
+                                                          (5,) if case == "on_the_car_one_lost" else ())
+    calls = _window_calls(monkeypatch)
+    gated = refine_offline(seq, track, config)
+    assert len(calls) == runs
+    if not runs:
+        always = refine_offline(seq, track, config.updated({"refinement.offline.window_start_first_moved": 0.0}))
+        assert len(calls) == 1                                                         # the ungated run's pass
+        assert np.array_equal([e.box.to_array() for e in gated.estimates],
+                              [e.box.to_array() for e in always.estimates])
