@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_offline_window_skip import _counting_window
 from test_reacquire_clusters import _iou, _scene, _straight
 
 from tracker import get_preset, refine_fixed_lag, refine_offline
@@ -82,20 +83,6 @@ def test_window_keep_takes_the_window_states_where_they_hold_more_points(held_of
     assert sum(e.num_points for e in kept.estimates) > sum(e.num_points for e in solved.estimates)
 
 
-def _window_calls(monkeypatch) -> list[int]:
-    import tracker.fixed_lag as fixed_lag
-
-    calls: list[int] = []
-    real = fixed_lag.window_states
-
-    def counted(*args, **kwargs):
-        calls.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(fixed_lag, "window_states", counted)
-    return calls
-
-
 def _on_the_car(boxes, online, config, lost_frames=()) -> TrackResult:
     return TrackResult([FrameEstimate(k, State.from_array(b.to_array()[:4]), b, 50, 1.0,
                                       ("prior_only",) if k in lost_frames else (), 1.0, np.zeros((0, 3)))
@@ -113,7 +100,7 @@ def test_the_window_pass_runs_only_where_the_first_solve_moved_a_state_or_a_fram
     assert config.refinement.offline.window_start_first_moved == 0.25                 # full's
     track = online if case == "held_off" else _on_the_car(boxes, online, config,
                                                           (5,) if case == "on_the_car_one_lost" else ())
-    calls = _window_calls(monkeypatch)
+    calls = _counting_window(monkeypatch)
     gated = refine_offline(seq, track, config)
     assert len(calls) == runs
     if not runs:
