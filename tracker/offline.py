@@ -864,8 +864,12 @@ def _window_not_needed(result: TrackResult, online: np.ndarray, states: np.ndarr
     the window pass (the most expensive part of the solve) finds no better start (docs/tracker-decisions.md)."""
     if params.window_start_first_moved <= 0 or any(is_lost(e, 0) for e in result.estimates):
         return False
-    moved = np.hypot(states[:, 0] - online[:, 0], states[:, 1] - online[:, 1])
-    return bool(np.max(moved) <= params.window_start_first_moved)
+    return _largest_move(states, online) <= params.window_start_first_moved
+
+
+def _largest_move(states: np.ndarray, online: np.ndarray) -> float:
+    """The largest horizontal distance (m) between a frame's centre in ``states`` and in ``online``."""
+    return float(np.max(np.hypot(states[:, 0] - online[:, 0], states[:, 1] - online[:, 1])))
 
 
 def _window_start(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
@@ -876,7 +880,7 @@ def _window_start(source: FrameSource | None, result: TrackResult, config: Track
     boxes hold more of the points than the solve from the online states; returns (states, shape, points) of the
     one kept."""
     size = np.asarray(result.size)
-    if np.max(np.hypot(window[:, 0] - online[:, 0], window[:, 1] - online[:, 1])) <= params.window_start_moved:
+    if _largest_move(window, online) <= params.window_start_moved:
         return states, shape, points
     both = points
     if source is not None:  # the points around the window's boxes too (the online regions may not reach them)
