@@ -73,6 +73,7 @@ _task_running = False   # in a worker process: whether a task is running (see _w
 _stop_event = None      # in a worker process: set by the parent after Ctrl-C (see _worker_init)
 _interrupted = False    # in a worker process: it received a Ctrl-C (see _worker_sigint)
 _task_threads: set[int] = set()   # in a worker: the threads running a task (see _interrupt_running_tasks)
+_other_unraisable_hook = sys.unraisablehook   # in a worker: the hook _worker_init replaced (every other exception)
 
 
 def _call(task: Task) -> TaskOutcome:
@@ -134,7 +135,7 @@ def _worker_redeliver_interrupt(unraisable) -> None:
         if hasattr(signal, "setitimer"):
             signal.setitimer(signal.ITIMER_REAL, 0.01)
         return
-    sys.__unraisablehook__(unraisable)
+    _other_unraisable_hook(unraisable)
 
 
 class TaskInterrupted(Exception):
@@ -173,13 +174,14 @@ def _quieten_dask_logs() -> None:
 
 
 def _worker_init(stop_event=None) -> None:
-    global _stop_event
+    global _stop_event, _other_unraisable_hook
     _single_threaded_env()
     _stop_event = stop_event
     signal.signal(signal.SIGINT, _worker_sigint)
     if hasattr(signal, "SIGALRM"):
         signal.signal(signal.SIGALRM, _worker_sigint)
-    sys.unraisablehook = _worker_redeliver_interrupt
+    if sys.unraisablehook is not _worker_redeliver_interrupt:
+        _other_unraisable_hook, sys.unraisablehook = sys.unraisablehook, _worker_redeliver_interrupt
 
 
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
