@@ -74,3 +74,21 @@ def test_eval_cli_prints_tables_and_writes_json(pandaset_root, tmp_path, capsys)
     # an easy sanity bound: tracking these two cars over 10 frames from the true box works
     assert rows["full"]["pooled"]["acc"] > 0.5
     assert np.isfinite(report["rows"][0]["by_track"][report["tracks"][0]["track_id"]]["acc"])
+
+
+def test_every_difficulty_group_carries_its_spread_over_the_seeds(pandaset):
+    """``by_difficulty_std``: per difficulty, the standard deviation over the seeds of its pooled figures (a
+    comparison of two runs needs each group's spread, not only the whole's). With one track per group it is the
+    spread of that track's figures over the seeds, each seed evaluated alone."""
+    from sot_apps.bench.sequence_eval import evaluate
+
+    ids = ["91aa5b5c", "1a46fa13"]   # one medium, one hard (216 and 33 points)
+    both = evaluate(pandaset, ids, ("full",), seeds=(0, 1), end_frame=8).rows[0]
+    alone = [evaluate(pandaset, ids, ("full",), seeds=(s,), end_frame=8).rows[0] for s in (0, 1)]
+    assert set(both.by_difficulty_std) == set(both.by_difficulty) == {"medium", "hard"}
+    for level in ("medium", "hard"):
+        per_seed = np.array([row.by_difficulty[level]["acc"] for row in alone])
+        assert both.by_difficulty[level]["acc"] == pytest.approx(per_seed.mean())
+        assert both.by_difficulty_std[level]["acc"] == pytest.approx(per_seed.std())
+        assert alone[0].by_difficulty_std[level]["acc"] == 0.0   # one seed: no spread
+    assert both.to_dict()["by_difficulty_std"] == both.by_difficulty_std

@@ -194,6 +194,8 @@ class ResultRow:
     by_difficulty: dict[str, dict[str, float]]
     by_track: dict[str, dict[str, Any]]
     timing: dict[str, float]
+    # per difficulty, the standard deviation over the seeds of its pooled figures (as ``pooled_std`` for the whole)
+    by_difficulty_std: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -244,6 +246,7 @@ def summarise_row(name: str, preset: str, offline: bool, seeds: Sequence[int], r
     pooled, pooled_std = _mean_over_seeds(pooled_runs)
     diff_of = {t.track_id: t.difficulty for t in specs}
     by_difficulty: dict[str, dict[str, float]] = {}
+    by_difficulty_std: dict[str, dict[str, float]] = {}
     for level in DIFFICULTIES:
         runs = []
         for s in seeds:
@@ -251,7 +254,7 @@ def summarise_row(name: str, preset: str, offline: bool, seeds: Sequence[int], r
             if chosen:
                 runs.append(_metrics_dict(pool_metrics(chosen)))
         if runs:
-            by_difficulty[level] = _mean_over_seeds(runs)[0]
+            by_difficulty[level], by_difficulty_std[level] = _mean_over_seeds(runs)
     by_track: dict[str, dict[str, Any]] = {}
     for spec in specs:
         runs = [dataclasses.asdict(tracklet_metrics(r.scores)) for r in records if r.track_id == spec.track_id]
@@ -273,7 +276,8 @@ def summarise_row(name: str, preset: str, offline: bool, seeds: Sequence[int], r
               "p90_ms": stat(ms, lambda a: np.percentile(a, 90)), "frames": int(ms.size),
               "median_ms_excl_frame1": stat(later, np.median), "mean_ms_excl_frame1": stat(later, np.mean),
               "frame1_mean_ms": stat(first, np.mean)}
-    return ResultRow(name, preset, offline, tuple(seeds), pooled, pooled_std, by_difficulty, by_track, timing)
+    return ResultRow(name, preset, offline, tuple(seeds), pooled, pooled_std, by_difficulty, by_track, timing,
+                     by_difficulty_std)
 
 
 def flag_counts(result: TrackResult) -> dict[str, int]:
