@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ..io import FORMATS
 from .common import (
@@ -56,7 +57,11 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--offline", action="store_true", help="add a row with offline refinement for each preset")
     parser.add_argument("--lag", type=positive_int, nargs="+", default=[], metavar="N",
                         help="add a fixed-lag row (each state final N frames later) for each preset and N")
-    parser.add_argument("--seeds", type=positive_int, default=1, metavar="N", help="run seeds 0..N-1 and average (default 1)")
+    parser.add_argument("--seeds", type=positive_int, default=1, metavar="N",
+                        help="run N tracker seeds, from --first-seed, and average (default 1)")
+    parser.add_argument("--first-seed", type=nonnegative_int, default=0, metavar="S",
+                        help="the first tracker seed (default 0): seeds S..S+N-1; reports of one set with disjoint "
+                             "seeds pool in `sot-apps bench rule`")
     parser.add_argument("--end-frame", type=nonnegative_int, metavar="K", help="stop every track at frame K (default: span end)")
     parser.add_argument("--no-per-track", action="store_true", help="omit the per-track table")
     parser.add_argument("--json", metavar="FILE", help="also write the full report as JSON (atomically)")
@@ -104,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     if args.end_frame is not None:
         sequence.check_index(args.end_frame)
     progress = lambda jobs: tqdm(jobs, desc="eval", unit="track", file=sys.stderr, leave=False)  # noqa: E731
-    report = evaluate(sequence, ids, presets, offline=args.offline, seeds=list(range(args.seeds)),
+    report = evaluate(sequence, ids, presets, offline=args.offline, seeds=_seeds(args),
                       end_frame=args.end_frame, progress=progress, detections=detections, lags=args.lag,
                       overrides=args.overrides)
     if args.overrides:
@@ -120,6 +125,7 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
 
     from ..bench.benchmark_eval import evaluate_tracklets, format_benchmark, open_benchmark
     from ..errors import InputError
+    from ..evaluation.rule import list_digest
     from ..io.atomic import write_json
     from ..provenance import invoked_command, provenance_record
 
@@ -137,12 +143,18 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
     if args.simulate_detections:
         check_profile(args.simulate_detections)
         detections = lambda seq, seed: simulated_detections(seq, args.simulate_detections, seed)  # noqa: E731
-    run = evaluate_tracklets(bench.tracklets, bench.resolve, presets, range(args.seeds), progress=progress,
+    run = evaluate_tracklets(bench.tracklets, bench.resolve, presets, _seeds(args), progress=progress,
                              detections=detections, overrides=args.overrides, lags=args.lag, offline=args.offline)
     title = f"benchmark: {bench.source} ({len(bench.tracklets)} tracklets)"
     if args.overrides:
         title += "; set " + " ".join(f"{k}={v}" for k, v in args.overrides.items())
     print(format_benchmark(run, title))
     if args.json:
-        write_json(args.json, run.to_dict() | {"provenance": provenance_record([invoked_command()])})
+        # the list's identity: `sot-apps bench rule` pools and matches reports of one list by it
+        listed = {"source": str(Path(bench.source).resolve()), "sha1": list_digest(bench.source)}
+        write_json(args.json, run.to_dict() | {"list": listed, "provenance": provenance_record([invoked_command()])})
     return 0
+
+
+def _seeds(args: argparse.Namespace) -> list[int]:
+    return list(range(args.first_seed, args.first_seed + args.seeds))
