@@ -22,6 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the baseline's preset where a report holds several (e.g. faithful)")
     parser.add_argument("--candidate-preset", default=None, metavar="NAME",
                         help="the candidate's preset where a report holds several")
+    parser.add_argument("--json", metavar="FILE", help="also write every group's comparison as JSON (atomically)")
+    parser.set_defaults(bench_inputs=("baseline", "candidate"))   # --json never overwrites a report
 
 
 def run(args: argparse.Namespace) -> int:
@@ -35,6 +37,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(args.candidate[0], "no evaluation set is in both the baseline's and the candidate's reports")
     names = [sorted({r.preset for r in side}) for side in (baseline, candidate)]
     print(format_rule(check, "/".join(names[0]), "/".join(names[1])))
+    if args.json:
+        from ..io.atomic import write_json
+        from ..provenance import invoked_command, provenance_record
+
+        write_json(args.json, check.to_dict() | {"provenance": provenance_record([invoked_command()])})
     return 0
 
 

@@ -89,6 +89,21 @@ class RuleCheck:
     def lost(self) -> list[GroupVerdict]:
         return [v for v in self.verdicts if v.lost]
 
+    def to_dict(self) -> dict:
+        """Plain JSON: every group's two sides (Acc mean and spread over the seeds, 0..1), its verdict, the pooled
+        Acc per mode and the counts."""
+        def side(g: GroupStat) -> dict:
+            return {"acc": g.mean, "acc_std": g.std, "seeds": g.seeds, "n": g.tracklets}
+
+        return {"baseline_seeds": list(self.baseline_seeds), "candidate_seeds": list(self.candidate_seeds),
+                "groups": [{"set": v.label, "mode": v.mode, "group": v.group, "baseline": side(v.baseline),
+                            "candidate": side(v.candidate), "spread": v.spread, "lost": v.lost}
+                           for v in self.verdicts],
+                "counts": {"groups": len(self.verdicts), "above": sum(v.difference > 0 for v in self.verdicts),
+                           "below": sum(v.difference < 0 for v in self.verdicts), "lost": len(self.lost)},
+                "pooled": {mode: {"baseline": b, "candidate": c} for mode, (b, c) in self.pooled.items()},
+                "unmatched": list(self.unmatched)}
+
 
 def list_digest(source: str | Path) -> str:
     """The identity of a benchmark list (a list file, or a folder of list files): the SHA-1 of its bytes (a

@@ -96,6 +96,15 @@ def test_two_one_seed_evals_pool_to_the_two_seed_eval(small_benchmark, tmp_path,
         assert v.baseline.mean == pytest.approx(v.candidate.mean, abs=1e-9)
         assert v.baseline.std == pytest.approx(v.candidate.std, abs=1e-9)
     capsys.readouterr()
-    assert main(["bench", "rule", "--baseline", str(out["s0"]), str(out["s1"]), "--candidate", str(out["both"])]) == 0
+    result = tmp_path / "rule.json"
+    assert main(["bench", "rule", "--baseline", str(out["s0"]), str(out["s1"]), "--candidate", str(out["both"]),
+                 "--json", str(result)]) == 0
     text = capsys.readouterr().out
     assert "full (seeds 0-1) against full (seeds 0-1)" in text and "lost on 0" in text
+    written = json.loads(result.read_text())
+    assert written["counts"]["lost"] == 0 and written["counts"]["groups"] == len(both.groups)
+    assert written["pooled"]["offline"]["baseline"] == pytest.approx(written["pooled"]["offline"]["candidate"])
+    before = out["both"].read_bytes()   # the output never overwrites a report
+    assert main(["bench", "rule", "--baseline", str(out["s0"]), "--candidate", str(out["both"]),
+                 "--json", str(out["both"])]) == 2
+    assert out["both"].read_bytes() == before
