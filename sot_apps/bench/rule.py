@@ -3,7 +3,8 @@
 Give the baseline's reports and the candidate's (one per evaluation set and seed range; several reports of a set
 with disjoint ``--first-seed`` ranges are pooled), and it prints, per set, the groups where the candidate is below
 the baseline by more than the larger spread over the seeds, the counts, and the pooled Acc per mode. The comparison
-itself is :mod:`sot_apps.evaluation.rule`; the rule and its noise floor: docs/benchmark.md, "The rule".
+itself is :mod:`sot_apps.evaluation.rule` (docs/evaluation.md, "The rule for changing `full`"); what a count of lost
+groups means: docs/tracker-decisions.md, "The rule's noise floor".
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The rule for changing ``full`` (issue 23 item 5, docs/benchmark.md "The rule"), checked on ``sot-apps eval`` reports.
+"""The rule for changing ``full`` (issue 23 item 5), checked on ``sot-apps eval --json`` reports (docs/evaluation.md,
+"The rule for changing `full`").
 
 A candidate is compared with a baseline group by group: every (evaluation set, mode, group) both sides hold, a group
 being a difficulty or a motion profile of a benchmark list (``sot-apps eval --benchmark ... --json``) or a
@@ -22,7 +23,8 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["list_digest", "GroupStat", "SetReport", "GroupVerdict", "RuleCheck", "read_report", "pool", "check_rule", "format_rule"]
+__all__ = ["list_digest", "GroupStat", "SetReport", "GroupVerdict", "RuleCheck", "read_report", "pool", "check_rule",
+           "format_rule"]
 
 
 @dataclass(frozen=True)
@@ -39,8 +41,8 @@ class GroupStat:
 @dataclass(frozen=True)
 class SetReport:
     """One ``eval --json`` report reduced to what the rule needs: the evaluation set it ran on (``key`` identifies
-    it: its list's folder and a hash of its tracklets, or its sequence and tracks; ``label`` names it), its seeds, and per (mode,
-    group) the Acc statistics of the chosen preset."""
+    it: the list's content hash, for older reports its folder and tracklets, or the sequence and its tracks;
+    ``label`` names it), its seeds, and per (mode, group) the Acc statistics of the chosen preset."""
 
     path: str
     key: str
@@ -52,6 +54,9 @@ class SetReport:
 
 @dataclass(frozen=True)
 class GroupVerdict:
+    """One group of one set: the baseline's and the candidate's pooled statistics; lost when the candidate is below
+    by more than the larger spread."""
+
     label: str
     mode: str
     group: str
@@ -78,6 +83,8 @@ class GroupVerdict:
 
 @dataclass(frozen=True)
 class RuleCheck:
+    """Every group compared, the pooled Acc per mode, each side's seeds and the sets only one side holds."""
+
     verdicts: tuple[GroupVerdict, ...]
     pooled: dict[str, tuple[float, float]]   # mode -> (baseline, candidate) Acc of the sets' "all" groups,
     #                                          weighted by their tracklets
@@ -89,6 +96,14 @@ class RuleCheck:
     def lost(self) -> list[GroupVerdict]:
         return [v for v in self.verdicts if v.lost]
 
+    @property
+    def above(self) -> int:
+        return sum(v.difference > 0 for v in self.verdicts)
+
+    @property
+    def below(self) -> int:
+        return sum(v.difference < 0 for v in self.verdicts)
+
     def to_dict(self) -> dict:
         """Plain JSON: every group's two sides (Acc mean and spread over the seeds, 0..1), its verdict, the pooled
         Acc per mode and the counts."""
@@ -99,8 +114,8 @@ class RuleCheck:
                 "groups": [{"set": v.label, "mode": v.mode, "group": v.group, "baseline": side(v.baseline),
                             "candidate": side(v.candidate), "spread": v.spread, "lost": v.lost}
                            for v in self.verdicts],
-                "counts": {"groups": len(self.verdicts), "above": sum(v.difference > 0 for v in self.verdicts),
-                           "below": sum(v.difference < 0 for v in self.verdicts), "lost": len(self.lost)},
+                "counts": {"groups": len(self.verdicts), "above": self.above, "below": self.below,
+                           "lost": len(self.lost)},
                 "pooled": {mode: {"baseline": b, "candidate": c} for mode, (b, c) in self.pooled.items()},
                 "unmatched": list(self.unmatched)}
 
@@ -273,9 +288,7 @@ def format_rule(check: RuleCheck, baseline_name: str, candidate_name: str) -> st
                          + (f"(± {100 * v.spread:.1f})" if v.has_spread else "(no spread)") for v in lost)
         lines.append(f"  {label:28s} lost {len(lost):2d}" + (f": {text}" if text else ""))
     n = len(check.verdicts)
-    above = sum(v.difference > 0 for v in check.verdicts)
-    below = sum(v.difference < 0 for v in check.verdicts)
-    lines.append(f"{n} groups of {len(labels)} sets: above on {above}, below on {below}, "
+    lines.append(f"{n} groups of {len(labels)} sets: above on {check.above}, below on {check.below}, "
                  f"lost on {len(check.lost)} (of {len({v.label for v in check.lost})} sets)")
     for mode, (b, c) in check.pooled.items():
         lines.append(f"  pooled {mode:8s} {100 * b:5.1f} -> {100 * c:5.1f}")
