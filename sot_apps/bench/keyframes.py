@@ -62,6 +62,7 @@ class KeyframeBenchTrack:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("sources", nargs="+", metavar="SOURCE",
                         help="benchmark list (benchmark.json or its folder) or annotated sequence directory")
+    parser.set_defaults(bench_inputs=("sources",))   # --json never overwrites one
     parser.add_argument("--every", type=int, nargs="+", default=[5, 10, 20, 40], metavar="N",
                         help="keyframe intervals (default: 5 10 20 40)")
     parser.add_argument("--preset", default="full", help="tracker preset (default: full)")

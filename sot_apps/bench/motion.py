@@ -22,6 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--horizon", type=int, default=30, help="k = 1..HORIZON frames after the start (default 30)")
     parser.add_argument("--plot", metavar="PNG", help="write the centre-error curve as a PNG")
     parser.add_argument("--json", metavar="FILE", help="write all figures as JSON")
+    parser.set_defaults(bench_inputs=("tracks_dir",))   # --json and --plot never write into the tracks
 
 
 def run(args: argparse.Namespace) -> int:

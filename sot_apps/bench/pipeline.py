@@ -170,6 +170,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mode", choices=("online", "lag", "offline"), default=None,
                         help="tracking mode (default: the tracking stage's, offline)")
     parser.add_argument("--json", metavar="FILE", help="also write the rows and the machine description as JSON")
+    parser.set_defaults(bench_inputs=("pipeline",))   # --json never overwrites the pipeline file
 
 
 def run(args: argparse.Namespace) -> int:

@@ -222,6 +222,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=20, help="repeats, best is reported (default 20)")
     parser.add_argument("--sensor", default="waymo_top", help="sensor preset or JSON (default waymo_top)")
     parser.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    parser.set_defaults(bench_inputs=("bank",))   # --json never writes into the bank
 
 
 def run(args: argparse.Namespace) -> int:

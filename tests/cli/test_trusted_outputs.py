@@ -95,6 +95,17 @@ def test_outputs_over_track_benchmark_and_list_inputs_are_refused(tiny_dir, tmp_
     assert (tracks / "track.json").read_text() == "{}" and (bench / "make.json").read_text() == "{}"
 
 
+def test_a_benchmarks_json_never_replaces_its_input_files(tmp_path, refused):
+    """`sot-apps bench`: each benchmark names its input options (pipeline file, reports, sources)."""
+    pipeline = tmp_path / "pipeline.json"
+    pipeline.write_text("{}")
+    refused(["bench", "pipeline", "--pipeline", pipeline, "--json", pipeline], "--json", "--pipeline")
+    refused(["bench", "rule", "--baseline", pipeline, "--candidate", tmp_path / "b.json", "--json", pipeline],
+            "--json", "--baseline")
+    refused(["bench", "keyframes", pipeline, "--json", pipeline], "--json", "SOURCE")
+    assert pipeline.read_text() == "{}"
+
+
 def test_two_outputs_of_one_command_may_not_be_the_same_file(tiny_dir, tmp_path, refused):
     out = tmp_path / "X.mcap"
     refused(["motion-export", tiny_dir, "--from-annotations", "--out", out, "--parquet", out], "--parquet", "--out")
