@@ -150,7 +150,7 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
         title += "; set " + " ".join(f"{k}={v}" for k, v in args.overrides.items())
     print(format_benchmark(run, title))
     if args.json:
-        # the list's identity: `sot-apps bench rule` pools and matches reports of one list by it
+        # the list evaluated (its path names the set in `sot-apps bench rule`; its digest, the bytes evaluated)
         listed = {"source": str(Path(bench.source).resolve()), "sha1": list_digest(bench.source)}
         write_json(args.json, run.to_dict() | {"list": listed, "provenance": provenance_record([invoked_command()])})
     return 0

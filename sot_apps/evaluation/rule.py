@@ -41,7 +41,7 @@ class GroupStat:
 @dataclass(frozen=True)
 class SetReport:
     """One ``eval --json`` report reduced to what the rule needs: the evaluation set it ran on (``key`` identifies
-    it: the list's content hash, for older reports its folder and tracklets, or the sequence and its tracks;
+    it: the list's folder and a hash of its tracklets and their groups, or the sequence and its tracks;
     ``label`` names it), its seeds, and per (mode, group) the Acc statistics of the chosen preset."""
 
     path: str
@@ -185,14 +185,14 @@ def _benchmark_report(path: str, data: dict, preset: str | None) -> SetReport:
             std = m.get("acc_std")
             groups[(_mode(row, chosen), group)] = GroupStat(float(m["acc"]), None if std is None else float(std),
                                                             len(seeds), int(m["n"]))
+    # a set is its list's folder and its tracklets with their groups (generated lists of several seeds share
+    # tracklet ids); the folder from the list's path (`list`, written by eval since 2026-11-28) or the command
     listed = data.get("list")
-    if isinstance(listed, dict) and listed.get("sha1"):   # the list's content, written by eval since 2026-11-28
-        source = Path(str(listed.get("source", "")))
+    if isinstance(listed, dict) and listed.get("source"):
+        source = Path(str(listed["source"]))
         label = (source.parent.name if source.suffix == ".json" else source.name) or Path(path).stem
-        return SetReport(path, "benchmark:" + str(listed["sha1"]), label, chosen, seeds, groups)
-    # older reports: the list's folder in the command and the tracklets (generated lists of several seeds share
-    # tracklet ids)
-    label = _label_from_command(data, Path(path).stem)
+    else:
+        label = _label_from_command(data, Path(path).stem)
     digest = hashlib.sha1(json.dumps(data["tracklets"], sort_keys=True).encode()).hexdigest()[:12]
     return SetReport(path, f"benchmark:{label}:{digest}", label, chosen, seeds, groups)
 
