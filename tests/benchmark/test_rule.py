@@ -108,3 +108,22 @@ def test_two_one_seed_evals_pool_to_the_two_seed_eval(small_benchmark, tmp_path,
     assert main(["bench", "rule", "--baseline", str(out["s0"]), "--candidate", str(out["both"]),
                  "--json", str(out["both"])]) == 2
     assert out["both"].read_bytes() == before
+
+
+def test_a_sequences_reports_pool_like_a_benchmarks(pandaset_root, tmp_path):
+    """`eval SEQ` reports (rows per mode, difficulties with their spreads; real PandaSet tracks, one medium, one
+    hard, 8 frames): two one-seed runs pooled equal the two-seed run group by group."""
+    out = {}
+    for name, extra in (("s0", ["--seeds", "1"]), ("s1", ["--seeds", "1", "--first-seed", "1"]),
+                        ("both", ["--seeds", "2"])):
+        out[name] = tmp_path / f"{name}.json"
+        assert main(["eval", str(pandaset_root), "--tracks", "91aa5b5c,1a46fa13", "--end-frame", "8", "--preset",
+                     "full", "--offline", *extra, "--json", str(out[name])]) == 0
+    both = read_report(out["both"])
+    assert both.seeds == (0, 1) and {g for _, g in both.groups} == {"all", "medium", "hard"}
+    assert any(g.std for g in both.groups.values())   # the seeds differ: the spreads are compared, not zeros
+    check = check_rule([read_report(out["s0"]), read_report(out["s1"])], [both])
+    assert len(check.verdicts) == len(both.groups) and not check.lost and not check.unmatched
+    for v in check.verdicts:
+        assert v.baseline.mean == pytest.approx(v.candidate.mean, abs=1e-9)
+        assert v.baseline.std == pytest.approx(v.candidate.std, abs=1e-9)
