@@ -125,8 +125,8 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
 
     from ..bench.benchmark_eval import evaluate_tracklets, format_benchmark, open_benchmark
     from ..errors import InputError
-    from ..evaluation.rule import list_digest
     from ..io.atomic import write_json
+    from ..io.checksums import sha256_file
     from ..provenance import invoked_command, provenance_record
 
     if args.tracks or args.all_moving:
@@ -150,8 +150,10 @@ def _run_benchmark(args: argparse.Namespace, presets: list[str]) -> int:
         title += "; set " + " ".join(f"{k}={v}" for k, v in args.overrides.items())
     print(format_benchmark(run, title))
     if args.json:
-        # the list evaluated (its path names the set in `sot-apps bench rule`; its digest, the bytes evaluated)
-        listed = {"source": str(Path(bench.source).resolve()), "sha1": list_digest(bench.source)}
+        # the list evaluated (its path names the set in `sot-apps bench rule`; the sha256 of each list file read)
+        source = Path(bench.source).resolve()
+        files = sorted(source.glob("*.json")) if source.is_dir() else [source]
+        listed = {"source": str(source), "sha256": {f.name: sha256_file(f) for f in files}}
         write_json(args.json, run.to_dict() | {"list": listed, "provenance": provenance_record([invoked_command()])})
     return 0
 

@@ -14,7 +14,6 @@ Each report must hold one preset, or the side names the preset to take (``preset
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from collections.abc import Sequence
@@ -23,7 +22,7 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["list_digest", "GroupStat", "SetReport", "GroupVerdict", "RuleCheck", "read_report", "pool", "check_rule",
+__all__ = ["GroupStat", "SetReport", "GroupVerdict", "RuleCheck", "read_report", "pool", "check_rule",
            "format_rule"]
 
 
@@ -41,7 +40,7 @@ class GroupStat:
 @dataclass(frozen=True)
 class SetReport:
     """One ``eval --json`` report reduced to what the rule needs: the evaluation set it ran on (``key`` identifies
-    it: the list's folder and a hash of its tracklets and their groups, or the sequence and its tracks;
+    it: the list's folder and its tracklets with their groups, or the sequence and its tracks;
     ``label`` names it), its seeds, and per (mode, group) the Acc statistics of the chosen preset."""
 
     path: str
@@ -120,17 +119,6 @@ class RuleCheck:
                 "unmatched": list(self.unmatched)}
 
 
-def list_digest(source: str | Path) -> str:
-    """The identity of a benchmark list (a list file, or a folder of list files): the SHA-1 of its bytes (a
-    folder's ``*.json`` files in name order)."""
-    source = Path(source)
-    files = sorted(source.glob("*.json")) if source.is_dir() else [source]
-    digest = hashlib.sha1()
-    for f in files:
-        digest.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
-    return digest.hexdigest()
-
-
 def _mode(row_name: str, preset: str) -> str:
     """``full+lag10`` -> ``lag10``; ``full`` -> ``online``."""
     rest = row_name[len(preset):].lstrip("+")
@@ -193,8 +181,8 @@ def _benchmark_report(path: str, data: dict, preset: str | None) -> SetReport:
         label = (source.parent.name if source.suffix == ".json" else source.name) or Path(path).stem
     else:
         label = _label_from_command(data, Path(path).stem)
-    digest = hashlib.sha1(json.dumps(data["tracklets"], sort_keys=True).encode()).hexdigest()[:12]
-    return SetReport(path, f"benchmark:{label}:{digest}", label, chosen, seeds, groups)
+    key = f"benchmark:{label}:" + json.dumps(data["tracklets"], sort_keys=True)
+    return SetReport(path, key, label, chosen, seeds, groups)
 
 
 def _sequence_report(path: str, data: dict, preset: str | None) -> SetReport:
@@ -216,8 +204,7 @@ def _sequence_report(path: str, data: dict, preset: str | None) -> SetReport:
             groups[(mode, level)] = GroupStat(float(v["acc"]), None if std is None else float(std), len(seeds),
                                               int(v["n_tracklets"]))
     tracks = data.get("tracks") or []
-    key = "sequence:" + hashlib.sha1((str(data.get("sequence")) + "\n" + "\n".join(map(str, tracks))).encode()
-                                     ).hexdigest()[:12]
+    key = f"sequence:{data.get('sequence')}:" + json.dumps(tracks, sort_keys=True)
     label = Path(str(data.get("sequence") or path)).name
     return SetReport(path, key, label, chosen, seeds, groups)
 
