@@ -35,10 +35,12 @@ SCHEMA_VERSION = 1
 # Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points, prior_only and, for a
 # frame without a sweep, no_sweep).
 DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost", "no_sweep"})
-# Every flag the tracker (tracker/sotracker.py, tracker/offline.py) writes, plus "lost" (kept for older files).
+# Every flag the tracker (tracker/sotracker.py, the refinements, keyframes, the Det baseline) writes, plus "lost"
+# (kept for older files).
 TRACKER_FLAGS: frozenset[str] = frozenset({"init", "no_points", "prior_only", "low_points", "nan_points",
                                            "no_shape_inliers", "yaw_clamped", "motion_clamped", "offline", "lost",
-                                           "no_sweep"})
+                                           "no_sweep", "footprint", "coasting", "waiting", "reacquired", "backward",
+                                           "det", "det_only", "keyframe", "keyframes", "low_quality"})
 
 
 def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> bool:

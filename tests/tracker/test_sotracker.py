@@ -107,3 +107,18 @@ def test_track_checks_its_frame_range(sequence):
     with pytest.raises(ValueError):
         Tracker(get_preset("full")).start(sequence.lidar_frame(0), sequence.boxes[0].__class__(
             np.nan, 0, 0, 0, 4, 2, 1.5))
+
+
+def test_every_flag_a_coasting_and_refined_track_writes_is_a_known_tracker_flag():
+    """``sot_apps.io.tracks.TRACKER_FLAGS`` (what `motion-export --invalid-flags` accepts) names every flag the
+    tracker writes: a track that loses its points for four frames (coasting) and its offline refinement."""
+    from sot_apps.io.tracks import TRACKER_FLAGS
+    from tracker import refine_offline
+
+    seq = make_sequence(n_frames=14, seed=6, empty_frames=(5, 6, 7, 8))
+    result = track(seq, seq.boxes[0], 0, 13, get_preset("full"))
+    online = {f for e in result.estimates for f in e.flags}
+    assert {"coasting", "prior_only", "no_points"} <= online
+    refined = {f for e in refine_offline(seq, result, get_preset("full")).estimates for f in e.flags}
+    assert "offline" in refined
+    assert online | refined <= TRACKER_FLAGS, sorted((online | refined) - TRACKER_FLAGS)
