@@ -29,7 +29,8 @@ from typing import Any, Iterable, Mapping
 from .ground_params import GroundParams
 
 __all__ = ["TrackerConfig", "GroundConfig", "SearchConfig", "RegistrationConfig", "RansacConfig", "ShapeConfig",
-           "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "ReacquireConfig", "DetectionConfig",
+           "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "ReacquireConfig", "FootprintConfig",
+           "DetectionConfig",
            "OfflineParams", "OFFLINE_PARAMS",
            "RefinementConfig", "LAG_PARAMS", "PRESETS", "DETECTION_PRESETS", "get_preset", "preset_names",
            "parse_overrides"]
@@ -403,6 +404,28 @@ class ReacquireConfig:
 
 
 @dataclass(frozen=True)
+class FootprintConfig:
+    """The footprint check (tracker/footprint.py): a dense object whose points and shape both contradict the box's
+    heading turns the box. ``min_points`` 0 = off (every preset)."""
+
+    min_points: int = 0                  # > 0: frames with at least this many object points are tested (0: off)
+    min_offset: float = 0.12             # rad: the fitted heading differs from the box's by more than this ...
+    frames: int = 3                      # ... on this many tested frames in a row ...
+    agreement: float = 0.05              # rad: ... by amounts within this of the frame before
+    search_range: float = 0.35           # rad: the fitted heading within this of the box's (each way)
+    min_gain: float = 1.5                # the points line up this many times as sharply there as at the box's
+                                         # heading (a curved front or a partial view lines up no better)
+    crop_length: float = 1.2             # the points fitted: in the box scaled this along its length ...
+    crop_width: float = 1.8              # ... and this across (a box 20 degrees off still holds the object's corners)
+
+    def __post_init__(self) -> None:
+        _positive(self, "footprint", "frames", "search_range", "crop_length", "crop_width", "min_gain")
+        if self.min_points < 0 or self.min_offset < 0 or self.agreement < 0:
+            raise ValueError(f"footprint: min_points, min_offset and agreement must be >= 0, got {self.min_points}, "
+                             f"{self.min_offset}, {self.agreement}")
+
+
+@dataclass(frozen=True)
 class DetectionConfig:
     """The Detection term (Det+SOT, docs/detection.md); ``weight`` 0 = off. With ``method="det"`` the detections
     alone are tracked with a constant-velocity Kalman filter (the paper's Det row)."""
@@ -571,6 +594,7 @@ class TrackerConfig:
     height: HeightConfig = field(default_factory=HeightConfig)
     first_frame: FirstFrameConfig = field(default_factory=FirstFrameConfig)
     reacquire: ReacquireConfig = field(default_factory=ReacquireConfig)
+    footprint: FootprintConfig = field(default_factory=FootprintConfig)
     detection: DetectionConfig = field(default_factory=DetectionConfig)
     refinement: RefinementConfig = field(default_factory=RefinementConfig)
 

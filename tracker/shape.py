@@ -10,7 +10,8 @@ from collections import deque
 
 import numpy as np
 
-from .geometry import Box, transform_points
+from .association import NearestNeighbors
+from .geometry import Box, rotation_z, transform_points
 from .metrics import voxel_downsample_centres
 
 __all__ = ["to_object_frame", "to_world_frame", "ShapeModel", "SubShape"]
@@ -30,11 +31,28 @@ class ShapeModel:
     def __init__(self, voxel_size: float) -> None:
         self.voxel_size = voxel_size
         self.points = np.zeros((0, 3))
+        self._nearest: NearestNeighbors | None = None   # built on the points at the first query after a change
 
     def add(self, points_object: np.ndarray) -> None:
         if len(points_object) == 0:
             return
         self.points = voxel_downsample_centres(np.vstack([self.points, points_object]), self.voxel_size)
+        self._nearest = None
+
+    def turn(self, angle: float) -> None:
+        """Turn the points by ``angle`` about the object frame's vertical axis."""
+        self.points = _turned(self.points, angle)
+        self._nearest = None
+
+    def explained(self, points_object: np.ndarray, radius: float = 0.2) -> tuple[float, int]:
+        """The share of ``points_object`` within ``radius`` of a shape point (0 for an empty shape), and their
+        number."""
+        if len(points_object) == 0 or len(self.points) == 0:
+            return 0.0, len(points_object)
+        if self._nearest is None:
+            self._nearest = NearestNeighbors(self.points)
+        dist, _ = self._nearest.query(points_object)
+        return float((dist <= radius).mean()), len(points_object)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -52,8 +70,16 @@ class SubShape:
         if self._enabled:
             self._frames.append(voxel_downsample_centres(points_object, self.voxel_size))
 
+    def turn(self, angle: float) -> None:
+        """Turn every frame's points by ``angle`` about the object frame's vertical axis."""
+        self._frames = deque((_turned(f, angle) for f in self._frames), maxlen=self._frames.maxlen)
+
     @property
     def points(self) -> np.ndarray:
         if not self._enabled or not self._frames:
             return np.zeros((0, 3))
         return np.vstack(list(self._frames))
+
+
+def _turned(points_object: np.ndarray, angle: float) -> np.ndarray:
+    return points_object @ rotation_z(angle).T if len(points_object) else points_object

@@ -25,10 +25,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .association import NearestNeighbors
 from .config import TrackerConfig
 from .deskew import deskew_points
 from .detection import Detections, FrameDetections, associate_detection, detection_motion
+from .footprint import FootprintCheck
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .local_region import LocalCrop, local_region, road_within
@@ -132,8 +132,6 @@ class Tracker:
         self.shape = ShapeModel(c.shape.voxel_size)
         self.subshape = SubShape(c.shape.subshape_frames if c.shape.subshape else 0, c.shape.voxel_size)
         self.steps = self._coasting = 0
-        self._shape_nn: NearestNeighbors | None = None
-        self._shape_nn_size = -1
         self._previous_pose = previous_pose
         local, flags = self._local_points(frame, box, max(c.first_frame.scale, c.search.scale))
         self.strategies.height.start(box, self._ground_points)
@@ -147,6 +145,7 @@ class Tracker:
         self._lost_start = self.strategies.reacquire.lost_start(len(obj))  # see _search
         self.strategies.travel.reset()
         self.strategies.travel.record(box, time_s)
+        self._footprint = FootprintCheck(c.footprint)
         if len(obj) == 0:
             flags.append("no_points")
         return FrameEstimate(frame.index, box.state, box, len(obj), 1.0, tuple(["init"] + flags),
@@ -297,13 +296,26 @@ class Tracker:
         x[3] = wrap_angle(x[3])
         return x
 
+    def _check_footprint(self, x: np.ndarray, local: np.ndarray, flags: list[str]) -> np.ndarray:
+        """The footprint check (tracker/footprint.py) of a measured frame: the box turns about its centre, the
+        shape and sub-shape turn back in the object frame (they stay where they lie in the world). Flag:
+        ``footprint``."""
+        turn = None if "prior_only" in flags else self._footprint.turn(local, box_moved(self.box, x), self.shape.points)
+        if turn is None:
+            return x
+        flags.append("footprint")
+        self.shape.turn(-turn)
+        self.subshape.turn(-turn)
+        return x + np.array([0.0, 0.0, 0.0, turn])
+
     def _finish_step(self, frame: LidarFrame, x: np.ndarray, local: np.ndarray, flags: list[str],
                      t0: float) -> FrameEstimate:
         c = self.config
+        x = self._check_footprint(x, local, flags)
         box = box_moved(self.box, x)
         inside = local[points_in_box(local, box, 1.0)]   # the points the quality and (crop 1.0) the shape take
         obj = to_object_frame(inside, box)
-        quality = _quality(*self._explained_of(obj))
+        quality = _quality(*self.shape.explained(obj))
         keyframe = c.shape.aggregate and self.steps % c.shape.keyframe_interval == 0
         shared = (inside, obj) if c.shape.crop_scale == 1.0 else None
         obj_world = self._finish_frame(frame, box, local, keyframe, shared)
@@ -436,17 +448,7 @@ class Tracker:
 
     def _explained(self, local: np.ndarray, box: Box) -> tuple[float, int]:
         """Share of the object points in ``box`` within 0.2 m of the shape placed there, and their number."""
-        return self._explained_of(to_object_frame(local[points_in_box(local, box, 1.0)], box))
-
-    def _explained_of(self, obj: np.ndarray) -> tuple[float, int]:
-        """:meth:`_explained` of the object-frame points ``obj``."""
-        if len(obj) == 0 or len(self.shape) == 0:
-            return 0.0, len(obj)
-        if self._shape_nn is None or self._shape_nn_size != len(self.shape):
-            self._shape_nn = NearestNeighbors(self.shape.points)
-            self._shape_nn_size = len(self.shape)
-        dist, _ = self._shape_nn.query(obj)
-        return float((dist <= 0.2).mean()), len(obj)
+        return self.shape.explained(to_object_frame(local[points_in_box(local, box, 1.0)], box))
 
 
 def _quality(explained: float, count: int) -> float:

@@ -1,0 +1,134 @@
+"""The footprint check (tracker/footprint.py): a dense object's points turn a box whose heading they contradict."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from tracker_synthetic import BOX_SIZE, car_points, make_sequence, trajectory
+
+from tracker import Tracker, get_preset
+from tracker.config import FootprintConfig
+from tracker.footprint import FootprintCheck, fit_heading
+from tracker.geometry import Box, rotation_z, wrap_angle
+from tracker.shape import ShapeModel, SubShape
+
+
+@pytest.mark.parametrize("heading, start_offset, sensor", [
+    (0.3, 0.2, (0.0, 0.0, 1.7)),       # seen from behind-side: back and one side
+    (-2.4, -0.25, (20.0, -8.0, 1.7)),  # seen from the front-side
+    (1.2, 0.15, (12.0, 30.0, 1.7)),    # side on: one long side and the roof
+])
+def test_the_fitted_heading_is_the_vehicles_own_from_a_search_started_off_it(heading, start_offset, sensor):
+    rng = np.random.default_rng(7)
+    box = Box(12.0, 4.0, 0.0, heading, *BOX_SIZE)
+    points = car_points(rng, box, np.array(sensor))
+    points += rng.normal(0.0, 0.02, points.shape)
+    assert len(points) > 300
+    fit = fit_heading(points, heading + start_offset, search_range=0.35)
+    assert abs(np.degrees(wrap_angle(fit.heading - heading))) < 2.0   # 0.1 m bins over a 4.5 m side: ~1.3 deg
+    assert fit.interior and fit.gain > 1.1   # flat, evenly sampled faces: real scans line up sharper
+    # a start farther off than the range: the best is its end, no peak
+    beyond = fit_heading(points, heading + 0.6, 0.35)
+    assert abs(wrap_angle(beyond.heading - heading - 0.6)) <= 0.35 + 1e-9 and not beyond.interior
+    # searched from the truth: no gain
+    assert fit_heading(points, heading, 0.35).gain < 1.05
+
+
+def _object_frame(points: np.ndarray, box: Box) -> np.ndarray:
+    return (points - box.center) @ rotation_z(box.heading)
+
+
+def test_the_check_turns_the_box_after_agreeing_dense_frames_in_a_row_once_and_only_if_the_shape_was_built_turned():
+    rng = np.random.default_rng(3)
+    truth = Box(10.0, 3.0, 0.0, 0.5, *BOX_SIZE)
+    sensor = np.array([0.0, 0.0, 1.7])
+    dense = [car_points(rng, truth, sensor) for _ in range(6)]
+    sparse = dense[0][:20]
+    wrong = 0.5 + 0.25
+    box = Box(truth.x, truth.y, truth.z, wrong, *BOX_SIZE)
+    built_turned = _object_frame(car_points(rng, truth, sensor), box)     # the real car, seen from the wrong box
+    built_right = _object_frame(car_points(rng, box, sensor), box)        # a car that lines up with the box
+
+    def check(frames: int = 3, min_points: int = 150) -> FootprintCheck:
+        return FootprintCheck(FootprintConfig(min_points=min_points, min_offset=0.1, frames=frames, agreement=0.05,
+                                              search_range=0.35, min_gain=1.1))
+
+    first = check()
+    assert first.test(dense[0], wrong, built_turned) is None
+    assert first.test(dense[1], wrong, built_turned) is None
+    assert first.test(sparse, wrong, built_turned) is None          # a sparse frame ends the run
+    assert first.test(dense[2], wrong, built_turned) is None
+    assert first.test(dense[3], wrong, built_turned) is None
+    turned = first.test(dense[4], wrong, built_turned)
+    assert turned is not None and abs(np.degrees(turned - 0.5)) < 2.0
+    assert first.test(dense[5], wrong, built_turned) is None        # once per (re)start
+    # the same votes against a shape that lines up with the box: the registration's own error, no turn
+    second = check(frames=1)
+    assert all(second.test(d, wrong, built_right) is None for d in dense)
+    # a box already within min_offset is never turned
+    assert all(check(frames=1).test(d, 0.5 + 0.05, built_turned) is None for d in dense)
+    # off
+    assert check(frames=1, min_points=0).test(dense[0], wrong, built_turned) is None
+
+
+def _turn_box_against_shape(tracker: Tracker, delta: float) -> None:
+    """The state a shape aggregated in a wrong frame leaves (the box on something else, or a sparse partial view,
+    while the shape grew): the box turned by ``delta`` and the shape and sub-shape turned back by it, so that both
+    still lie on the points in the world."""
+    b = tracker.box
+    tracker.box = Box(b.x, b.y, b.z, float(wrap_angle(b.heading + delta)), b.length, b.width, b.height)
+    back = rotation_z(-delta)
+    shape = ShapeModel(tracker.config.shape.voxel_size)
+    shape.add(tracker.shape.points @ back.T)
+    tracker.shape = shape
+    sub = SubShape(tracker.config.shape.subshape_frames, tracker.config.shape.voxel_size)
+    for frame_points in tracker.subshape._frames:
+        sub.add(frame_points @ back.T)
+    tracker.subshape = sub
+
+
+@pytest.mark.parametrize("delta_deg", [12.0, -15.0])
+def test_a_dense_track_whose_shape_was_built_turned_is_turned_back_to_the_vehicles_heading(delta_deg):
+    """Without the check the registration holds the box where the shape puts it (more than half of delta off for
+    good); with it the box is back within 2 degrees three dense frames later, and stays there."""
+    boxes = trajectory(24, speed=0.8, yaw_rate=0.0, turn_after=99)
+    sequence = make_sequence(24, seed=4, boxes=boxes)
+
+    def heading_errors(**overrides) -> tuple[np.ndarray, list[int]]:
+        tracker = Tracker(get_preset("full", seed=0, **overrides))
+        tracker.start(sequence.lidar_frame(0), boxes[0])
+        errors, turned = [], []
+        for k in range(1, 24):
+            estimate = tracker.step(sequence.lidar_frame(k))
+            if "footprint" in estimate.flags:
+                turned.append(k)
+            if k == 5:
+                _turn_box_against_shape(tracker, np.radians(delta_deg))
+            errors.append(abs(np.degrees(wrap_angle(tracker.box.heading - boxes[k].heading))))
+        return np.array(errors), turned
+
+    off, never = heading_errors(**{"footprint.min_points": 0})
+    assert off[:4].max() < 2.0 and off[5:].min() > abs(delta_deg) / 2 and never == []
+    on, turned = heading_errors(**{"footprint.min_points": 150, "footprint.min_gain": 1.1})
+    assert np.array_equal(on[:5], off[:5])            # nothing changes before
+    assert turned == [8]                              # frames 6, 7, 8 dense and agreeing: turned at the third
+    assert on[7:].max() < 2.0
+
+
+def test_a_box_turned_together_with_its_shape_is_left_to_the_registration():
+    """Box and shape turned together (the registration's own error; the shape still lines up with the box): the
+    registration turns them back within a few frames and nothing else turns the box."""
+    boxes = trajectory(16, speed=0.8, yaw_rate=0.0, turn_after=99)
+    sequence = make_sequence(16, seed=4, boxes=boxes)
+    tracker = Tracker(get_preset("full", seed=0, **{"footprint.min_points": 150, "footprint.min_gain": 1.1}))
+    tracker.start(sequence.lidar_frame(0), boxes[0])
+    flags, errors = [], []
+    for k in range(1, 16):
+        flags += tracker.step(sequence.lidar_frame(k)).flags
+        if k == 5:
+            b = tracker.box
+            tracker.box = Box(b.x, b.y, b.z, float(wrap_angle(b.heading + np.radians(12.0))), b.length, b.width,
+                              b.height)
+        errors.append(abs(np.degrees(wrap_angle(tracker.box.heading - boxes[k].heading))))
+    assert "footprint" not in flags
+    assert errors[4] > 10.0 and max(errors[-5:]) < 2.0
