@@ -10,7 +10,6 @@ from tracker import Tracker, get_preset
 from tracker.config import FootprintConfig
 from tracker.footprint import FootprintCheck, fit_heading
 from tracker.geometry import Box, rotation_z, wrap_angle
-from tracker.shape import ShapeModel, SubShape
 
 
 @pytest.mark.parametrize("heading, start_offset, sensor", [
@@ -77,14 +76,8 @@ def _turn_box_against_shape(tracker: Tracker, delta: float) -> None:
     still lie on the points in the world."""
     b = tracker.box
     tracker.box = Box(b.x, b.y, b.z, float(wrap_angle(b.heading + delta)), b.length, b.width, b.height)
-    back = rotation_z(-delta)
-    shape = ShapeModel(tracker.config.shape.voxel_size)
-    shape.add(tracker.shape.points @ back.T)
-    tracker.shape = shape
-    sub = SubShape(tracker.config.shape.subshape_frames, tracker.config.shape.voxel_size)
-    for frame_points in tracker.subshape._frames:
-        sub.add(frame_points @ back.T)
-    tracker.subshape = sub
+    tracker.shape.turn(-delta)
+    tracker.subshape.turn(-delta)
 
 
 @pytest.mark.parametrize("delta_deg", [12.0, -15.0])
