@@ -24,7 +24,7 @@ import numpy as np
 from .config import FootprintConfig
 from .geometry import Box, points_in_box, wrap_angle
 
-__all__ = ["HeadingFit", "fit_heading", "FootprintCheck"]
+__all__ = ["HeadingFit", "fit_heading", "FootprintCheck", "held_turned"]
 
 _COARSE = np.radians(2.0)    # the heading grid of the search ...
 _STEP = np.radians(0.5)      # ... refined around its best
@@ -87,6 +87,15 @@ def _sharpness(values: np.ndarray) -> np.ndarray:
         counts = np.bincount(flat, minlength=width * values.shape[0]).reshape(values.shape[0], width)
         total += (counts.astype(np.float64) ** 2).sum(axis=1)
     return total / values.shape[1] ** 2
+
+
+def held_turned(points: np.ndarray, heading: float, turn: float, config: FootprintConfig) -> bool:
+    """Whether a frame before a footprint turn was held turned too: its object ``points`` (world; at least
+    ``min_points``) line up sharpest nearer ``heading`` + ``turn`` than its box's ``heading``."""
+    if len(points) < max(config.min_points, 2):
+        return False
+    offset = float(wrap_angle(fit_heading(points, heading, config.search_range).heading - heading))
+    return abs(offset - turn) < abs(offset)
 
 
 class FootprintCheck:

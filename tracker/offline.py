@@ -77,6 +77,7 @@ from scipy.spatial import cKDTree
 
 from .bidirectional import fused_result, is_lost
 from .config import OfflineParams, TrackerConfig
+from .footprint import held_turned
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
@@ -894,6 +895,26 @@ def _window_start(source: FrameSource | None, result: TrackResult, config: Track
     return states, shape, points
 
 
+def footprint_carried_back(result: TrackResult, config: TrackerConfig) -> TrackResult:
+    """``result`` with each footprint turn (:attr:`FrameEstimate.turn`, tracker/footprint.py) carried back over
+    the frames before it that were held turned too (:func:`~tracker.footprint.held_turned`: dense, their points
+    line up nearer the turned heading), back to the first that was not or to the shape's (re)start: each such box
+    turned by the same amount about its centre. Online those frames are final; the whole-sequence solve starts
+    from them, and a turn left at frame k with the frames before it held turned is a kink that the solve's
+    smoothness and fold shapes spread over both sides."""
+    estimates = list(result.estimates)
+    for i in [i for i, e in enumerate(estimates) if e.turn != 0.0]:
+        turn = estimates[i].turn
+        j = i - 1
+        while (j > 0 and not {"init", "reacquired"} & set(estimates[j].flags)
+               and held_turned(estimates[j].points, estimates[j].box.heading, turn, config.footprint)):
+            e = estimates[j]
+            box = dataclasses.replace(e.box, heading=float(wrap_angle(e.box.heading + turn)))
+            estimates[j] = dataclasses.replace(e, box=box, state=box.state)
+            j -= 1
+    return dataclasses.replace(result, estimates=estimates)
+
+
 def refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig | None = None,
                    params: OfflineParams | None = None, points: list[np.ndarray] | None = None) -> TrackResult:
     """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
@@ -902,6 +923,13 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
     them, when the caller gathered them while tracking (then ``source`` is not read and may be None)."""
     config = config or result.config
     params = params or config.refinement.offline
+    if config.footprint.carry_back:
+        result = footprint_carried_back(result, config)
+    return _refine_offline(source, result, config, params, points)
+
+
+def _refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
+                    points: list[np.ndarray] | None) -> TrackResult:
     if config.refinement.backward != "none" and source is not None:  # bidirectional: the fused states are the data
         fused = fused_result(source, result, config)
         if points is not None:

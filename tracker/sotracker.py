@@ -52,7 +52,8 @@ class FrameEstimate:
     ``num_points``: object points (ground removed) in the estimated box; ``points``: those points (N, 3);
     ``quality``: 0..1 (share of those points that the registration explains, scaled down when sparse);
     ``flags``: e.g. "init", "no_points", "prior_only", "low_points", "nan_points", "no_shape_inliers",
-    "no_sweep" (the frame has no sweep: a prediction only, see :meth:`Tracker.step`).
+    "no_sweep" (the frame has no sweep: a prediction only, see :meth:`Tracker.step`). ``turn``: how far the
+    footprint check turned this frame's box (rad, flag ``footprint``; 0 elsewhere): the refinements carry it back.
     """
 
     frame: int
@@ -63,6 +64,7 @@ class FrameEstimate:
     flags: tuple[str, ...]
     time_ms: float
     points: np.ndarray = field(repr=False)
+    turn: float = 0.0
 
 
 @dataclass
@@ -296,22 +298,22 @@ class Tracker:
         x[3] = wrap_angle(x[3])
         return x
 
-    def _check_footprint(self, x: np.ndarray, local: np.ndarray, flags: list[str]) -> np.ndarray:
+    def _check_footprint(self, x: np.ndarray, local: np.ndarray, flags: list[str]) -> tuple[np.ndarray, float]:
         """The footprint check (tracker/footprint.py) of a measured frame: the box turns about its centre, the
         shape and sub-shape turn back in the object frame (they stay where they lie in the world). Flag:
         ``footprint``."""
         turn = None if "prior_only" in flags else self._footprint.turn(local, box_moved(self.box, x), self.shape.points)
         if turn is None:
-            return x
+            return x, 0.0
         flags.append("footprint")
         self.shape.turn(-turn)
         self.subshape.turn(-turn)
-        return x + np.array([0.0, 0.0, 0.0, turn])
+        return x + np.array([0.0, 0.0, 0.0, turn]), turn
 
     def _finish_step(self, frame: LidarFrame, x: np.ndarray, local: np.ndarray, flags: list[str],
                      t0: float) -> FrameEstimate:
         c = self.config
-        x = self._check_footprint(x, local, flags)
+        x, turn = self._check_footprint(x, local, flags)
         box = box_moved(self.box, x)
         inside = local[points_in_box(local, box, 1.0)]   # the points the quality and (crop 1.0) the shape take
         obj = to_object_frame(inside, box)
@@ -324,7 +326,7 @@ class Tracker:
         self.box = box
         self.strategies.travel.record(box, int(frame.timestamp_ns) * 1e-9)
         return FrameEstimate(frame.index, box.state, box, len(obj_world), quality, tuple(dict.fromkeys(flags)),
-                             (time.perf_counter() - t0) * 1e3, obj_world)
+                             (time.perf_counter() - t0) * 1e3, obj_world, turn)
 
     def _finish_frame(self, frame: LidarFrame, box: Box, local: np.ndarray, keyframe: bool,
                       object_points: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:

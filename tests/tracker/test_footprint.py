@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from tracker_synthetic import BOX_SIZE, car_points, make_sequence, trajectory
 
-from tracker import Tracker, get_preset
+from tracker import Tracker, get_preset, refine_offline
 from tracker.config import FootprintConfig
-from tracker.footprint import FootprintCheck, fit_heading
+from tracker.footprint import FootprintCheck, fit_heading, held_turned
 from tracker.geometry import Box, rotation_z, wrap_angle
+from tracker.offline import footprint_carried_back
+from tracker.sotracker import TrackResult
 
 
 @pytest.mark.parametrize("heading, start_offset, sensor", [
@@ -125,3 +129,58 @@ def test_a_box_turned_together_with_its_shape_is_left_to_the_registration():
         errors.append(abs(np.degrees(wrap_angle(tracker.box.heading - boxes[k].heading))))
     assert "footprint" not in flags
     assert errors[4] > 10.0 and max(errors[-5:]) < 2.0
+
+
+def test_a_frame_was_held_turned_when_its_dense_points_line_up_nearer_the_turned_heading():
+    rng = np.random.default_rng(5)
+    truth = Box(10.0, 3.0, 0.0, 0.5, *BOX_SIZE)
+    points = car_points(rng, truth, np.array([0.0, 0.0, 1.7]))
+    config = FootprintConfig(min_points=150)
+    assert held_turned(points, 0.5 + 0.2, -0.2, config)        # its box 0.2 off: the turn brings it home
+    assert held_turned(points, 0.5 + 0.15, -0.2, config)       # partly
+    assert not held_turned(points, 0.5, -0.2, config)          # its box right: the turn would take it off
+    assert not held_turned(points, 0.5 - 0.2, -0.2, config)    # off the other way
+    assert not held_turned(points[:100], 0.5 + 0.2, -0.2, config)   # too few points to say
+
+
+def _track_with_turned_shape(overrides: dict, frames: int = 16, delta_deg: float = 12.0):
+    boxes = trajectory(frames, speed=0.8, yaw_rate=0.0, turn_after=99)
+    sequence = make_sequence(frames, seed=4, boxes=boxes)
+    config = get_preset("full", seed=0, **overrides)
+    tracker = Tracker(config)
+    estimates = [tracker.start(sequence.lidar_frame(0), boxes[0])]
+    for k in range(1, frames):
+        estimates.append(tracker.step(sequence.lidar_frame(k)))
+        if k == 5:   # frames 6 and 7 are held turned with the shape; the check turns the box at frame 8
+            _turn_box_against_shape(tracker, np.radians(delta_deg))
+    return sequence, boxes, TrackResult(estimates, boxes[0].size, tracker.shape_points(), config)
+
+
+def _heading_errors(estimates, boxes) -> np.ndarray:
+    return np.array([abs(np.degrees(wrap_angle(e.box.heading - b.heading))) for e, b in zip(estimates, boxes, strict=True)])
+
+
+@pytest.mark.parametrize("delta_deg", [12.0, -15.0])
+def test_offline_carries_a_footprint_turn_back_over_exactly_the_frames_held_turned_with_it(delta_deg):
+    on = {"footprint.min_points": 150, "footprint.min_gain": 1.1}
+    sequence, boxes, result = _track_with_turned_shape(on, delta_deg=delta_deg)
+    turns = {e.frame: e.turn for e in result.estimates if e.turn != 0.0}
+    assert list(turns) == [8] and abs(np.degrees(turns[8]) + delta_deg) < 2.0   # the turn undoes the wrong shape
+    online = _heading_errors(result.estimates, boxes)
+    assert online[6:8].min() > abs(delta_deg) - 2.0 and online[:6].max() < 2.0
+    carried = footprint_carried_back(result, result.config)
+    after = _heading_errors(carried.estimates, boxes)
+    assert after.max() < 2.0                                              # frames 6, 7 turned back ...
+    assert all(a is b for a, b in zip(result.estimates[:6] + result.estimates[8:],
+                                      carried.estimates[:6] + carried.estimates[8:], strict=True))   # ... and only they
+    # every earlier frame held turned: carried back to the start box, never onto it
+    held_from_start = TrackResult([result.estimates[0]] + [
+        dataclasses.replace(e, box=dataclasses.replace(e.box, heading=float(e.box.heading - turns[8])))
+        for e in result.estimates[1:6]] + result.estimates[6:], result.size, result.shape, result.config)
+    assert _heading_errors(footprint_carried_back(held_from_start, result.config).estimates, boxes).max() < 2.0
+    # the offline solve from the carried states: every frame within 1 degree; without the carry it starts from
+    # the turn's kink
+    refined = refine_offline(sequence, result)
+    assert _heading_errors(refined.estimates, boxes).max() < 1.0
+    kept = refine_offline(sequence, result, result.config.updated({"footprint.carry_back": False}))
+    assert not np.array_equal([e.box.heading for e in kept.estimates], [e.box.heading for e in refined.estimates])
