@@ -902,8 +902,11 @@ def footprint_carried_back(result: TrackResult, config: TrackerConfig) -> TrackR
     turned by the same amount about its centre. Online those frames are final; the whole-sequence solve starts
     from them, and a turn left at frame k with the frames before it held turned is a kink that the solve's
     smoothness and fold shapes spread over both sides."""
+    turns = [i for i, e in enumerate(result.estimates) if e.turn != 0.0]
+    if not turns:
+        return result
     estimates = list(result.estimates)
-    for i in [i for i, e in enumerate(estimates) if e.turn != 0.0]:
+    for i in turns:
         turn = estimates[i].turn
         j = i - 1
         while (j > 0 and not {"init", "reacquired"} & set(estimates[j].flags)
@@ -924,7 +927,11 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
     config = config or result.config
     params = params or config.refinement.offline
     if config.footprint.carry_back:
-        result = footprint_carried_back(result, config)
+        carried = footprint_carried_back(result, config)
+        if carried is not result and points is None and source is not None:
+            # each frame's points around its online box, as a tracking pass gathers them while it tracks
+            points = gather_frame_points(source, result, config, params)
+        result = carried
     return _refine_offline(source, result, config, params, points)
 
 

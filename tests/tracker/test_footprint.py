@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from tracker_synthetic import BOX_SIZE, car_points, make_sequence, trajectory
 
-from tracker import Tracker, get_preset, refine_offline
+from tracker import Tracker, get_preset, offline, refine_offline
 from tracker.config import FootprintConfig
 from tracker.footprint import FootprintCheck, fit_heading, held_turned
 from tracker.geometry import Box, rotation_z, wrap_angle
-from tracker.offline import footprint_carried_back
+from tracker.offline import footprint_carried_back, gather_frame_points
 from tracker.sotracker import TrackResult
 
 
@@ -184,3 +184,24 @@ def test_offline_carries_a_footprint_turn_back_over_exactly_the_frames_held_turn
     assert _heading_errors(refined.estimates, boxes).max() < 1.0
     kept = refine_offline(sequence, result, result.config.updated({"footprint.carry_back": False}))
     assert not np.array_equal([e.box.heading for e in kept.estimates], [e.box.heading for e in refined.estimates])
+
+
+def test_offline_with_a_carried_turn_is_the_same_from_a_source_or_from_the_points_a_pass_gathered(monkeypatch):
+    """A tracking pass gathers each frame's points around its online box while it tracks and solves from them
+    (sot_apps.tracking); tracking alone reads the source: the carried boxes must not change which points (here the
+    car stands alone, so the turned regions would hold the same points: the boxes gathered around are checked)."""
+    sequence, _, result = _track_with_turned_shape({"footprint.min_points": 150, "footprint.min_gain": 1.1})
+    assert any(e.turn != 0.0 for e in result.estimates)
+    config = result.config
+    gathered = gather_frame_points(sequence, result, config, config.refinement.offline)
+    around = []
+
+    def spy(source, track, *args, **kwargs):
+        around.append([e.box for e in track.estimates])
+        return gather_frame_points(source, track, *args, **kwargs)
+
+    monkeypatch.setattr(offline, "gather_frame_points", spy)
+    alone, passed = refine_offline(sequence, result), refine_offline(None, result, points=gathered)
+    assert around == [[e.box for e in result.estimates]]   # once, around the online boxes
+    assert [e.box for e in alone.estimates] == [e.box for e in passed.estimates]
+    assert np.array_equal(alone.shape, passed.shape)
