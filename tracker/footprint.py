@@ -12,7 +12,8 @@ the aggregated shape is asked the same in the box's frame: if it lines up sharpe
 was built turned), the box turns there about its centre, once per (re)start, and the shape turns back by as much in
 the box's frame (it stays where it lies in the world). A shape that lines up with the box says the registration
 has turned box and shape together away from the points for a while (a partial view); it turns them back itself, and
-turning the box alone would overshoot then: no turn.
+turning the box alone would overshoot then: no turn. The offline solve carries a turn back over the frames before it
+that were held turned too (:func:`held_turned`; tracker/offline.py ``footprint_carried_back``).
 """
 
 from __future__ import annotations
