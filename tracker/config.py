@@ -417,7 +417,7 @@ class FootprintConfig:
                                          # heading (a curved front or a partial view lines up no better)
     crop_length: float = 1.2             # the points fitted: in the box scaled this along its length ...
     crop_width: float = 1.8              # ... and this across (a box 20 degrees off still holds the object's corners)
-    carry_back: bool = True              # offline: the turn also turns the frames since the shape's (re)start
+    carry_back: bool = True              # offline: the turn also turns the frames before it that were held turned
 
     def __post_init__(self) -> None:
         _positive(self, "footprint", "frames", "search_range", "crop_length", "crop_width", "min_gain")

@@ -53,7 +53,7 @@ class FrameEstimate:
     ``quality``: 0..1 (share of those points that the registration explains, scaled down when sparse);
     ``flags``: e.g. "init", "no_points", "prior_only", "low_points", "nan_points", "no_shape_inliers",
     "no_sweep" (the frame has no sweep: a prediction only, see :meth:`Tracker.step`). ``turn``: how far the
-    footprint check turned this frame's box (rad, flag ``footprint``; 0 elsewhere): the refinements carry it back.
+    footprint check turned this frame's box (rad, flag ``footprint``; 0 elsewhere): the offline solve carries it back.
     """
 
     frame: int
