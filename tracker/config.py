@@ -406,7 +406,7 @@ class ReacquireConfig:
 @dataclass(frozen=True)
 class FootprintConfig:
     """The footprint check (tracker/footprint.py): a dense object whose points and shape both contradict the box's
-    heading turns the box. ``min_points`` 0 = off (``full``: 150; the ablations from ``full`` keep it; ``faithful``: off)."""
+    heading turns the box. ``min_points`` 0 = off (every preset)."""
 
     min_points: int = 0                  # > 0: frames with at least this many object points are tested (0: off)
     min_offset: float = 0.12             # rad: the fitted heading differs from the box's by more than this ...
@@ -781,7 +781,6 @@ _FULL = TrackerConfig(
                               start_fill_frames=3),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0,
                                                             dense_voxel=0.025, window_start_first_moved=0.25)),
-    footprint=FootprintConfig(min_points=150),
 )
 # faithful: the authors' implementation (docs/tracker.md)
 _FAITHFUL = TrackerConfig(
