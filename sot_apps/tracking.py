@@ -615,7 +615,9 @@ def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: in
                 o.final += o.smoother.finish()
                 result = TrackResult(o.final, np.asarray(online.size), o.smoother.shape, config, mode="lag", lag=lag)
             elif refine == "offline":
-                result = refine_offline(None, online, config, points=o.regions)
+                # backward passes re-read the frames of a lost run (and gather points around the fused boxes)
+                source = seq if config.refinement.backward != "none" else None
+                result = refine_offline(source, online, config, points=o.regions)
             else:
                 result = online
         except Exception as exc:  # noqa: BLE001 - one object's failure does not stop the others

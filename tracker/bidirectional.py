@@ -62,7 +62,7 @@ class AnchorDetector:
     def __init__(self, config: TrackerConfig) -> None:
         self.refinement = config.refinement
         self.count = 0
-        self.run_start, self.run_lost = 1, False  # the current weak run: its first index, whether it holds a lost one
+        self.run_start, self.run_lost = 1, 0  # the current weak run: its first index, how many lost frames it holds
 
     def add(self, estimate: FrameEstimate) -> tuple[int, int] | None:
         k, r = self.count, self.refinement
@@ -72,11 +72,11 @@ class AnchorDetector:
         lost = is_lost(estimate, r.backward_lost_points)
         dense = estimate.num_points >= r.backward_dense_points
         strong = not lost and (dense or "reacquired" in estimate.flags)
-        out = (self.run_start - 1, k) if strong and self.run_lost else None
+        out = (self.run_start - 1, k) if strong and self.run_lost >= max(1, r.backward_lost_frames) else None
         if strong and dense:
-            self.run_start, self.run_lost = k + 1, False
+            self.run_start, self.run_lost = k + 1, 0
         elif not strong:
-            self.run_lost = self.run_lost or lost
+            self.run_lost += int(lost)
         return out
 
 

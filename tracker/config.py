@@ -570,6 +570,7 @@ class RefinementConfig:
     backward: str = "none"
     backward_dense_points: int = 100     # an anchor holds at least this many object points (or is re-locked)
     backward_lost_points: int = 3        # a frame with fewer (or flagged prior_only, coasting, waiting) is lost
+    backward_lost_frames: int = 1        # an anchor's weak run holds at least this many lost frames
     backward_reach: int = 40             # offline: the pass starts from the densest frame held up to this many
                                          # frames after the anchor
     backward_lag_lead: int = 3           # fixed lag: the pass starts this many frames after the anchor (held)

@@ -873,6 +873,13 @@ def _largest_move(states: np.ndarray, online: np.ndarray) -> float:
     return float(np.max(np.hypot(states[:, 0] - online[:, 0], states[:, 1] - online[:, 1])))
 
 
+def _moved_by_backward_passes(fused: TrackResult, result: TrackResult, moved: float) -> bool:
+    """Whether the backward passes moved some centre of ``result`` farther than ``moved`` (m): a pass that agrees
+    with the forward one within that changes nothing (the solve starts from the online states as without it)."""
+    return _largest_move(np.array([e.state.to_array() for e in fused.estimates]),
+                         np.array([e.state.to_array() for e in result.estimates])) > moved
+
+
 def _window_start(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
                   points: list[np.ndarray], online: np.ndarray, window: np.ndarray, states: np.ndarray,
                   shape: np.ndarray | None
@@ -937,8 +944,9 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
 
 def _refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig, params: OfflineParams,
                     points: list[np.ndarray] | None) -> TrackResult:
-    if config.refinement.backward != "none" and source is not None:  # bidirectional: the fused states are the data
-        fused = fused_result(source, result, config)
+    if config.refinement.backward != "none" and source is not None and _moved_by_backward_passes(
+            fused := fused_result(source, result, config), result, params.window_start_moved):
+        # bidirectional: the backward passes moved a lost stretch, the fused states are the data
         if points is not None:
             points = [p if a is b else frame_region_points(source.lidar_frame(b.frame), b.box, config, params)
                       for p, a, b in zip(points, result.estimates, fused.estimates, strict=True)]

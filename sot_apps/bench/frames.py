@@ -5,9 +5,10 @@ each preset and each variant (``NAME:PATH=VALUE,PATH=VALUE``: ``full`` with thos
 tracklet: Acc (mean 3D IoU over frames 1..n-1, as ``sot-apps eval``), the median and last-frame absolute heading
 error (degrees) and the mean height error (m); with ``--frames`` each frame's errors in the ground-truth box's frame
 (along, across, z; m), the heading error (deg), the object points and flags (``C`` yaw capped, ``P`` prior only,
-``c`` coasting). It diagnoses on CHOOSING sets: a list whose tracklets come from the bank's confirming part
-(``split: confirm``) is refused unless ``--allow-confirm`` (the confirming part never influences a choice;
-docs/benchmark.md).
+``c`` coasting, ``r`` re-locked, ``b`` from a backward pass). ``--offline``: each run's offline refinement
+(:func:`tracker.offline.refine_offline`, as ``sot-apps eval --offline``) instead of its online states. It diagnoses
+on CHOOSING sets: a list whose tracklets come from the bank's confirming part (``split: confirm``) is refused unless
+``--allow-confirm`` (the confirming part never influences a choice; docs/benchmark.md).
 """
 
 from __future__ import annotations
@@ -69,7 +70,8 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
 
 def _flags(estimate: FrameEstimate) -> str:
     return "".join(mark if flag in estimate.flags else "." for flag, mark in
-                   (("yaw_clamped", "C"), ("prior_only", "P"), ("coasting", "c")))
+                   (("yaw_clamped", "C"), ("prior_only", "P"), ("coasting", "c"), ("reacquired", "r"),
+                    ("backward", "b")))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -80,6 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tracklets", default=None, metavar="ID,...", help="only these tracklet ids")
     parser.add_argument("--seed", type=int, default=0, help="tracker seed (default 0)")
     parser.add_argument("--frames", action="store_true", help="print per-frame rows")
+    parser.add_argument("--offline", action="store_true", help="the runs' offline refinement (as eval --offline)")
     parser.add_argument("--allow-confirm", action="store_true",
                         help="also diagnose tracklets of the bank's confirming part (not for choosing)")
 
@@ -87,7 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from tracker import get_preset, track
+    from tracker import get_preset, refine_offline, track
 
     from ..errors import InputError
     from ..io import open_sequence
@@ -126,6 +129,8 @@ def run(args: argparse.Namespace) -> int:
         runs = {}
         for name, config in configs.items():
             result = track(source, truth[0], a, b, config)
+            if args.offline:
+                result = refine_offline(source, result, config)
             runs[name] = (result.estimates, frame_errors([e.box for e in result.estimates], truth))
             pooled[name].append(runs[name][1].iou[1:])
         head = f"{t.id} {t.profile or '-':12s} {t.difficulty or '-':6s}"

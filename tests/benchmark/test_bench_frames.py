@@ -43,3 +43,21 @@ def test_a_list_from_the_confirming_part_is_refused(tmp_path, capsys):
     path.write_text(json.dumps([entry]))
     assert main(["bench", "frames", str(path)]) == 2
     assert "confirming part" in capsys.readouterr().err
+
+
+
+def test_offline_rows_are_the_offline_refinement_that_eval_scores(small_benchmark, capsys, tmp_path):
+    """``--offline``: each run's offline refinement, pooled as ``sot-apps eval --offline`` pools it (the eval's
+    offline row over the same tracklets, seed 0; online likewise)."""
+    listing = str(small_benchmark / "benchmark.json")
+    pooled = {}
+    for mode in ("online", "offline"):
+        assert main(["bench", "frames", listing, "--preset", "full"] + (["--offline"] if mode == "offline" else [])) == 0
+        pooled[mode] = float(capsys.readouterr().out.strip().splitlines()[-1].split()[-1])
+    report = tmp_path / "report.json"
+    assert main(["eval", "--benchmark", listing, "--preset", "full", "--offline", "--json", str(report)]) == 0
+    capsys.readouterr()
+    tables = json.loads(report.read_text())["tables"]
+    assert pooled["offline"] == pytest.approx(100 * tables["full+offline"]["all"]["acc"], abs=0.051)
+    assert pooled["online"] == pytest.approx(100 * tables["full"]["all"]["acc"], abs=0.051)
+    assert pooled["offline"] != pooled["online"]

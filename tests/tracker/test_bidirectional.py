@@ -83,6 +83,41 @@ def test_anchors_are_dense_or_relocked_frames_after_a_weak_run_with_a_lost_frame
     assert anchors(estimates, config) == [(1, 5), (1, 6), (7, 10)]
     detector = AnchorDetector(config)
     assert [detector.add(e) for e in estimates][5] == (1, 5)             # causal: known when frame 5 arrives
+    # an anchor's run holds at least backward_lost_frames lost frames: 8-9 holds one, 2-5 two
+    two = config.updated({"refinement.backward_lost_frames": 2})
+    assert anchors(estimates, two) == [(1, 5), (1, 6)]
+    assert anchors(estimates, config.updated({"refinement.backward_lost_frames": 3})) == []
+
+
+def test_backward_passes_that_move_no_frame_beyond_window_start_moved_leave_the_offline_solve_as_without(
+        far_approach):
+    """The fused states are the solve's data only where the backward passes moved some frame farther than
+    ``window_start_moved`` from the online states (on the far approach they move the lost frames by metres)."""
+    seq, boxes, online, found = far_approach
+    settings = {**REACQUIRE, "refinement.offline.gauge_heading_points": 30}
+    for moved, same in ((0.5, False), (100.0, True)):
+        plain, both = (refine_offline(seq, online, get_preset("full", seed=0, **settings, **{
+            "refinement.backward": backward, "refinement.offline.window_start_moved": moved}))
+            for backward in ("none", "offline"))
+        assert np.array_equal([e.box.to_array() for e in plain.estimates],
+                              [e.box.to_array() for e in both.estimates]) == same
+        assert any("backward" in e.flags for e in both.estimates) != same
+
+
+def test_the_multi_object_pass_runs_the_backward_passes_of_the_offline_solve(far_approach):
+    """sot_apps.tracking.track_objects (the pipeline's pass, regions gathered while tracking) gives the offline
+    result of tracking the object alone with backward passes, bit for bit (it reads the lost run's frames again)."""
+    from sot_apps.tracking import ObjectRequest, track_objects
+
+    seq, boxes, online, found = far_approach
+    config = get_preset("full", seed=0, **REACQUIRE, **{"refinement.backward": "offline"})
+    outcomes, _ = track_objects(seq, [ObjectRequest("far", boxes[0], 0, len(seq) - 1)], config, mode="offline",
+                                min_points=None)
+    got, want = outcomes[0].result, refine_offline(seq, online, config)
+    assert sum("backward" in e.flags for e in want.estimates) >= found - 2
+    assert np.array_equal([e.box.to_array() for e in got.estimates], [e.box.to_array() for e in want.estimates])
+    assert [e.flags for e in got.estimates] == [e.flags for e in want.estimates]
+    assert np.array_equal(got.shape, want.shape)
 
 
 def test_fusion_fills_the_lost_frames_from_the_backward_pass_tied_to_the_held_frames_on_both_sides():
