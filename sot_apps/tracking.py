@@ -435,7 +435,8 @@ def track_objects(seq: Sequence, requests: list[ObjectRequest], config: TrackerC
     tracking it alone gives (:func:`tracker.track`, then :func:`refine_track_fixed_lag` with ``mode="lag"`` or
     :func:`refine_track_offline` with ``mode="offline"``), bit for bit: the refinements are fed from the sweeps
     as the pass reads them (the fixed-lag window as it slides; offline, each object keeps only its region points
-    per frame until its solve). Refinement applies to ``config.method == "sot"``; other methods track alone.
+    per frame until its solve; with backward passes, ``refinement.backward``, the frames of a lost run are read
+    again). Refinement applies to ``config.method == "sot"``; other methods track alone.
 
     An object whose start box (or every annotated box, see :class:`ObjectRequest`) holds fewer than
     ``min_points`` points, that is lost after its start (no points in any later frame), or whose tracking raises,

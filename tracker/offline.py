@@ -929,7 +929,8 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
                    params: OfflineParams | None = None, points: list[np.ndarray] | None = None) -> TrackResult:
     """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
     ``config.refinement.offline``. With ``config.refinement.backward`` (and a ``source``) the states of backward
-    passes from the track's anchors replace its weak runs first (tracker/bidirectional.py). ``points``: each frame's region points as :func:`gather_frame_points` gives
+    passes from the track's anchors replace its weak runs first (tracker/bidirectional.py), when they move some
+    frame's centre farther than ``params.window_start_moved``. ``points``: each frame's region points as :func:`gather_frame_points` gives
     them, when the caller gathered them while tracking (then ``source`` is not read and may be None)."""
     config = config or result.config
     params = params or config.refinement.offline

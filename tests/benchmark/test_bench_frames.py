@@ -45,7 +45,6 @@ def test_a_list_from_the_confirming_part_is_refused(tmp_path, capsys):
     assert "confirming part" in capsys.readouterr().err
 
 
-
 def test_offline_rows_are_the_offline_refinement_that_eval_scores(small_benchmark, capsys, tmp_path):
     """``--offline``: each run's offline refinement, pooled as ``sot-apps eval --offline`` pools it (the eval's
     offline row over the same tracklets, seed 0; online likewise)."""
