@@ -44,7 +44,8 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, wrap_angle
 from .sotracker import FrameEstimate, Tracker, TrackResult
 
-__all__ = ["AnchorDetector", "anchors", "is_lost", "backward_run", "backward_states", "fuse_backward", "fused_result",
+__all__ = ["AnchorDetector", "anchors", "is_lost", "coasts_that_arrive", "backward_run", "backward_states",
+           "fuse_backward", "fused_result",
            "refine_bidirectional", "reversed_motion"]
 
 _LOST_FLAGS = frozenset({"prior_only", "coasting", "waiting", "no_sweep"})
@@ -156,6 +157,27 @@ def fuse_backward(forward: np.ndarray, backward: np.ndarray, lost: np.ndarray) -
     return out
 
 
+def coasts_that_arrive(forward: np.ndarray, lost: np.ndarray, arrival: float) -> np.ndarray:
+    """The lost rows whose stretch the forward pass coasted to where it found the object again: its last step
+    through the stretch, carried one frame on, lands within ``arrival`` (m, horizontally) of its state at the held
+    row after the stretch. Such a coast needs no fill (the backward pass's coast is no better evidence); a stretch
+    whose coast arrives farther (a car that turned or changed speed while unseen) or that no held row follows does
+    not arrive."""
+    out = np.zeros(len(lost), dtype=bool)
+    j = 0
+    while j < len(lost):
+        if not lost[j]:
+            j += 1
+            continue
+        a = j
+        while j < len(lost) and lost[j]:
+            j += 1
+        if j < len(lost) and j >= 2:
+            landed = 2.0 * forward[j - 1, :2] - forward[j - 2, :2]
+            out[a:j] = float(np.hypot(*(forward[j, :2] - landed))) <= arrival
+    return out
+
+
 def backward_run(frames: list[LidarFrame], start: FrameEstimate, motion: np.ndarray | None,
                  forward: list[FrameEstimate], config: TrackerConfig, size: np.ndarray,
                  start_lost: bool = False) -> list[FrameEstimate]:
@@ -169,6 +191,9 @@ def backward_run(frames: list[LidarFrame], start: FrameEstimate, motion: np.ndar
     states = [b.state.to_array() for b in back] + [start.state.to_array()]
     lost = np.array([is_lost(e, config.refinement.backward_lost_points) for e in forward])
     lost[0], lost[-1] = start_lost, False
+    if config.refinement.backward_arrival > 0:
+        lost &= ~coasts_that_arrive(np.array([e.state.to_array() for e in forward]), lost,
+                                    config.refinement.backward_arrival)
     fused = fuse_backward(np.array([e.state.to_array() for e in forward]), np.array(states[:n]), lost)
     return [_replaced(forward[j], fused[j], size, back[j]) if lost[j] else forward[j] for j in range(1, n - 1)]
 

@@ -571,6 +571,8 @@ class RefinementConfig:
     backward_dense_points: int = 100     # an anchor holds at least this many object points (or is re-locked)
     backward_lost_points: int = 3        # a frame with fewer (or flagged prior_only, coasting, waiting) is lost
     backward_lost_frames: int = 1        # an anchor's weak run holds at least this many lost frames
+    backward_arrival: float = 0.0        # > 0: a lost stretch whose forward coast lands within this (m) of where
+                                         # the forward pass finds the object again keeps the coast (no fill)
     backward_reach: int = 40             # offline: the pass starts from the densest frame held up to this many
                                          # frames after the anchor
     backward_lag_lead: int = 3           # fixed lag: the pass starts this many frames after the anchor (held)

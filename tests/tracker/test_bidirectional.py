@@ -9,7 +9,7 @@ import pytest
 from test_reacquire_clusters import REACQUIRE, _iou, _scene, _straight
 
 from tracker import get_preset, refine_fixed_lag, refine_offline, track
-from tracker.bidirectional import AnchorDetector, anchors, fuse_backward, refine_bidirectional
+from tracker.bidirectional import AnchorDetector, anchors, coasts_that_arrive, fuse_backward, refine_bidirectional
 from tracker.geometry import Box, State
 from tracker.sotracker import FrameEstimate
 
@@ -132,3 +132,15 @@ def test_fusion_fills_the_lost_frames_from_the_backward_pass_tied_to_the_held_fr
     np.testing.assert_allclose(fused[1:4, 3], [0.025, 0.05, 0.075])
     lost_start = fuse_backward(forward, backward, np.array([True, True, True, True, False, False]))
     np.testing.assert_allclose(lost_start[:4, 1], 1.0)                   # no held frame before: the other end's
+
+
+def test_a_coast_that_lands_where_the_object_is_found_again_arrives():
+    """``backward_arrival``: a lost stretch the forward pass coasted at 1 m per frame to where it found the object
+    (0.3 m off) keeps its coast; one found 2 m ahead of the coast (the car sped up unseen) or never found does not."""
+    forward = np.array([[float(k), 0.5 * k, 0.0, 0.1] for k in range(8)])
+    lost = np.array([False, False, True, True, True, False, True, True])
+    forward[5, 0] += 0.3
+    np.testing.assert_array_equal(coasts_that_arrive(forward, lost, 0.5), [0, 0, 1, 1, 1, 0, 0, 0])
+    assert not coasts_that_arrive(forward, lost, 0.2).any()
+    forward[5, :2] += [1.7, 0.8]
+    assert not coasts_that_arrive(forward, lost, 0.5).any()
