@@ -137,14 +137,7 @@ def fuse_backward(forward: np.ndarray, backward: np.ndarray, lost: np.ndarray) -
     lost = np.asarray(lost, dtype=bool)
     mismatch = forward - backward
     mismatch[:, 3] = wrap_angle(mismatch[:, 3])
-    j = 0
-    while j < len(out):
-        if not lost[j]:
-            j += 1
-            continue
-        a = j
-        while j < len(out) and lost[j]:
-            j += 1
+    for a, j in _stretches(lost):
         before = mismatch[a - 1] if a > 0 else None
         after = mismatch[j] if j < len(out) else None
         before = after if before is None else before
@@ -157,6 +150,12 @@ def fuse_backward(forward: np.ndarray, backward: np.ndarray, lost: np.ndarray) -
     return out
 
 
+def _stretches(lost: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of True rows of ``lost``: (first row, row after the last), in order."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(lost, dtype=np.int8), [0]])))
+    return [(int(a), int(j)) for a, j in zip(edges[::2], edges[1::2], strict=True)]
+
+
 def coasts_that_arrive(forward: np.ndarray, lost: np.ndarray, arrival: float) -> np.ndarray:
     """The lost rows whose stretch the forward pass coasted to where it found the object again: its last step
     through the stretch, carried one frame on, lands within ``arrival`` (m, horizontally) of its state at the held
@@ -164,14 +163,7 @@ def coasts_that_arrive(forward: np.ndarray, lost: np.ndarray, arrival: float) ->
     whose coast arrives farther (a car that turned or changed speed while unseen) or that no held row follows does
     not arrive."""
     out = np.zeros(len(lost), dtype=bool)
-    j = 0
-    while j < len(lost):
-        if not lost[j]:
-            j += 1
-            continue
-        a = j
-        while j < len(lost) and lost[j]:
-            j += 1
+    for a, j in _stretches(lost):
         if j < len(lost) and j >= 2:
             landed = 2.0 * forward[j - 1, :2] - forward[j - 2, :2]
             out[a:j] = float(np.hypot(*(forward[j, :2] - landed))) <= arrival
