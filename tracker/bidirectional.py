@@ -10,7 +10,7 @@ motion to hold it:
 1. a frame is **lost** when the forward estimate had no support (flags ``prior_only``, ``coasting``,
    ``waiting``, ``no_sweep``, or fewer than ``backward_lost_points`` object points) and **weak** when it is
    lost or has fewer than ``backward_dense_points`` points; an **anchor** is a frame that is not weak (or is
-   ``reacquired`` and not lost) after a run of weak frames that holds at least one lost frame;
+   ``reacquired`` and not lost) after a run of weak frames that holds at least ``backward_lost_frames`` (>= 1) lost ones;
 2. for an anchor k whose weak run starts after frame s (frame 0 — the given start box — or the last dense frame
    before the run), :class:`~tracker.sotracker.Tracker` starts with the forward box at frame m, its motion prior
    seeded with the forward motion there reversed, and steps through frames m - 1, ..., s. Offline, m is the
@@ -22,7 +22,9 @@ motion to hold it:
 3. fusion: the frames of the run that the forward pass held keep their forward states; each stretch of lost
    frames takes the backward states, moved by the mismatch between the two passes at the held frames on
    either side, blended linearly across the stretch, so the fused track meets the forward one at both ends
-   (where the backward pass had no points either, a two-ended interpolation);
+   (where the backward pass had no points either, a two-ended interpolation); with ``backward_arrival`` > 0 a
+   stretch the forward pass coasted to where it found the object again keeps the forward coast
+   (:func:`coasts_that_arrive`);
 4. the refinement that follows (offline: :func:`~tracker.offline.refine_offline`; fixed lag:
    :class:`~tracker.fixed_lag.FixedLagSmoother`) takes the fused states as its data (its initial states and
    the anchors of its weak pull), and gathers each frame's points around the fused box.
