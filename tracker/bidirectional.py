@@ -10,7 +10,8 @@ motion to hold it:
 1. a frame is **lost** when the forward estimate had no support (flags ``prior_only``, ``coasting``,
    ``waiting``, ``no_sweep``, or fewer than ``backward_lost_points`` object points) and **weak** when it is
    lost or has fewer than ``backward_dense_points`` points; an **anchor** is a frame that is not weak (or is
-   ``reacquired`` and not lost) after a run of weak frames that holds at least ``backward_lost_frames`` (>= 1) lost ones;
+   ``reacquired`` and not lost) after a run of weak frames that holds at least ``backward_lost_frames`` (>= 1)
+   lost ones;
 2. for an anchor k whose weak run starts after frame s (frame 0 — the given start box — or the last dense frame
    before the run), :class:`~tracker.sotracker.Tracker` starts with the forward box at frame m, its motion prior
    seeded with the forward motion there reversed, and steps through frames m - 1, ..., s. Offline, m is the
@@ -181,14 +182,16 @@ def backward_run(frames: list[LidarFrame], start: FrameEstimate, motion: np.ndar
     the fused backward ones (flag ``backward``) where it lost it. ``start_lost``: s itself is lost (a final frame
     of a window: no mismatch there)."""
     n = len(forward)
-    back = backward_states(frames, start.box, config, motion)[::-1]  # time order: s .. (pass start) - 1
-    states = [b.state.to_array() for b in back] + [start.state.to_array()]
+    forward_states = np.array([e.state.to_array() for e in forward])
     lost = np.array([is_lost(e, config.refinement.backward_lost_points) for e in forward])
     lost[0], lost[-1] = start_lost, False
     if config.refinement.backward_arrival > 0:
-        lost &= ~coasts_that_arrive(np.array([e.state.to_array() for e in forward]), lost,
-                                    config.refinement.backward_arrival)
-    fused = fuse_backward(np.array([e.state.to_array() for e in forward]), np.array(states[:n]), lost)
+        lost &= ~coasts_that_arrive(forward_states, lost, config.refinement.backward_arrival)
+    if not lost.any():
+        return forward[1:n - 1]   # nothing to fill: no backward pass
+    back = backward_states(frames, start.box, config, motion)[::-1]  # time order: s .. (pass start) - 1
+    states = [b.state.to_array() for b in back] + [start.state.to_array()]
+    fused = fuse_backward(forward_states, np.array(states[:n]), lost)
     return [_replaced(forward[j], fused[j], size, back[j]) if lost[j] else forward[j] for j in range(1, n - 1)]
 
 
