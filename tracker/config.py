@@ -200,6 +200,10 @@ class MotionConfig:
     per_second: bool = False             # "average" models: the prior is a velocity, predicted for the elapsed
                                          # time (frame gaps); False = per frame (paper)
     coast_yaw_decay: float = 0.5         # frames without data: the predicted turn rate decays by this per frame
+    coast_max_slip: float = 0.0          # > 0 (rad), "average" models: a frame without data is predicted moving within
+                                         # this of the box's heading line (the averaged velocity's part along it
+                                         # kept, its sideways part capped): a vehicle barely slides sideways, and a
+                                         # larger angle is a partial view's slide as the object vanished (0: off)
     first_motion_along_heading: bool = False  # "average" models: the first motion seeds the prior with only its
                                          # part along the start box's heading
     first_turn_points: int = 0           # > 0, "average" models: the first motion's heading change seeds the turn

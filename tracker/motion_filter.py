@@ -256,6 +256,15 @@ class CTRVMotion:
         return x
 
 
+def _within_slip(velocity: np.ndarray, heading: float, max_slip: float) -> np.ndarray:
+    """``velocity`` (xy) with its part across the ``heading`` line capped at tan(``max_slip``) x its part along it."""
+    axis = np.array([np.cos(heading), np.sin(heading)])
+    across_axis = np.array([-axis[1], axis[0]])
+    along, across = float(velocity @ axis), float(velocity @ across_axis)
+    limit = abs(along) * np.tan(max_slip)
+    return along * axis + float(np.clip(across, -limit, limit)) * across_axis
+
+
 class AverageMotion:
     """The paper's moving-average motion prior behind the same interface.
 
@@ -271,8 +280,9 @@ class AverageMotion:
     def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
                  first_along_heading: bool = False, trend: float = 0.0, trend_points: int = 0,
                  trend_velocity: bool = True, first_turn_points: int = 0, first_turn_max: float = 0.0,
-                 ramp: SpeedRamp | None = None) -> None:
+                 ramp: SpeedRamp | None = None, coast_max_slip: float = 0.0) -> None:
         self.prior = MotionPrior(alpha, frame, trend, trend_velocity)
+        self.coast_max_slip = coast_max_slip
         self.ramp = ramp
         self.trend_points = trend_points
         self._support = 1.0  # the last update's support: the share of the trend's prediction
@@ -292,6 +302,8 @@ class AverageMotion:
                 out = self._on_ramp(out, interval)
         out = out * interval
         out[3] *= self.coast_yaw_decay ** coasting  # coasting keeps the velocity, the turn rate dies out
+        if coasting and self.coast_max_slip > 0:   # ... near the heading line: a vehicle barely slides sideways
+            out[:2] = _within_slip(out[:2], box.heading, self.coast_max_slip)
         return out
 
     def search_sigma(self) -> float:

@@ -77,6 +77,29 @@ def test_the_first_motion_seeds_the_prior_along_the_start_heading(along):
     assert motion.predict(start, 0.1)[:2] @ sideways == pytest.approx(expected_sideways, abs=1e-12)
 
 
+@pytest.mark.parametrize("max_slip", [0.0, 0.17])
+@pytest.mark.parametrize("sign", [1.0, -1.0], ids=["forward", "reversing"])
+def test_a_coasting_prediction_moves_within_the_slip_cap_of_the_heading_line(max_slip, sign):
+    """The averaged velocity points 36 degrees off the box's heading (a partial view slid sideways as the object
+    vanished). A frame with data is predicted on it as it is; a frame without data (coasting) keeps its part along
+    the heading and caps the part across at tan(max_slip) x that (max_slip 0: as it is), the turn rate decaying."""
+    box = Box(10.0, 5.0, 0.0, 0.4, 4.5, 1.8, 1.5)
+    forward, sideways = np.array([np.cos(0.4), np.sin(0.4)]), np.array([-np.sin(0.4), np.cos(0.4)])
+    motion = AverageMotion(0.6, "world", 0.5, per_second=True, coast_max_slip=max_slip)
+    delta = np.r_[sign * 0.31 * forward + 0.225 * sideways, 0.0, 0.02]     # 0.1 s: 3.1 m/s along, 2.25 across
+    motion.update(box, delta, None, None, 0.1)
+    held = motion.predict(box, 0.1)
+    assert held[:2] @ sideways == pytest.approx(0.225, rel=1e-3)           # with data: as averaged
+    coast = motion.predict(box, 0.1, coasting=2)
+    assert coast[:2] @ forward == pytest.approx(held[:2] @ forward, abs=1e-12)   # the part along is kept
+    across = 0.225 if max_slip == 0 else 0.31 * np.tan(max_slip)
+    assert coast[:2] @ sideways == pytest.approx(across, rel=1e-3)
+    assert coast[3] == pytest.approx(0.25 * held[3])                     # the turn rate decays as before
+    small = AverageMotion(0.6, "world", 0.5, per_second=True, coast_max_slip=max_slip)
+    small.update(box, np.r_[0.31 * forward + 0.02 * sideways, 0.0, 0.0], None, None, 0.1)
+    assert np.array_equal(small.predict(box, 0.1, coasting=1), small.predict(box, 0.1))   # within the cap
+
+
 @pytest.mark.parametrize("points", [0, 15, 200, 5000])
 def test_the_first_heading_change_seeds_the_turn_rate_as_far_as_its_points_pin_it(points):
     """motion.first_turn_points n0: the first motion's heading change seeds the averaged turn rate with weight

@@ -473,3 +473,29 @@ def test_a_hidden_car_that_reappears_with_few_real_points_is_relocked_as_before_
         iou = _iou(on, boxes)
         relocked += int(iou[24:27].max() > 0.6 and iou[27:].min() > 0.6)
     assert relocked >= 2
+
+
+@pytest.mark.parametrize("max_slip", [0.0, 0.17])
+def test_a_coasting_box_keeps_to_its_heading_line_when_its_velocity_slid_sideways(max_slip):
+    """A car driving at 5 m/s (0.5 m per frame) along its heading is seen at the start only; its motion prior
+    starts 35 degrees off the heading (0.35 m per frame sideways: what a partial view sliding across as the car
+    vanished leaves in the average). Coasting on it, the box slides 0.35 m per frame across the car's path; with
+    ``motion.coast_max_slip`` (0.17 rad) the sideways part is capped at 0.5 x tan(0.17) = 0.086 m per frame, and the
+    part along the heading is kept. (``full`` seeds a start's prior along the start box's heading, which would remove
+    the slide here: off, so that the prior stands for an average that slid.)"""
+    from tracker.sotracker import Tracker
+
+    boxes = _straight(14, (10.0, 4.0), 0.0, 0.5)
+    seq = _scene(boxes, 0, hidden=range(1, 14))
+    tracker = Tracker(get_preset("full", seed=0, **{"motion.coast_max_slip": max_slip,
+                                                     "motion.first_motion_along_heading": False}))
+    tracker.start(seq.lidar_frame(0), boxes[0], None, np.array([0.5, 0.35, 0.0, 0.0]))
+    estimates = [tracker.step(seq.lidar_frame(k)) for k in range(1, len(boxes))]
+    assert all("prior_only" in e.flags for e in estimates)
+    along = np.array([e.box.x - b.x for e, b in zip(estimates, boxes[1:], strict=True)])
+    across = np.array([e.box.y - b.y for e, b in zip(estimates, boxes[1:], strict=True)])
+    k = np.arange(1, len(boxes))
+    # frame 1 is predicted on the prior as given (not yet coasting), the later frames coast
+    expected = 0.35 * k if max_slip == 0.0 else 0.35 + 0.5 * np.tan(0.17) * (k - 1)
+    np.testing.assert_allclose(across, expected, atol=1e-3)
+    np.testing.assert_allclose(along, 0.0, atol=1e-3)                     # the part along the heading kept
