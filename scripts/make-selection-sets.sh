@@ -54,7 +54,7 @@ for s in 1 2 3; do
   [ -d W$s ] || sot-apps synth --out W$s --frames 60 --vehicles 8 --seed $s
 done
 
-make() {  # NAME ARGS...: one set, resumable
+bench_set() {  # NAME ARGS...: one set, resumable
   local name=$1; shift
   step "$name"
   sot-apps benchmark make --workers "$WORKERS" --quiet --out "$name" "$@"
@@ -65,40 +65,40 @@ HARD="far_approach passing hidden oblique"
 
 # ---------------------------------------------------------------- choosing sets
 if [ "$PART" != confirm ]; then
-  make classic_choose_s0 --background synth_road --bank bank --tracklets 8 --frames 0:40 --seed 0 --split choose
+  bench_set classic_choose_s0 --background synth_road --bank bank --tracklets 8 --frames 0:40 --seed 0 --split choose
   for s in 0 1 2; do
-    make synth_choose_s$s --background synth_road --bank bank --tracklets 8 --frames 0:40 --seed $s --profiles $HARD --split choose
+    bench_set synth_choose_s$s --background synth_road --bank bank --tracklets 8 --frames 0:40 --seed $s --profiles $HARD --split choose
   done
-  make pandaset_choose_s1 --background "$PANDASET" --bank bank --tracklets 11 --frames 0:40 --seed 1 --split choose --profiles $ALL11
-  make sparse_choose_s21 --background "$PANDASET" --bank bank --tracklets 12 --frames 0:40 --seed 21 --split choose \
+  bench_set pandaset_choose_s1 --background "$PANDASET" --bank bank --tracklets 11 --frames 0:40 --seed 1 --split choose --profiles $ALL11
+  bench_set sparse_choose_s21 --background "$PANDASET" --bank bank --tracklets 12 --frames 0:40 --seed 21 --split choose \
     --profiles turn strong_accel hard_brake --range 28:60 --bands 40
   for s in 30 31 32; do
-    make hidden_choose_s$s --background synth_road --bank bank --tracklets 10 --frames 0:40 --seed $s --split choose --profiles hidden
+    bench_set hidden_choose_s$s --background synth_road --bank bank --tracklets 10 --frames 0:40 --seed $s --split choose --profiles hidden
   done
   for s in 33 34 35; do
-    make street_hidden_choose_s$s --background "$PANDASET" --bank bank --tracklets 12 --frames 0:40 --seed $s --split choose --profiles hidden
+    bench_set street_hidden_choose_s$s --background "$PANDASET" --bank bank --tracklets 12 --frames 0:40 --seed $s --split choose --profiles hidden
   done
-  make accel_choose_s31 --background "$PANDASET" --bank bank --tracklets 16 --frames 0:40 --seed 31 --split choose \
+  bench_set accel_choose_s31 --background "$PANDASET" --bank bank --tracklets 16 --frames 0:40 --seed 31 --split choose \
     --profiles strong_accel u_turn --range 5:60 --bands 17 28 40
-  make long_choose_s41 --background "$PANDASET" --bank bank_long --tracklets 12 --frames 0:40 --seed 41 --split choose \
+  bench_set long_choose_s41 --background "$PANDASET" --bank bank_long --tracklets 12 --frames 0:40 --seed 41 --split choose \
     --profiles strong_accel u_turn constant_speed
-  make long_choose_s42 --background "$PANDASET" --bank bank_long --tracklets 12 --frames 0:40 --seed 42 --split choose \
+  bench_set long_choose_s42 --background "$PANDASET" --bank bank_long --tracklets 12 --frames 0:40 --seed 42 --split choose \
     --profiles strong_accel u_turn constant_speed --range 5:60 --bands 17 28 40
   for s in 2 3; do
-    make street_choose_s$s --background "$PANDASET" --bank bank --tracklets 30 --frames 0:40 --seed $s --split choose --profiles $TEN
+    bench_set street_choose_s$s --background "$PANDASET" --bank bank --tracklets 30 --frames 0:40 --seed $s --split choose --profiles $TEN
   done
 fi
 
 # ---------------------------------------------------------------- confirming sets (report only: never choose on them)
 if [ "$PART" != choose ]; then
   for s in 0 1 2; do
-    make confirm_s$s --background "$PANDASET" --bank bank --tracklets 30 --frames 0:40 --seed $s --split confirm --profiles $TEN
+    bench_set confirm_s$s --background "$PANDASET" --bank bank --tracklets 30 --frames 0:40 --seed $s --split confirm --profiles $TEN
   done
-  make pandaset_confirm_s0 --background "$PANDASET" --bank bank --tracklets 11 --frames 0:40 --seed 0 --split confirm --profiles $ALL11
+  bench_set pandaset_confirm_s0 --background "$PANDASET" --bank bank --tracklets 11 --frames 0:40 --seed 0 --split confirm --profiles $ALL11
   for s in 0 1 2; do
-    make synth_confirm_s$s --background synth_road --bank bank --tracklets 8 --frames 0:40 --seed $s --profiles $HARD --split confirm
+    bench_set synth_confirm_s$s --background synth_road --bank bank --tracklets 8 --frames 0:40 --seed $s --profiles $HARD --split confirm
   done
   [ -d road60 ] || sot-apps synth --out road60 --frames 60 --vehicles 0 --seed 0 --sensor pandaset_pandar64 --open-road
-  make far60_confirm_s1 --background road60 --bank bank --tracklets 12 --frames 0:60 --seed 1 --split confirm --profiles far_approach
+  bench_set far60_confirm_s1 --background road60 --bank bank --tracklets 12 --frames 0:60 --seed 1 --split confirm --profiles far_approach
 fi
 step "done: $OUT"

@@ -204,6 +204,9 @@ class MotionConfig:
                                          # this of the box's heading line (the averaged velocity's part along it
                                          # kept, its sideways part capped): a vehicle barely slides sideways, and a
                                          # larger angle is a partial view's slide as the object vanished (0: off)
+    coast_max_slide: float = 0.0         # > 0 (m/s): ... only where the part across is at most this: a sideways speed
+                                         # beyond what a vanishing partial view slides (0.3 m per frame) says the
+                                         # box's heading turned off a fast object, not that it slid (0: always)
     first_motion_along_heading: bool = False  # "average" models: the first motion seeds the prior with only its
                                          # part along the start box's heading
     first_turn_points: int = 0           # > 0, "average" models: the first motion's heading change seeds the turn

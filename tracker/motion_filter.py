@@ -256,11 +256,14 @@ class CTRVMotion:
         return x
 
 
-def _within_slip(velocity: np.ndarray, heading: float, max_slip: float) -> np.ndarray:
-    """``velocity`` (xy) with its part across the ``heading`` line capped at tan(``max_slip``) x its part along it."""
+def _within_slip(velocity: np.ndarray, heading: float, max_slip: float, max_slide: float = 0.0) -> np.ndarray:
+    """``velocity`` (xy) with its part across the ``heading`` line capped at tan(``max_slip``) x its part along it;
+    with ``max_slide`` > 0 only where that part across is at most ``max_slide`` (the same units as ``velocity``)."""
     axis = np.array([np.cos(heading), np.sin(heading)])
     across_axis = np.array([-axis[1], axis[0]])
     along, across = float(velocity @ axis), float(velocity @ across_axis)
+    if 0 < max_slide < abs(across):
+        return velocity
     limit = abs(along) * np.tan(max_slip)
     return along * axis + float(np.clip(across, -limit, limit)) * across_axis
 
@@ -280,9 +283,11 @@ class AverageMotion:
     def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
                  first_along_heading: bool = False, trend: float = 0.0, trend_points: int = 0,
                  trend_velocity: bool = True, first_turn_points: int = 0, first_turn_max: float = 0.0,
-                 ramp: SpeedRamp | None = None, coast_max_slip: float = 0.0) -> None:
+                 ramp: SpeedRamp | None = None, coast_max_slip: float = 0.0,
+                 coast_max_slide: float = 0.0) -> None:
         self.prior = MotionPrior(alpha, frame, trend, trend_velocity)
         self.coast_max_slip = coast_max_slip
+        self.coast_max_slide = coast_max_slide
         self.ramp = ramp
         self.trend_points = trend_points
         self._support = 1.0  # the last update's support: the share of the trend's prediction
@@ -303,7 +308,7 @@ class AverageMotion:
         out = out * interval
         out[3] *= self.coast_yaw_decay ** coasting  # coasting keeps the velocity, the turn rate dies out
         if coasting and self.coast_max_slip > 0:   # ... near the heading line: a vehicle barely slides sideways
-            out[:2] = _within_slip(out[:2], box.heading, self.coast_max_slip)
+            out[:2] = _within_slip(out[:2], box.heading, self.coast_max_slip, self.coast_max_slide * dt)
         return out
 
     def search_sigma(self) -> float:

@@ -100,6 +100,21 @@ def test_a_coasting_prediction_moves_within_the_slip_cap_of_the_heading_line(max
     assert np.array_equal(small.predict(box, 0.1, coasting=1), small.predict(box, 0.1))   # within the cap
 
 
+@pytest.mark.parametrize(("across_speed", "capped"), [(2.25, True), (6.0, False)])
+def test_a_sideways_speed_beyond_a_slide_is_not_capped(across_speed, capped):
+    """With ``coast_max_slide`` 3 m/s the cap applies only where the velocity's part across the heading is at most
+    3 m/s (0.3 m per 0.1 s frame: what a vanishing partial view slides); a car driving at 14 m/s 25 degrees off
+    the box's heading (6 m/s across) says the box turned off it, and its coast keeps its velocity."""
+    box = Box(10.0, 5.0, 0.0, 0.4, 4.5, 1.8, 1.5)
+    forward, sideways = np.array([np.cos(0.4), np.sin(0.4)]), np.array([-np.sin(0.4), np.cos(0.4)])
+    motion = AverageMotion(0.6, "world", 0.5, per_second=True, coast_max_slip=0.17, coast_max_slide=3.0)
+    motion.update(box, np.r_[0.1 * (12.6 * forward + across_speed * sideways), 0.0, 0.0], None, None, 0.1)
+    coast = motion.predict(box, 0.1, coasting=1)
+    expected = 1.26 * np.tan(0.17) if capped else 0.1 * across_speed
+    assert coast[:2] @ sideways == pytest.approx(expected, rel=1e-6)
+    assert coast[:2] @ forward == pytest.approx(1.26, rel=1e-6)
+
+
 @pytest.mark.parametrize("points", [0, 15, 200, 5000])
 def test_the_first_heading_change_seeds_the_turn_rate_as_far_as_its_points_pin_it(points):
     """motion.first_turn_points n0: the first motion's heading change seeds the averaged turn rate with weight
