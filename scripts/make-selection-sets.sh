@@ -6,7 +6,8 @@
 #
 #   bash scripts/make-selection-sets.sh OUT [choose|confirm|all]     # default all
 #
-# About 30 minutes of 2 cores for everything; `choose` builds the banks, roads, worlds and choosing sets only.
+# `choose` builds the banks, roads, worlds and choosing sets only (17 minutes on the 2-core VM), `confirm` the
+# confirming sets (and the banks and roads they need).
 set -euo pipefail
 
 OUT=${1:?usage: make-selection-sets.sh OUT [choose|confirm|all]}

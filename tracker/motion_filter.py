@@ -277,7 +277,9 @@ class AverageMotion:
     average alone. ``trend_points`` (n0 > 0): the support of a motion registered on n object points is
     n / (n + n0): it adds that share of its change to the trend, and the next frame is predicted that share of
     the way from the average to the trend's prediction (a dense object's registrations pin its motion, a sparse
-    or partly seen one's slide: it keeps the average's robust, lagging prediction).
+    or partly seen one's slide: it keeps the average's robust, lagging prediction). ``coast_max_slip`` (rad, > 0): a
+    coasting frame's predicted velocity keeps its part along the box's heading and its part across is capped at
+    tan(coast_max_slip) x that; with ``coast_max_slide`` (m/s, > 0) only where the part across is at most that.
     """
 
     def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
