@@ -13,6 +13,7 @@ from tracker.frames import LidarFrame
 from tracker.geometry import Box, invert_transform, make_transform, points_in_box, rotation_z, transform_points
 from tracker.metrics import iou_3d_batch
 from tracker.reacquire import EarlierSweep, cluster_candidates, search_region
+from tracker.sotracker import Tracker
 
 REACQUIRE = {"reacquire.mode": "clusters"}
 NO_REACQUIRE = {"reacquire.mode": "none"}     # `full` re-acquires: the comparisons switch it off
@@ -483,8 +484,6 @@ def test_a_coasting_box_keeps_to_its_heading_line_when_its_velocity_slid_sideway
     ``motion.coast_max_slip`` (0.17 rad) the sideways part is capped at 0.5 x tan(0.17) = 0.086 m per frame, and the
     part along the heading is kept. (``full`` seeds a start's prior along the start box's heading, which would remove
     the slide here: off, so that the prior stands for an average that slid.)"""
-    from tracker.sotracker import Tracker
-
     boxes = _straight(14, (10.0, 4.0), 0.0, 0.5)
     seq = _scene(boxes, 0, hidden=range(1, 14))
     tracker = Tracker(get_preset("full", seed=0, **{"motion.coast_max_slip": max_slip,
