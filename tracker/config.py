@@ -207,6 +207,10 @@ class MotionConfig:
     coast_max_slide: float = 0.0         # > 0 (m/s): ... only where the part across is at most this: a sideways speed
                                          # beyond what a vanishing partial view slides (0.3 m per frame) says the
                                          # box's heading turned off a fast object, not that it slid (0: always)
+    coast_steady_frames: int = 0         # > 0: ... only on the coast of a box whose heading held over its last this
+                                         # many supported frames (within coast_steady_max of the last): a heading
+                                         # that swung before the loss is no line to coast along (0: always)
+    coast_steady_max: float = 0.05       # rad: the largest swing of a steady heading
     first_motion_along_heading: bool = False  # "average" models: the first motion seeds the prior with only its
                                          # part along the start box's heading
     first_turn_points: int = 0           # > 0, "average" models: the first motion's heading change seeds the turn

@@ -24,6 +24,7 @@ averaged offset (the road as a prior).
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -279,17 +280,23 @@ class AverageMotion:
     the way from the average to the trend's prediction (a dense object's registrations pin its motion, a sparse
     or partly seen one's slide: it keeps the average's robust, lagging prediction). ``coast_max_slip`` (rad, > 0): a
     coasting frame's predicted velocity keeps its part along the box's heading and its part across is capped at
-    tan(coast_max_slip) x that; with ``coast_max_slide`` (m/s, > 0) only where the part across is at most that.
+    tan(coast_max_slip) x that; with ``coast_max_slide`` (m/s, > 0) only where the part across is at most that;
+    with ``coast_steady_frames`` (n > 0) only when the box's heading after each of the last n updates lay within
+    ``coast_steady_max`` (rad) of the last one (a heading that swung before the loss is no line to coast along).
     """
 
     def __init__(self, alpha: float, frame: str, coast_yaw_decay: float, per_second: bool = False,
                  first_along_heading: bool = False, trend: float = 0.0, trend_points: int = 0,
                  trend_velocity: bool = True, first_turn_points: int = 0, first_turn_max: float = 0.0,
                  ramp: SpeedRamp | None = None, coast_max_slip: float = 0.0,
-                 coast_max_slide: float = 0.0) -> None:
+                 coast_max_slide: float = 0.0, coast_steady_frames: int = 0,
+                 coast_steady_max: float = 0.05) -> None:
         self.prior = MotionPrior(alpha, frame, trend, trend_velocity)
         self.coast_max_slip = coast_max_slip
         self.coast_max_slide = coast_max_slide
+        self.coast_steady_max = coast_steady_max
+        self._headings: deque[float] = deque(maxlen=max(coast_steady_frames, 1))  # after the last updates
+        self._steady_frames = coast_steady_frames
         self.ramp = ramp
         self.trend_points = trend_points
         self._support = 1.0  # the last update's support: the share of the trend's prediction
@@ -309,7 +316,7 @@ class AverageMotion:
                 out = self._on_ramp(out, interval)
         out = out * interval
         out[3] *= self.coast_yaw_decay ** coasting  # coasting keeps the velocity, the turn rate dies out
-        if coasting and self.coast_max_slip > 0:   # ... near the heading line: a vehicle barely slides sideways
+        if coasting and self.coast_max_slip > 0 and self._heading_steady():  # near a held heading line
             out[:2] = _within_slip(out[:2], box.heading, self.coast_max_slip, self.coast_max_slide * dt)
         return out
 
@@ -338,11 +345,22 @@ class AverageMotion:
             motion = motion.copy()
             motion[3] = np.clip(motion[3], -self.first_turn_max, self.first_turn_max)
         self._support = points / (points + self.trend_points) if self.trend_points > 0 else 1.0
+        self._headings.append(box.heading + float(x[3]))
         rate, interval = (motion / dt, dt) if self.per_second else (motion, 1.0)
         self.prior.update(rate, box.heading, interval, self._support)
         if self.ramp is not None:
             self.ramp.add(float(np.hypot(rate[0], rate[1])), interval)
         return x
+
+    def _heading_steady(self) -> bool:
+        """Whether the box's heading after each of the last ``coast_steady_frames`` updates lay within
+        ``coast_steady_max`` of the last (always, with ``coast_steady_frames`` 0)."""
+        if self._steady_frames <= 0:
+            return True
+        if len(self._headings) < self._steady_frames:
+            return False
+        swing = wrap_angle(np.asarray(self._headings) - self._headings[-1])
+        return bool(np.max(np.abs(swing)) <= self.coast_steady_max)
 
     def _on_ramp(self, out: np.ndarray, interval: float) -> np.ndarray:
         """The predicted motion (per unit of interval) with its speed moved toward the speed ramp's, as far as

@@ -115,6 +115,39 @@ def test_a_sideways_speed_beyond_a_slide_is_not_capped(across_speed, capped):
     assert coast[:2] @ forward == pytest.approx(1.26, rel=1e-6)
 
 
+@pytest.mark.parametrize(("headings_deg", "capped"), [
+    ([23.0, 22.0, 24.0, 23.5, 22.9], True),          # held within 2 degrees of the last: a line to coast along
+    ([0.0, 5.0, 10.0, 17.0, 23.0], False),           # swung 23 degrees in five frames (a brake, a turn)
+    ([23.0, 23.0, 23.0], False),                     # too few updates to say
+    ([179.0, -179.5, 178.5, -178.0, 179.9], True),   # steady across the +-180 degree seam
+])
+def test_the_slip_cap_applies_only_after_a_steady_heading(headings_deg, capped):
+    """With ``coast_steady_frames`` 5 and ``coast_steady_max`` 0.1 rad the coast is capped only when the box's
+    heading after each of the last 5 updates (its heading plus the registered turn) lay within 0.1 rad of the
+    last one; otherwise the averaged velocity is coasted on as it is (the motion then is a box's turned heading,
+    not a sideways slide)."""
+    motion = AverageMotion(0.6, "world", 0.5, per_second=True, coast_max_slip=0.17, coast_steady_frames=5,
+                           coast_steady_max=0.1)
+    headings = np.radians(headings_deg)
+    for before, after in zip(np.r_[headings[0], headings[:-1]], headings, strict=True):
+        box = Box(10.0, 5.0, 0.0, float(before), 4.5, 1.8, 1.5)
+        heading = float(after)
+        forward, sideways = np.array([np.cos(heading), np.sin(heading)]), np.array([-np.sin(heading),
+                                                                                     np.cos(heading)])
+        delta = np.r_[0.31 * forward + 0.225 * sideways, 0.0, float(wrap_angle(after - before))]
+        motion.update(box, delta, None, None, 0.1)
+    last = Box(10.0, 5.0, 0.0, float(headings[-1]), 4.5, 1.8, 1.5)
+    held, coast = motion.predict(last, 0.1), motion.predict(last, 0.1, coasting=1)
+    along = float(held[:2] @ forward)
+    across = float(coast[:2] @ sideways)
+    assert coast[:2] @ forward == pytest.approx(along, abs=1e-12)
+    if capped:
+        assert abs(across) == pytest.approx(abs(along) * np.tan(0.17), rel=1e-6)
+    else:
+        assert across == pytest.approx(float(held[:2] @ sideways), abs=1e-12)
+        assert abs(across) > 2 * abs(along) * np.tan(0.17)                # ... which the cap would have cut
+
+
 @pytest.mark.parametrize("points", [0, 15, 200, 5000])
 def test_the_first_heading_change_seeds_the_turn_rate_as_far_as_its_points_pin_it(points):
     """motion.first_turn_points n0: the first motion's heading change seeds the averaged turn rate with weight

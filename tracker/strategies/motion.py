@@ -27,4 +27,5 @@ def choose_motion_model(params: MotionConfig, box: Box) -> AverageMotion | CTRVM
                          params.first_turn_max,
                          SpeedRamp(params.ramp_frames, params.ramp_min_t, params.ramp_min_accel,
                                    params.ramp_accelerating_only)
-                         if params.ramp_frames > 0 else None, params.coast_max_slip, params.coast_max_slide)
+                         if params.ramp_frames > 0 else None, params.coast_max_slip, params.coast_max_slide,
+                         params.coast_steady_frames, params.coast_steady_max)
