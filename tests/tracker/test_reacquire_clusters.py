@@ -483,10 +483,12 @@ def test_a_coasting_box_keeps_to_its_heading_line_when_its_velocity_slid_sideway
     vanished leaves in the average). Coasting on it, the box slides 0.35 m per frame across the car's path; with
     ``motion.coast_max_slip`` (0.17 rad) the sideways part is capped at 0.5 x tan(0.17) = 0.086 m per frame, and the
     part along the heading is kept. (``full`` seeds a start's prior along the start box's heading, which would remove
-    the slide here: off, so that the prior stands for an average that slid.)"""
+    the slide here: off, so that the prior stands for an average that slid; and caps a coast only after 5 steady
+    updates, which a track seen at its start only has not had: ``motion.coast_steady_frames`` 0 here.)"""
     boxes = _straight(14, (10.0, 4.0), 0.0, 0.5)
     seq = _scene(boxes, 0, hidden=range(1, 14))
     tracker = Tracker(get_preset("full", seed=0, **{"motion.coast_max_slip": max_slip,
+                                                     "motion.coast_steady_frames": 0,
                                                      "motion.first_motion_along_heading": False}))
     tracker.start(seq.lidar_frame(0), boxes[0], None, np.array([0.5, 0.35, 0.0, 0.0]))
     estimates = [tracker.step(seq.lidar_frame(k)) for k in range(1, len(boxes))]
