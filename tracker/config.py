@@ -21,6 +21,7 @@ import dataclasses
 import difflib
 import functools
 import json
+import math
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -272,6 +273,11 @@ class MotionConfig:
             raise ValueError(f"motion.ramp_frames: must be 0 (off) or >= 3, got {self.ramp_frames}")
         if self.travel_scatter < 0:
             raise ValueError(f"motion.travel_scatter: must be >= 0 (0: off), got {self.travel_scatter}")
+        if not 0.0 <= self.coast_max_slip < math.pi / 2:
+            raise ValueError(f"motion.coast_max_slip: must be in [0, pi/2) rad (0: off), got {self.coast_max_slip}")
+        if self.coast_steady_frames < 0 or self.coast_steady_max < 0:
+            raise ValueError("motion.coast_steady_frames and motion.coast_steady_max: must be >= 0, got "
+                             f"{self.coast_steady_frames}, {self.coast_steady_max}")
 
 
 @dataclass(frozen=True)

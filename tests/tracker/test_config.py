@@ -87,6 +87,13 @@ def test_dotted_overrides_are_typed_like_their_field():
             parse_overrides([bad])
 
 
+
+@pytest.mark.parametrize(("path", "value"), [("motion.coast_max_slip", -0.1), ("motion.coast_max_slip", 1.6),
+                                             ("motion.coast_steady_frames", -1), ("motion.coast_steady_max", -0.1)])
+def test_a_coast_setting_out_of_range_is_refused_by_name(path, value):
+    with pytest.raises(ValueError, match=path.replace(".", r"\.")):
+        get_preset("full", **{path: value})
+
 def _strategies(config: TrackerConfig) -> tuple:
     s = Tracker(config).strategies
     r = s.registration
