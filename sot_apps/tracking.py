@@ -414,6 +414,7 @@ class _Live:
         self.smoother = None              # mode "lag": tracker.fixed_lag.FixedLagSmoother
         self.final: list = []             # mode "lag": the estimates that became final
         self.regions: list[np.ndarray] = []   # mode "offline": each frame's region points (its local crops)
+        self.region_times: list = []          # ... and their capture times (with refinement.offline.own_motion_spread)
         self.previous: tuple[int, np.ndarray] | None = None
 
     @property
@@ -527,7 +528,7 @@ def sweep_ground_once(seq: Sequence, frame: LidarFrame, ground_args: tuple) -> n
 
 def _fail(o: _Live, error: str, lacks_points: bool = False) -> None:
     o.out.error, o.out.lacks_points = error, lacks_points
-    o.tracker, o.estimates, o.smoother, o.regions = None, [], None, []
+    o.tracker, o.estimates, o.smoother, o.regions, o.region_times = None, [], None, [], []
 
 
 def _start(o: _Live, seq: Sequence, k: int, frame: LidarFrame, config: TrackerConfig, refine: str, lag: int,
@@ -578,7 +579,7 @@ def _start(o: _Live, seq: Sequence, k: int, frame: LidarFrame, config: TrackerCo
 def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerConfig, refine: str,
                   times: PassTimes) -> None:
     """Feed the object's newest estimate to its refinement with the sweep in hand."""
-    from tracker import frame_region_points
+    from tracker import frame_region_points_timed
 
     if refine == "online":
         return
@@ -592,8 +593,11 @@ def _refine_frame(o: _Live, seq: Sequence, frame: LidarFrame, config: TrackerCon
     if refine == "lag":
         o.final += o.smoother.add(frame, estimate, crop=crop)
     else:
-        o.regions.append(frame_region_points(frame, estimate.box, config, config.refinement.offline, o.previous,
-                                             crop=crop))
+        params = config.refinement.offline
+        points, when = frame_region_points_timed(frame, estimate.box, config, params, o.previous, crop=crop,
+                                                 with_times=params.own_motion_spread > 0)
+        o.regions.append(points)
+        o.region_times.append(when)
         o.previous = _pose(seq, frame.index)
     dt = time.thread_time() - t
     times.refine += dt
@@ -618,7 +622,7 @@ def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: in
             elif refine == "offline":
                 # backward passes re-read the frames of a lost run (and gather points around the fused boxes)
                 source = seq if config.refinement.backward != "none" else None
-                result = refine_offline(source, online, config, points=o.regions)
+                result = refine_offline(source, online, config, points=o.regions, point_times=o.region_times)
             else:
                 result = online
         except Exception as exc:  # noqa: BLE001 - one object's failure does not stop the others
@@ -632,6 +636,7 @@ def _finish(o: _Live, seq: Sequence, config: TrackerConfig, refine: str, lag: in
             if o.recorder is not None:
                 o.out.growth = o.recorder.growth(o.request.object_id, o.out.start, o.out.init_box)
             o.tracker, o.estimates, o.smoother, o.regions, o.final, o.recorder = None, [], None, [], [], None
+            o.region_times = []
     if on_done is not None:
         on_done(o.out)
         o.out.result = None

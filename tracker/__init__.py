@@ -28,7 +28,7 @@ _EXPORTS = {  # name -> submodule: imported on first use, so `import tracker` st
     "KeyframeParams": "keyframes", "interpolate_ctrv": "keyframes", "interpolate_linear": "keyframes",
     "keyframe_passes": "keyframes", "keyframe_schedule": "keyframes", "track_keyframes": "keyframes",
     "MotionPrior": "motion",
-    "refine_offline": "offline", "frame_region_points": "offline",
+    "refine_offline": "offline", "frame_region_points": "offline", "frame_region_points_timed": "offline",
     "mean_points_in_boxes": "pseudo_gt", "pseudo_gt_shape": "pseudo_gt",
     "ShapeModel": "shape", "SubShape": "shape",
     "SolverResult": "solver", "solve": "solver",
@@ -56,7 +56,7 @@ __all__ = [
     "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag",
     "rotation_zyx", "parse_overrides", "interpolate_pose", "ctrv_arc",
     # the multi-object pass of sot_apps.tracking feeds the refinements from the sweeps it reads
-    "FixedLagSmoother", "frame_region_points", "remember_sweep_ground_mask",
+    "FixedLagSmoother", "frame_region_points", "frame_region_points_timed", "remember_sweep_ground_mask",
     "KeyframeParams", "track_keyframes", "keyframe_passes", "keyframe_schedule", "interpolate_linear",
     "interpolate_ctrv",
 ]

@@ -32,6 +32,7 @@ class LocalCrop:
     half_length: float
     half_width: float
     ground: str  # "none" (nothing removed) or "sweep" (the cached whole-sweep mask); else not reusable
+    time_offsets_ns: np.ndarray | None = field(default=None, repr=False)  # each point's capture time, if known
 
     def contains(self, box: Box, scale: float, tolerance: float = 1e-3) -> bool:
         """Whether ``box`` scaled ``scale`` (BEV) lies inside the rectangle, ``tolerance`` inside its edges."""
@@ -84,6 +85,8 @@ def local_region(frame: LidarFrame, box: Box, scale: float, ground: GroundRemove
         near &= np.isfinite(pts).all(axis=1)
     idx = np.flatnonzero(near)
     local = pts[idx].astype(np.float64)
+    offsets = frame.point_time_offset_ns
+    times = np.asarray(offsets)[idx] if offsets is not None and len(offsets) == len(pts) else None
     known = ground.candidates(pts, idx)
     if deskew:
         assert previous_pose is not None and frame.point_time_offset_ns is not None
@@ -100,19 +103,23 @@ def local_region(frame: LidarFrame, box: Box, scale: float, ground: GroundRemove
     gscale = scale + 0.5
     region = (u <= 0.5 * box.length * gscale + margin) & (v <= 0.5 * box.width * gscale + margin)
     world = world[region]
+    times = None if times is None else times[region]
     is_ground = ground.mask(world, None if known is None else known[region])
     road_points = empty
     if is_ground is not None:
         road_points = world[road.road(world, is_ground)]
         world = world[~is_ground]
+        times = None if times is None else times[~is_ground]
     # keep only what a search box can contain (the box moves a little during the outer loop)
     d = world[:, :2] - box.center[:2]
     u = np.abs(d @ np.array([ca, sa]))
     v = np.abs(d @ np.array([-sa, ca]))
     slack = 1.0
     half_length, half_width = 0.5 * box.length * scale + slack, 0.5 * box.width * scale + slack
-    world = world[(u <= half_length) & (v <= half_width)]
-    crop = LocalCrop(frame.index, world, box, half_length, half_width, ground.label)
+    kept = (u <= half_length) & (v <= half_width)
+    world = world[kept]
+    crop = LocalCrop(frame.index, world, box, half_length, half_width, ground.label,
+                     None if times is None else times[kept])
     return LocalRegion(world, road_points, crop, tuple(flags))
 
 

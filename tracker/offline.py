@@ -82,12 +82,14 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
 from .metrics import unique_sorted, voxel_downsample_centres, voxel_downsample_means
+from .own_motion import RegionTimes, compensate_track
 from .rows import finite3, inside3, norm3, sum3
 from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
 from .voxel_nearest import VoxelNearest
 
-__all__ = ["Anchors", "OfflineParams", "OfflineProblem", "frame_region_points", "gather_frame_points", "refine_states",
+__all__ = ["Anchors", "OfflineParams", "OfflineProblem", "frame_region_points", "frame_region_points_timed",
+           "gather_frame_points", "refine_states",
            "refine_offline"]
 
 
@@ -150,6 +152,15 @@ def _deskew_reach(points_ego: np.ndarray, frame: LidarFrame, previous: tuple[int
 def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, params: OfflineParams,
                         previous: tuple[int, np.ndarray] | None = None,
                         world: np.ndarray | None = None, crop: LocalCrop | None = None) -> np.ndarray:
+    """Ground-removed world points of ``frame`` inside ``box`` scaled ``region_scale``: the points of
+    :func:`frame_region_points_timed`, without their capture times."""
+    return frame_region_points_timed(frame, box, config, params, previous, world, crop, with_times=False)[0]
+
+
+def frame_region_points_timed(frame: LidarFrame, box: Box, config: TrackerConfig, params: OfflineParams,
+                              previous: tuple[int, np.ndarray] | None = None, world: np.ndarray | None = None,
+                              crop: LocalCrop | None = None, with_times: bool = True
+                              ) -> tuple[np.ndarray, RegionTimes | None]:
     """Ground-removed world points of ``frame`` inside ``box`` scaled ``region_scale``.
 
     The ground is the tracker's (``params.ground="tracker"``): with ``ground.remover="sweep"`` the whole-sweep
@@ -159,13 +170,20 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
     world points (all of the sweep's, in its order) when the caller has them cached; ``crop``: the points the
     online step searched in this frame (:class:`~tracker.sotracker.LocalCrop`), used when the region lies
     inside it and its ground is this one (the same points, in the same order, without another pass over the
-    sweep)."""
+    sweep). With ``with_times`` and the sweep's point times, also each point's capture time
+    (:class:`~tracker.own_motion.RegionTimes`, from the crop's own when it is used), else None."""
     pts_ego = np.asarray(frame.points_ego)
     removes_ground = config.ground.remover != "none"
     sweep_ground = config.ground.remover == "sweep" and params.ground == "tracker"
+    offsets = frame.point_time_offset_ns
+    times = (np.asarray(offsets) if with_times and offsets is not None and len(offsets) == len(pts_ego)
+             else None)  # the capture times of the points kept so far
     if (crop is not None and crop.frame == frame.index and crop.ground == ("sweep" if sweep_ground else "none")
-            and (sweep_ground or not removes_ground) and crop.contains(box, params.region_scale)):
-        return crop.points[points_in_box(crop.points, box, params.region_scale)]
+            and (sweep_ground or not removes_ground) and crop.contains(box, params.region_scale)
+            and (times is None or crop.time_offsets_ns is not None)):
+        inside = points_in_box(crop.points, box, params.region_scale)
+        return crop.points[inside], (None if times is None or crop.time_offsets_ns is None
+                                     else RegionTimes(int(frame.timestamp_ns), crop.time_offsets_ns[inside]))
     above_ground = ~cached_sweep_ground_mask(pts_ego, *config.ground.sweep_args()) if sweep_ground else None
     reach = 0.5 * max(box.length, box.width) * params.region_scale + params.ground_margin
     deskew_from = previous if (config.deskew and frame.point_time_offset_ns is not None
@@ -176,6 +194,7 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
         idx = _square_candidates(pts_ego, world_from_ego, box.center[:2], reach + pad)
         if above_ground is not None:
             idx = idx[above_ground[idx]]
+        times = None if times is None else times[idx]
         if deskew_from is not None:
             world = deskew_points(pts_ego[idx], np.asarray(frame.point_time_offset_ns)[idx], frame.timestamp_ns,
                                   world_from_ego, deskew_from[0], deskew_from[1])
@@ -187,25 +206,40 @@ def frame_region_points(frame: LidarFrame, box: Box, config: TrackerConfig, para
                                   frame.world_from_ego, deskew_from[0], deskew_from[1])
         if above_ground is not None:
             world = world[above_ground]
+            times = None if times is None else times[above_ground]
     near = (np.abs(world[:, 0] - box.x) <= reach) & (np.abs(world[:, 1] - box.y) <= reach)  # NaN: False
     local = world[near]
-    local = local[finite3(local)]
+    finite = finite3(local)
+    local = local[finite]
+    times = None if times is None else times[near][finite]
     if removes_ground and not sweep_ground and len(local) >= 3:
-        local = local[~ground_mask(local, config.ground.params())]
-    return local[points_in_box(local, box, params.region_scale)]
+        above = ~ground_mask(local, config.ground.params())
+        local = local[above]
+        times = None if times is None else times[above]
+    inside = points_in_box(local, box, params.region_scale)
+    return local[inside], None if times is None else RegionTimes(int(frame.timestamp_ns), times[inside])
 
 
 def gather_frame_points(source: FrameSource, result: TrackResult, config: TrackerConfig,
                         params: OfflineParams) -> list[np.ndarray]:
-    """Ground-removed world points inside each online box scaled ``region_scale`` (one array per frame)."""
+    """Ground-removed world points inside each online box scaled ``region_scale`` (one array per frame); with
+    ``params.own_motion_spread`` > 0 the object's own motion during each sweep is taken out of them
+    (:func:`~tracker.own_motion.compensate_track`, the velocities of ``result``'s boxes)."""
     out: list[np.ndarray] = []
+    times: list[RegionTimes | None] = []
     previous = None
     getter = getattr(source, "points_world", None)
+    compensate = params.own_motion_spread > 0
     for est in result.estimates:
         frame = source.lidar_frame(est.frame)
-        out.append(frame_region_points(frame, est.box, config, params, previous,
-                                       getter(est.frame) if callable(getter) and not config.deskew else None))
+        points, when = frame_region_points_timed(frame, est.box, config, params, previous,
+                                                 getter(est.frame) if callable(getter) and not config.deskew else None,
+                                                 with_times=compensate)
+        out.append(points)
+        times.append(when)
         previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
+    if compensate:
+        return compensate_track(out, times, [e.box for e in result.estimates], params.own_motion_spread)
     return out
 
 
@@ -926,14 +960,19 @@ def footprint_carried_back(result: TrackResult, config: TrackerConfig) -> TrackR
 
 
 def refine_offline(source: FrameSource | None, result: TrackResult, config: TrackerConfig | None = None,
-                   params: OfflineParams | None = None, points: list[np.ndarray] | None = None) -> TrackResult:
+                   params: OfflineParams | None = None, points: list[np.ndarray] | None = None,
+                   point_times: list[RegionTimes | None] | None = None) -> TrackResult:
     """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
     ``config.refinement.offline``. With ``config.refinement.backward`` (and a ``source``) the states of backward
     passes from the track's anchors replace its weak runs first (tracker/bidirectional.py), when they move some
     frame's centre farther than ``params.window_start_moved``. ``points``: each frame's region points as :func:`gather_frame_points` gives
-    them, when the caller gathered them while tracking (then ``source`` is not read and may be None)."""
+    them, when the caller gathered them while tracking (then ``source`` is not read and may be None), and
+    ``point_times`` their capture times (:func:`frame_region_points_timed`; needed to take the object's own motion
+    out of them, as :func:`gather_frame_points` does, when ``params.own_motion_spread`` > 0)."""
     config = config or result.config
     params = params or config.refinement.offline
+    if points is not None and point_times is not None and params.own_motion_spread > 0:
+        points = compensate_track(points, point_times, [e.box for e in result.estimates], params.own_motion_spread)
     if config.footprint.carry_back:
         carried = footprint_carried_back(result, config)
         if carried is not result and points is None and source is not None:
