@@ -533,6 +533,9 @@ class OfflineParams:
     gauge_window: int = 0               # > 0 (offline, with window_start): the trajectory is moved by the mean object-
                                         # frame offset from its states to the window pass's over frames 1..this
     gauge_window_max: float = 0.3       # ... only when that offset's centre part is under this (m)
+    own_motion_spread: float = 0.0      # > 0 (s; offline): a frame whose object returns span more of the sweep than
+                                        # this (a car at the sweep's seam) has its region points moved by the track's
+                                        # velocity to their median capture time (tracker/own_motion.py)
 
     def __post_init__(self) -> None:
         _choice("refinement.*.ground", self.ground, ("local", "tracker"))
@@ -543,6 +546,8 @@ class OfflineParams:
             raise ValueError("refinement.*.dense_voxel, dense_points, dense_shape_points: must be >= 0")
         if not self.window_start_first_moved >= 0:
             raise ValueError("refinement.*.window_start_first_moved: must be >= 0")
+        if not self.own_motion_spread >= 0:
+            raise ValueError("refinement.*.own_motion_spread: must be >= 0")
 
 
 # the fixed-lag window's solve: one shape, two Gauss-Newton steps (each state is solved lag + 1 times, warm-started);
@@ -800,7 +805,8 @@ _FULL = TrackerConfig(
     reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, static_share=0.5,
                               start_fill_frames=3),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0,
-                                                            dense_voxel=0.025, window_start_first_moved=0.25)),
+                                                            dense_voxel=0.025, window_start_first_moved=0.25,
+                                                            own_motion_spread=0.05)),
 )
 # faithful: the authors' implementation (docs/tracker.md)
 _FAITHFUL = TrackerConfig(

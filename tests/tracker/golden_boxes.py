@@ -26,8 +26,10 @@ REPO = Path(__file__).resolve().parents[2]
 GOLDEN = REPO / "tests" / "tracker" / "golden" / "dev_tracks_boxes.npz"
 GOLDEN_OFFLINE = REPO / "tests" / "tracker" / "golden" / "dev_tracks_offline_boxes.npz"
 PRESETS = ("full", "faithful")
-# ``full``'s refinement as the offline file was made (the dense tracks' finer fold grid came later)
-OFFLINE_SETTINGS = {"refinement.offline.dense_voxel": 0.0, "refinement.lag.dense_voxel": 0.0}
+# ``full``'s refinement as the offline file was made (the dense tracks' finer fold grid and the own-motion
+# compensation came later)
+OFFLINE_SETTINGS = {"refinement.offline.dense_voxel": 0.0, "refinement.lag.dense_voxel": 0.0,
+                    "refinement.offline.own_motion_spread": 0.0}
 SEEDS = (0, 1, 2)
 
 
