@@ -12,7 +12,8 @@ float64 boxes x, y, z, heading, l, w, h, and the flags of each frame joined by '
 tracks with ``full``, seed 0, online and then refined offline (:func:`tracker.refine_offline`), the boxes as above
 (made with today's solve with its voxel look-up reverted to the kd-tree it replaced;
 tests/tracker/test_golden_boxes.py checks today's offline solve gives them bit for bit), with the offline settings
-of ``full`` when the file was made (``OFFLINE_SETTINGS``: no dense grid), so it keeps checking the look-up.
+of ``full`` when the file was made (``OFFLINE_SETTINGS``: no dense grid, no own-motion compensation), so it keeps
+checking the look-up.
 """
 
 from __future__ import annotations
