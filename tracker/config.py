@@ -92,10 +92,16 @@ class SearchConfig:
     min_target_points: int = 5           # a search region with fewer points: the frame runs on the prior
     max_points: int = 1000               # random subsample of each point set
     association: str = "global"
+    own_motion_spread: float = 0.0       # > 0 (s): a step whose object returns (in the predicted box) span more of
+                                         # the sweep than this (a car at the sweep's seam) moves its region points by
+                                         # the motion model's predicted velocity to their median capture time
+                                         # (tracker/own_motion.py)
 
     def __post_init__(self) -> None:
         _choice("search.association", self.association, ("global", "crop"))
         _positive(self, "search", "scale", "crop_scale", "max_points")
+        if not self.own_motion_spread >= 0:
+            raise ValueError("search.own_motion_spread: must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -533,9 +539,10 @@ class OfflineParams:
     gauge_window: int = 0               # > 0 (offline, with window_start): the trajectory is moved by the mean object-
                                         # frame offset from its states to the window pass's over frames 1..this
     gauge_window_max: float = 0.3       # ... only when that offset's centre part is under this (m)
-    own_motion_spread: float = 0.0      # > 0 (s; offline): a frame whose object returns span more of the sweep than
-                                        # this (a car at the sweep's seam) has its region points moved by the track's
-                                        # velocity to their median capture time (tracker/own_motion.py)
+    own_motion_spread: float = 0.0      # > 0 (s): a frame whose object returns span more of the sweep than this (a
+                                        # car at the sweep's seam) has its region points moved by the track's velocity
+                                        # to their median capture time (tracker/own_motion.py); offline: the online
+                                        # boxes' velocity; the window (refinement.lag): its current states'
 
     def __post_init__(self) -> None:
         _choice("refinement.*.ground", self.ground, ("local", "tracker"))

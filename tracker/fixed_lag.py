@@ -27,7 +27,8 @@ import numpy as np
 from .config import LAG_PARAMS, OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box
-from .offline import _box, _rebuild_shape, frame_region_points, refine_states
+from .offline import _box, _rebuild_shape, frame_region_points_timed, refine_states
+from .own_motion import RegionTimes, compensate_track
 from .sotracker import FrameEstimate, LocalCrop, Tracker, TrackResult
 
 __all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag", "window_states"]
@@ -44,7 +45,9 @@ class FixedLagSmoother:
         self.config, self.lag, self.params, self.context = config, int(lag), params, int(context)
         self.size = np.asarray(size, dtype=np.float64)
         self.online: list[FrameEstimate] = []
-        self.points: list[np.ndarray] = []
+        self.points: list[np.ndarray] = []  # each frame's region points (own motion taken out, see _own_motion_out)
+        self.captured: list[np.ndarray] = []  # ... as captured
+        self.times: list[RegionTimes | None] = []  # ... and their capture times (with params.own_motion_spread)
         self.states = np.zeros((0, 4))      # current (refined) state of every frame so far
         self.extra_ms: list[float] = []     # smoother time spent when each frame arrived
         self.emitted = 0
@@ -60,10 +63,14 @@ class FixedLagSmoother:
         ``world``, ``crop``: see :func:`~tracker.offline.frame_region_points`; ``points``: the frame's region
         points when the caller has them (then ``frame`` is not read and may be None; no :meth:`revise` after)."""
         t0 = time.perf_counter()
+        when = None
         if points is None:
             assert frame is not None
-            points = frame_region_points(frame, estimate.box, self.config, self.params, self._previous, world, crop)
+            points, when = frame_region_points_timed(frame, estimate.box, self.config, self.params, self._previous,
+                                                     world, crop, with_times=self.params.own_motion_spread > 0)
         self.points.append(points)
+        self.captured.append(points)
+        self.times.append(when)
         self._previous_of.append(self._previous)
         if frame is not None:
             self._previous = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
@@ -74,6 +81,7 @@ class FixedLagSmoother:
         begin = max(0, first_free - self.context, self.floor)
         first_free = max(first_free, begin)
         if k - begin >= 2:  # frames before first_free are final (held); with none, the first is re-gauged as offline
+            self._own_motion_out(begin)
             online = np.array([e.state.to_array() for e in self.online[begin:]])
             refined, _ = refine_states(self.points[begin:], online, self.size, self.params,
                                        seed=self.config.seed + k, initial=self.states[begin:],
@@ -89,10 +97,23 @@ class FixedLagSmoother:
             raise ValueError(f"estimate {j} is final already")
         self.online[j] = estimate
         self.states[j] = estimate.state.to_array()
-        self.points[j] = frame_region_points(frame, estimate.box, self.config, self.params, self._previous_of[j])
+        self.points[j], self.times[j] = frame_region_points_timed(
+            frame, estimate.box, self.config, self.params, self._previous_of[j],
+            with_times=self.params.own_motion_spread > 0)
+        self.captured[j] = self.points[j]
+
+    def _own_motion_out(self, begin: int) -> None:
+        """The window's points (frames ``begin`` on) with the object's own motion during each sweep taken out
+        (``params.own_motion_spread``, tracker/own_motion.py), at the velocities of the window's current states."""
+        spread = self.params.own_motion_spread
+        if spread <= 0 or all(t is None for t in self.times[begin:]):
+            return
+        boxes = [_box(s, self.size) for s in self.states[begin:]]
+        self.points[begin:] = compensate_track(self.captured[begin:], self.times[begin:], boxes, spread)
 
     def finish(self) -> list[FrameEstimate]:
         """The estimates not yet final (the last ``lag`` frames), as they stand; builds the shape (all frames)."""
+        self._own_motion_out(0)
         self.shape = _rebuild_shape(self.points, self.states, self.size, self.config.refinement.offline.voxel)
         return self._emit(len(self.online))
 

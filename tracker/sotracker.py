@@ -33,6 +33,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .local_region import LocalCrop, local_region, road_within
 from .motion_limits import limit_motion
+from .own_motion import own_motion_compensated
 from .reacquire import EarlierSweep, box_holds_against, cluster_candidates, filled_start, search_region, start_shift
 from .registration import box_moved
 from .shape import ShapeModel, SubShape, to_object_frame, to_world_frame
@@ -176,6 +177,7 @@ class Tracker:
         det_target = self._detection_for(prediction, detections, flags)
         search_scale = self._search_scale(first)
         local, point_flags = self._local_points(frame, prediction, max(search_scale, self.config.search.scale))
+        local = self._own_motion_out(local, prediction, prior)
         flags += point_flags
         x = self._register(local, prior, search_scale, first, det_target, flags)
         x = limit_motion(x, prior, self.box.heading, first, self.steps, self.config.motion, flags, self._last_dt,
@@ -209,9 +211,18 @@ class Tracker:
         s, c = self.strategies, self.config
         region = local_region(frame, box, scale, s.ground, s.road, c.ground.margin, c.deskew, self._previous_pose)
         self._ground_points = road_within(region.road, box, frame, c.height.road_max_range)
+        self._local_times = None if region.crop is None else region.crop.time_offsets_ns
         if region.crop is not None:
             self.last_crop = region.crop
         return region.points, list(region.flags)
+
+    def _own_motion_out(self, local: np.ndarray, prediction: Box, prior: np.ndarray) -> np.ndarray:
+        """``local`` with the object's own motion during the sweep taken out (``search.own_motion_spread``), at the
+        motion model's predicted velocity; the crop the refinements reuse keeps the points as captured."""
+        spread, times = self.config.search.own_motion_spread, self._local_times
+        if spread <= 0 or times is None or len(times) != len(local):
+            return local
+        return own_motion_compensated(local, times, prediction, prior[:2] / self._last_dt, spread)
 
     def _detection_for(self, prediction: Box, detections: FrameDetections | None, flags: list[str]
                        ) -> np.ndarray | None:
