@@ -802,7 +802,7 @@ DET_WEIGHT = 0.03  # Detection-term weight of det_sot: ~ (sigma_ICP / sigma_Det)
 _FULL = TrackerConfig(
     preset="full",
     ground=GroundConfig(remover="sweep", seed_threshold=0.3, distance_threshold=0.2),
-    search=SearchConfig(min_target_points=3, max_points=600),
+    search=SearchConfig(min_target_points=3, max_points=600, own_motion_spread=0.05),
     registration=RegistrationConfig(outer_iterations=10, solver_iterations=6, convergence_tolerance=2e-3,
                                     anderson_depth=3),
     motion=MotionConfig(model="turn", alpha=0.6, per_second=True, first_motion_along_heading=True,
@@ -813,7 +813,8 @@ _FULL = TrackerConfig(
                               start_fill_frames=3),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0,
                                                             dense_voxel=0.025, window_start_first_moved=0.25,
-                                                            own_motion_spread=0.05)),
+                                                            own_motion_spread=0.05),
+                                lag=dataclasses.replace(LAG_PARAMS, own_motion_spread=0.05)),
 )
 # faithful: the authors' implementation (docs/tracker.md)
 _FAITHFUL = TrackerConfig(

@@ -85,16 +85,18 @@ def test_pandaset_dev_objects_in_one_pass_equal_each_tracked_alone(mode, pandase
     _assert_identical(seq, requests, mode, lag=3)
 
 
-def test_own_motion_taken_out_in_one_pass_as_each_tracked_alone(tiny_worlds):
-    """With refinement.offline.own_motion_spread the pass keeps the regions' capture times for the offline solve:
-    the same boxes as gathering them alone. A 1 ms spread reaches every object of the tiny world, so the boxes
-    differ from those without it."""
+@pytest.mark.parametrize("mode", ["lag", "offline"])
+def test_own_motion_taken_out_in_one_pass_as_each_tracked_alone(tiny_worlds, mode):
+    """With the own-motion settings (online step, window, offline solve) the pass keeps the regions' capture times:
+    the same boxes as tracking each object alone. A 1 ms spread reaches every object of the tiny world, so the
+    boxes differ from those without it."""
     seq = open_sequence(tiny_worlds[0])
     requests = _requests(seq, ["veh_000", "veh_001", "veh_002"], [0, 2, 1], 5)
-    config = get_preset("full", **{"refinement.offline.own_motion_spread": 0.001})
-    _assert_identical(seq, requests, "offline", config=config)
-    with_it = [_alone(seq, r, config, "offline", 3) for r in requests]
-    without = [_alone(seq, r, get_preset("full"), "offline", 3) for r in requests]
+    spread = ("search.own_motion_spread", "refinement.lag.own_motion_spread", "refinement.offline.own_motion_spread")
+    config = get_preset("full", **dict.fromkeys(spread, 0.001))
+    _assert_identical(seq, requests, mode, config=config)
+    with_it = [_alone(seq, r, config, mode, 3) for r in requests]
+    without = [_alone(seq, r, get_preset("full", **dict.fromkeys(spread, 0.0)), mode, 3) for r in requests]
     assert any(not np.array_equal([e.box.to_array() for e in a.estimates], [e.box.to_array() for e in b.estimates])
                for a, b in zip(with_it, without, strict=True))
 
