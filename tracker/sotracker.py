@@ -176,8 +176,7 @@ class Tracker:
         prediction = box_moved(self.box, prior)  # the motion model's prediction S^_k
         det_target = self._detection_for(prediction, detections, flags)
         search_scale = self._search_scale(first)
-        local, point_flags = self._local_points(frame, prediction, max(search_scale, self.config.search.scale))
-        local = self._own_motion_out(local, prediction, prior)
+        local, point_flags = self._local_points(frame, prediction, max(search_scale, self.config.search.scale), prior)
         flags += point_flags
         x = self._register(local, prior, search_scale, first, det_target, flags)
         x = limit_motion(x, prior, self.box.heading, first, self.steps, self.config.motion, flags, self._last_dt,
@@ -206,23 +205,17 @@ class Tracker:
         return None if det is None else detection_motion(self.box, det, prediction.heading)
 
     # ------------------------------------------------------------------ steps
-    def _local_points(self, frame: LidarFrame, box: Box, scale: float) -> tuple[np.ndarray, list[str]]:
-        """Non-ground world points near ``box`` (tracker/local_region.py); keeps the road points and the crop."""
+    def _local_points(self, frame: LidarFrame, box: Box, scale: float, prior: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, list[str]]:
+        """Non-ground world points near ``box`` (tracker/local_region.py); keeps the road points and the crop. With
+        the step's ``prior``, the object's own motion during the sweep taken out (:func:`_own_motion_out`)."""
         s, c = self.strategies, self.config
         region = local_region(frame, box, scale, s.ground, s.road, c.ground.margin, c.deskew, self._previous_pose)
         self._ground_points = road_within(region.road, box, frame, c.height.road_max_range)
-        self._local_times = None if region.crop is None else region.crop.time_offsets_ns
         if region.crop is not None:
             self.last_crop = region.crop
-        return region.points, list(region.flags)
-
-    def _own_motion_out(self, local: np.ndarray, prediction: Box, prior: np.ndarray) -> np.ndarray:
-        """``local`` with the object's own motion during the sweep taken out (``search.own_motion_spread``), at the
-        motion model's predicted velocity; the crop the refinements reuse keeps the points as captured."""
-        spread, times = self.config.search.own_motion_spread, self._local_times
-        if spread <= 0 or times is None or len(times) != len(local):
-            return local
-        return own_motion_compensated(local, times, prediction, prior[:2] / self._last_dt, spread)
+        velocity = None if prior is None else prior[:2] / self._last_dt
+        return _own_motion_out(region.points, region.crop, box, velocity, c.search.own_motion_spread), list(region.flags)
 
     def _detection_for(self, prediction: Box, detections: FrameDetections | None, flags: list[str]
                        ) -> np.ndarray | None:
@@ -288,7 +281,7 @@ class Tracker:
         """A poor fit (clutter, a few stray points; below ``registration.min_quality``): trust the prior instead."""
         min_quality = self.config.registration.min_quality
         if min_quality > 0 and "prior_only" not in flags and not first:
-            explained, _ = self._explained(local, box_moved(self.box, x))
+            explained, _ = _explained(self.shape, local, box_moved(self.box, x))
             if explained < min_quality:
                 flags += ["low_quality", "prior_only"]
                 return prior.copy()
@@ -459,9 +452,21 @@ class Tracker:
         self._timestamp_ns = int(frame.timestamp_ns)
         return dt if dt > 0 else _NOMINAL_DT
 
-    def _explained(self, local: np.ndarray, box: Box) -> tuple[float, int]:
-        """Share of the object points in ``box`` within 0.2 m of the shape placed there, and their number."""
-        return self.shape.explained(to_object_frame(local[points_in_box(local, box, 1.0)], box))
+
+def _explained(shape: ShapeModel, local: np.ndarray, box: Box) -> tuple[float, int]:
+    """Share of the object points in ``box`` within 0.2 m of ``shape`` placed there, and their number."""
+    return shape.explained(to_object_frame(local[points_in_box(local, box, 1.0)], box))
+
+
+def _own_motion_out(local: np.ndarray, crop: LocalCrop | None, prediction: Box, velocity: np.ndarray | None,
+                    spread: float) -> np.ndarray:
+    """``local`` (the step's region points: ``crop``'s, in its order) with the object's own motion during the sweep
+    taken out (``search.own_motion_spread``) at the motion model's predicted ``velocity`` (none: as they are); the
+    crop, which the refinements reuse, keeps the points as captured."""
+    times = None if crop is None else crop.time_offsets_ns
+    if spread <= 0 or velocity is None or times is None or len(times) != len(local):
+        return local
+    return own_motion_compensated(local, times, prediction, velocity, spread)
 
 
 def _quality(explained: float, count: int) -> float:
