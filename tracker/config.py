@@ -814,7 +814,8 @@ _FULL = TrackerConfig(
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0,
                                                             dense_voxel=0.025, window_start_first_moved=0.25,
                                                             own_motion_spread=0.05),
-                                lag=dataclasses.replace(LAG_PARAMS, own_motion_spread=0.05)),
+                                lag=dataclasses.replace(LAG_PARAMS, own_motion_spread=0.05, dense_voxel=0.025,
+                                                        dense_points=1000)),
 )
 # faithful: the authors' implementation (docs/tracker.md)
 _FAITHFUL = TrackerConfig(
