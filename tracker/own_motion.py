@@ -58,10 +58,12 @@ def own_motion_compensated(points: np.ndarray, offsets_ns: np.ndarray, box: Box,
     else ``points`` itself. ``offsets_ns`` (N,): each point's capture time relative to any fixed time."""
     if len(points) == 0 or min_spread_s <= 0 or len(offsets_ns) != len(points):
         return points
+    times = np.asarray(offsets_ns, dtype=np.float64) * 1e-9
+    if float(times.max() - times.min()) <= min_spread_s:   # no subset spans more: most cars, no box test
+        return points
     inside = points_in_box(points, box, 1.0)
     if not inside.any():
         return points
-    times = np.asarray(offsets_ns, dtype=np.float64) * 1e-9
     own = times[inside]
     if float(own.max() - own.min()) <= min_spread_s:
         return points

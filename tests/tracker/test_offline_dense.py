@@ -21,25 +21,36 @@ def _acc(result, truth) -> float:
     return 100.0 * float(iou_3d_batch(boxes[1:], truth[1:]).mean())
 
 
-@pytest.mark.slow
-def test_a_dense_cars_offline_states_stay_above_online_on_the_finer_grid(tmp_path):
-    """Synthetic world seed 2 (20 frames, pandar64): its three moving cars hold a median of 3,060-3,310 points per
-    frame. With fold shapes of 5 cm voxel centres the offline solve ends below the online pass on two of them
-    (Acc 90.6 and 96.2 against 92.3 and 97.8, seed 0); on the 2.5 cm grid every one is above it."""
+def _dense_world(tmp_path):
+    """Synthetic world seed 2 (20 frames, pandar64, three moving cars of 3,060-3,310 points per frame) and a cached
+    source of it."""
     from sot_apps.io import open_sequence
     from sot_apps.io.cached_source import CachedSource
     from sot_apps.synth import write_world
 
     sequence = open_sequence(write_world(tmp_path / "w", frames=20, vehicles=3, sensor="pandar64", seed=2))
-    source = CachedSource(sequence)
+    return sequence, CachedSource(sequence)
+
+
+def _truth(sequence, track_id: str):
+    """(first frame, last frame, ground-truth boxes, their (K, 7) array) of a track."""
+    gt = sequence.tracks()[track_id]
+    lo, hi = min(gt.frames), max(gt.frames)
+    truth = [gt.box_at(k) for k in range(lo, hi + 1)]
+    return lo, hi, truth, np.array([b.to_array()[:7] for b in truth])
+
+
+@pytest.mark.slow
+def test_a_dense_cars_offline_states_stay_above_online_on_the_finer_grid(tmp_path):
+    """Synthetic world seed 2 (20 frames, pandar64): its three moving cars hold a median of 3,060-3,310 points per
+    frame. With fold shapes of 5 cm voxel centres the offline solve ends below the online pass on two of them
+    (Acc 90.6 and 96.2 against 92.3 and 97.8, seed 0); on the 2.5 cm grid every one is above it."""
+    sequence, source = _dense_world(tmp_path)
     config = get_preset("full", seed=0, **{"refinement.offline.dense_voxel": 0.025})
     coarse = get_preset("full", seed=0, **{"refinement.offline.dense_voxel": 0.0})
     below_on_coarse = 0
     for tid in ("veh_000", "veh_001", "veh_002"):
-        gt = sequence.tracks()[tid]
-        lo, hi = min(gt.frames), max(gt.frames)
-        truth = [gt.box_at(k) for k in range(lo, hi + 1)]
-        truth_boxes = np.array([b.to_array()[:7] for b in truth])
+        lo, hi, truth, truth_boxes = _truth(sequence, tid)
         online = track(source, truth[0], lo, hi, config)
         assert np.median([e.num_points for e in online.estimates]) >= 500, tid   # dense: the finer grid applies
         on, fine = _acc(online, truth_boxes), _acc(refine_offline(source, online, config), truth_boxes)
@@ -53,20 +64,12 @@ def test_a_dense_cars_window_states_stay_with_online_on_the_finer_grid(tmp_path)
     """The same world: on its 10 cm grid the window (lag 10) ends below the online pass on all three cars (Acc 91.6,
     93.9, 92.7 against 92.3, 97.8, 93.6, seed 0); on the 2.5 cm grid for a median of >= 1,000 points it is above
     online on two and within 0.6 of it on the third, and above the coarse grid's on every one."""
-    from sot_apps.io import open_sequence
-    from sot_apps.io.cached_source import CachedSource
-    from sot_apps.synth import write_world
-
-    sequence = open_sequence(write_world(tmp_path / "w", frames=20, vehicles=3, sensor="pandar64", seed=2))
-    source = CachedSource(sequence)
+    sequence, source = _dense_world(tmp_path)
     config = get_preset("full", seed=0, **{"refinement.lag.dense_voxel": 0.025, "refinement.lag.dense_points": 1000})
     coarse = get_preset("full", seed=0, **{"refinement.lag.dense_voxel": 0.0})
     below_on_coarse = 0
     for tid in ("veh_000", "veh_001", "veh_002"):
-        gt = sequence.tracks()[tid]
-        lo, hi = min(gt.frames), max(gt.frames)
-        truth = [gt.box_at(k) for k in range(lo, hi + 1)]
-        truth_boxes = np.array([b.to_array()[:7] for b in truth])
+        lo, hi, truth, truth_boxes = _truth(sequence, tid)
         online = track(source, truth[0], lo, hi, config)
         assert np.median([e.num_points for e in online.estimates]) >= 1000, tid
         on = _acc(online, truth_boxes)
