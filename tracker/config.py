@@ -31,7 +31,7 @@ from .ground_params import GroundParams
 
 __all__ = ["TrackerConfig", "GroundConfig", "SearchConfig", "RegistrationConfig", "RansacConfig", "ShapeConfig",
            "CTRVConfig", "MotionConfig", "HeightConfig", "FirstFrameConfig", "ReacquireConfig", "FootprintConfig",
-           "DetectionConfig",
+           "ContainmentConfig", "DetectionConfig",
            "OfflineParams", "OFFLINE_PARAMS",
            "RefinementConfig", "LAG_PARAMS", "PRESETS", "DETECTION_PRESETS", "get_preset", "preset_names",
            "parse_overrides"]
@@ -158,7 +158,7 @@ class RansacConfig:
 
     def __post_init__(self) -> None:
         _choice("shape.ransac.mode", self.mode, ("fixed", "upstream", "none"))
-        _positive(self, "shape.ransac", "max_iterations")
+        _positive(self, "shape.ransac", "max_iterations", "sample_size", "score_pairs")
 
 
 @dataclass(frozen=True)
@@ -427,6 +427,30 @@ class ReacquireConfig:
 
 
 @dataclass(frozen=True)
+class ContainmentConfig:
+    """``footprint.containment``, the containment check (tracker/containment.py): a moving dense object's points
+    that run on beyond the end of its box it moves towards, the other end empty, move the box along its length.
+    ``min_points`` 0 = off."""
+
+    min_points: int = 0                  # > 0: frames with at least this many object points in the box's band
+    min_speed: float = 1.0               # m/s: ... of an object moving at least this fast along its heading
+    gap: float = 0.3                     # m: the object's points run on with no gap wider than this
+    margin: float = 0.05                 # m: the band reaches this far beyond the box's sides (the side face's noise)
+    floor: float = 0.3                   # m: points this close to the box's bottom are left out (road left over)
+    min_shift: float = 0.1               # m: a smaller move is none (the points' noise, a tight box)
+    max_shift: float = 0.5               # m: the most the box moves in one frame
+    max_turn: float = 0.05               # rad: no move when the points line up sharpest further from the box's heading
+    shape: str = "world"                 # "world": the shape stays where it lies in the world; "kept": in the box frame
+
+    def __post_init__(self) -> None:
+        _positive(self, "footprint.containment", "gap", "max_shift", "max_turn")
+        _choice("footprint.containment.shape", self.shape, ("kept", "world"))
+        if min(self.min_points, self.min_speed, self.margin, self.floor, self.min_shift) < 0:
+            raise ValueError(f"footprint.containment: min_points, min_speed, margin, floor and min_shift must be >= 0, "
+                             f"got {self.min_points}, {self.min_speed}, {self.margin}, {self.floor}, {self.min_shift}")
+
+
+@dataclass(frozen=True)
 class FootprintConfig:
     """The footprint check (tracker/footprint.py): a dense object whose points and shape both contradict the box's
     heading turns the box. ``min_points`` 0 = off (every preset)."""
@@ -441,6 +465,7 @@ class FootprintConfig:
     crop_length: float = 1.2             # the points fitted: in the box scaled this along its length ...
     crop_width: float = 1.8              # ... and this across (a box 20 degrees off still holds the object's corners)
     carry_back: bool = True              # offline: the turn also turns the frames before it that were held turned
+    containment: ContainmentConfig = field(default_factory=ContainmentConfig)  # the box slides along its length
 
     def __post_init__(self) -> None:
         _positive(self, "footprint", "frames", "search_range", "crop_length", "crop_width", "min_gain")

@@ -44,6 +44,12 @@ class ShapeModel:
         self.points = _turned(self.points, angle)
         self._nearest = None
 
+    def slide(self, distance: float) -> None:
+        """Move the points by ``distance`` along the object frame's x axis (the box's length)."""
+        if len(self.points):
+            self.points = self.points + np.array([distance, 0.0, 0.0])
+        self._nearest = None
+
     def explained(self, points_object: np.ndarray, radius: float = 0.2) -> tuple[float, int]:
         """The share of ``points_object`` within ``radius`` of a shape point (0 for an empty shape), and their
         number."""
@@ -73,6 +79,11 @@ class SubShape:
     def turn(self, angle: float) -> None:
         """Turn every frame's points by ``angle`` about the object frame's vertical axis."""
         self._frames = deque((_turned(f, angle) for f in self._frames), maxlen=self._frames.maxlen)
+
+    def slide(self, distance: float) -> None:
+        """Move every frame's points by ``distance`` along the object frame's x axis."""
+        step = np.array([distance, 0.0, 0.0])
+        self._frames = deque((f + step for f in self._frames), maxlen=self._frames.maxlen)
 
     @property
     def points(self) -> np.ndarray:

@@ -25,7 +25,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .config import TrackerConfig
+from .config import ContainmentConfig, TrackerConfig
+from .containment import containment_shift
 from .deskew import deskew_points
 from .detection import Detections, FrameDetections, associate_detection, detection_motion
 from .footprint import FootprintCheck
@@ -181,7 +182,7 @@ class Tracker:
         x = self._register(local, prior, search_scale, first, det_target, flags)
         x = limit_motion(x, prior, self.box.heading, first, self.steps, self.config.motion, flags, self._last_dt,
                          len(self.prev_points))
-        x = self._check_quality(x, local, prior, first, flags)
+        x = self._check_fit(x, local, prior, first, flags)
         coasting = "prior_only" in flags
         x = self.strategies.height.motion(x, self.box, self._ground_points, fit=not coasting)
         x = self._update_motion(x, local, coasting)
@@ -276,16 +277,18 @@ class Tracker:
         flags[:] = [f for f in flags if f != "prior_only"] + ["det_only"]
         return (mp * prior + det * det_target) / (mp + det)
 
-    def _check_quality(self, x: np.ndarray, local: np.ndarray, prior: np.ndarray, first: bool,
-                       flags: list[str]) -> np.ndarray:
-        """A poor fit (clutter, a few stray points; below ``registration.min_quality``): trust the prior instead."""
+    def _check_fit(self, x: np.ndarray, local: np.ndarray, prior: np.ndarray, first: bool,
+                   flags: list[str]) -> np.ndarray:
+        """A poor fit (clutter, a few stray points; below ``registration.min_quality``): trust the prior instead.
+        A box that does not hold its object's points slides along its length (:func:`_slid`)."""
         min_quality = self.config.registration.min_quality
         if min_quality > 0 and "prior_only" not in flags and not first:
             explained, _ = _explained(self.shape, local, box_moved(self.box, x))
             if explained < min_quality:
                 flags += ["low_quality", "prior_only"]
                 return prior.copy()
-        return x
+        return _slid(x, self.box, local, self.config.footprint.containment, (self.shape, self.subshape), flags,
+                     self._last_dt)
 
     def _update_motion(self, x: np.ndarray, local: np.ndarray, coasting: bool) -> np.ndarray:
         """The motion model's update with the registered motion (CTRV: heading about the visible points); a
@@ -451,6 +454,26 @@ class Tracker:
         dt = (int(frame.timestamp_ns) - self._timestamp_ns) * 1e-9
         self._timestamp_ns = int(frame.timestamp_ns)
         return dt if dt > 0 else _NOMINAL_DT
+
+
+def _slid(x: np.ndarray, box: Box, local: np.ndarray, config: ContainmentConfig,
+          shapes: tuple[ShapeModel, SubShape], flags: list[str], dt: float) -> np.ndarray:
+    """The containment check (tracker/containment.py) of a measured frame's motion ``x`` from ``box`` over ``dt``
+    seconds: the box moves along its length to hold its object's points; with ``config.shape`` "world" the shape
+    and sub-shape move back by as much in the object frame (they stay where they lie in the world). Flag
+    ``contained``."""
+    if "prior_only" in flags:
+        return x
+    moved = box_moved(box, x)
+    direction = np.array([np.cos(moved.heading), np.sin(moved.heading)])
+    shift = containment_shift(local, moved, config, float(x[:2] @ direction) / dt)
+    if shift == 0.0:
+        return x
+    flags.append("contained")
+    if config.shape == "world":
+        for shape in shapes:
+            shape.slide(-shift)
+    return x + np.array([*(shift * direction), 0.0, 0.0])
 
 
 def _explained(shape: ShapeModel, local: np.ndarray, box: Box) -> tuple[float, int]:

@@ -57,6 +57,8 @@ def test_a_partial_file_keeps_the_defaults(tmp_path):
     ({"motion": 3}, "motion: expected a section (mapping), got 3"),
     ({"height": {"model": "laser"}}, "height.model: expected one of icp, ground, fixed, filter, got 'laser'"),
     ({"search": {"scale": 0}}, "search.scale: must be positive"),
+    ({"shape": {"ransac": {"score_pairs": 0}}}, "shape.ransac.score_pairs: must be positive"),
+    ({"footprint": {"containment": {"gap": 0}}}, "footprint.containment.gap: must be positive"),
     ({"refinement": {"offline": {"gauge": "x"}}}, "refinement.offline.gauge: expected one of regauge, fix_first"),
 ])
 def test_errors_name_the_field_path(data, message):
