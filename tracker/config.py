@@ -836,6 +836,7 @@ _FULL = TrackerConfig(
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
     reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, static_share=0.5,
                               start_fill_frames=3),
+    footprint=FootprintConfig(containment=ContainmentConfig(min_points=30)),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0,
                                                             dense_voxel=0.025, window_start_first_moved=0.25,
                                                             own_motion_spread=0.05),

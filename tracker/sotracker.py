@@ -279,16 +279,15 @@ class Tracker:
 
     def _check_fit(self, x: np.ndarray, local: np.ndarray, prior: np.ndarray, first: bool,
                    flags: list[str]) -> np.ndarray:
-        """A poor fit (clutter, a few stray points; below ``registration.min_quality``): trust the prior instead.
-        A box that does not hold its object's points slides along its length (:func:`_slid`)."""
+        """A poor fit (clutter; below ``registration.min_quality``): the prior instead; else :func:`_slid`."""
         min_quality = self.config.registration.min_quality
         if min_quality > 0 and "prior_only" not in flags and not first:
             explained, _ = _explained(self.shape, local, box_moved(self.box, x))
             if explained < min_quality:
                 flags += ["low_quality", "prior_only"]
                 return prior.copy()
-        return _slid(x, self.box, local, self.config.footprint.containment, (self.shape, self.subshape), flags,
-                     self._last_dt)
+        c = self.config.footprint.containment
+        return _slid(x, self.box, local, c, self._last_dt, (self.shape, self.subshape), flags)
 
     def _update_motion(self, x: np.ndarray, local: np.ndarray, coasting: bool) -> np.ndarray:
         """The motion model's update with the registered motion (CTRV: heading about the visible points); a
@@ -456,8 +455,8 @@ class Tracker:
         return dt if dt > 0 else _NOMINAL_DT
 
 
-def _slid(x: np.ndarray, box: Box, local: np.ndarray, config: ContainmentConfig,
-          shapes: tuple[ShapeModel, SubShape], flags: list[str], dt: float) -> np.ndarray:
+def _slid(x: np.ndarray, box: Box, local: np.ndarray, config: ContainmentConfig, dt: float,
+          shapes: tuple[ShapeModel, SubShape], flags: list[str]) -> np.ndarray:
     """The containment check (tracker/containment.py) of a measured frame's motion ``x`` from ``box`` over ``dt``
     seconds: the box moves along its length to hold its object's points; with ``config.shape`` "world" the shape
     and sub-shape move back by as much in the object frame (they stay where they lie in the world). Flag

@@ -12,8 +12,8 @@ float64 boxes x, y, z, heading, l, w, h, and the flags of each frame joined by '
 tracks with ``full``, seed 0, online and then refined offline (:func:`tracker.refine_offline`), the boxes as above
 (made with today's solve with its voxel look-up reverted to the kd-tree it replaced;
 tests/tracker/test_golden_boxes.py checks today's offline solve gives them bit for bit), with the settings of
-``full`` when the file was made (``OFFLINE_SETTINGS``: no dense grid, no own-motion compensation anywhere), so it
-keeps checking the look-up.
+``full`` when the file was made (``OFFLINE_SETTINGS``: no dense grid, no own-motion compensation anywhere, no
+containment check), so it keeps checking the look-up.
 """
 
 from __future__ import annotations
@@ -28,10 +28,10 @@ GOLDEN = REPO / "tests" / "tracker" / "golden" / "dev_tracks_boxes.npz"
 GOLDEN_OFFLINE = REPO / "tests" / "tracker" / "golden" / "dev_tracks_offline_boxes.npz"
 PRESETS = ("full", "faithful")
 # ``full``'s settings as the offline file was made (the dense tracks' finer fold grid and the own-motion
-# compensation, offline, online and in the window, came later)
+# compensation, offline, online and in the window, and the containment check came later)
 OFFLINE_SETTINGS = {"refinement.offline.dense_voxel": 0.0, "refinement.lag.dense_voxel": 0.0,
                     "refinement.offline.own_motion_spread": 0.0, "search.own_motion_spread": 0.0,
-                    "refinement.lag.own_motion_spread": 0.0}
+                    "refinement.lag.own_motion_spread": 0.0, "footprint.containment.min_points": 0}
 SEEDS = (0, 1, 2)
 
 

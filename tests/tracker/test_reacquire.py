@@ -62,8 +62,11 @@ def test_an_empty_start_is_held_then_reacquired_when_the_points_appear():
 
 
 def test_without_reacquire_the_empty_start_loses_the_car():
+    """Without re-acquisition and without the containment check (which slides the held box onto the car once the
+    car's points run on out of the box's front: IoU 0.85 at frame 9, 0.44 at the end), the box stays behind."""
     frames, truth = _sequence()
-    result = track(_Source(frames), truth[0], 0, len(frames) - 1, get_preset("full", seed=0, **{"reacquire.mode": "none"}))
+    settings = {"reacquire.mode": "none", "footprint.containment.min_points": 0}
+    result = track(_Source(frames), truth[0], 0, len(frames) - 1, get_preset("full", seed=0, **settings))
     assert _iou(result, truth)[-4:].max() < 0.1
 
 

@@ -145,7 +145,9 @@ def test_an_accelerating_car_is_followed_closer_with_the_ramp():
     sequence = make_sequence(n_frames=30, seed=1, boxes=boxes)
 
     def along_errors(changes: dict) -> np.ndarray:
-        result = track(sequence, boxes[0], 0, len(boxes) - 1, get_preset("full", **changes))
+        # the containment check off: it slides a box that falls behind the car onto it (0.06-0.12 m behind then)
+        result = track(sequence, boxes[0], 0, len(boxes) - 1,
+                       get_preset("full", **{"footprint.containment.min_points": 0, **changes}))
         return np.array([e.box.x - b.x for e, b in zip(result.estimates, boxes, strict=True)])
 
     plain, ramp = along_errors({}), along_errors({"motion.ramp_frames": 10})
