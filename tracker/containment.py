@@ -1,17 +1,19 @@
-"""The containment check (``containment``; ``containment.min_points`` 0 = off): a box holds its object's points.
+"""The containment check (``footprint.containment``; ``min_points`` 0 = off): a box holds its object's points.
 
 On a vehicle seen broadside, the points along its length pin the box only at the two ends of its side. When the
-registration stops short along the length (a motion prior that starts at zero speed, a shape aggregated from boxes
-that lagged), the box lags behind the car a little each frame; the points beyond the box's front never join the
-shape, the shape's rear edge moves forward in the box, and the lag holds: the shape and the box agree, the car does
-not. The check looks along the box's length in the band of the box's width (``margin`` wider each side: the
-visible side's points lie on the box's side face) and height (above ``floor`` from its bottom, where road points
-left by the ground removal lie): the object's points run from the box's inside, with no
-gap wider than ``gap``, beyond the end the object moves towards (at ``min_speed`` or faster), while the other end of the box is empty. The box moves along its length by
-the smaller of the two (the points then fit in it), at most ``max_shift``. Points beyond both ends, or none beyond
-either, leave it where it is; so do points that line up sharpest (tracker/footprint.py ``fit_heading``) at a
-heading more than ``max_turn`` from the box's: a box turned away from the object spills its points at one end
-too, and sliding it along its wrong length would move it sideways.
+registration stops short along the length (a motion prior that starts at zero speed, an early stop), the box falls
+behind the car a little each frame; the points beyond the box's front never join the shape, the shape's rear edge
+moves forward in the box, and the lag holds: the shape and the box agree, the car does not.
+
+The check looks along the box's length in the band of the box's width (``margin`` wider each side: the visible
+side's points lie on the box's side face) and height (above ``floor`` from its bottom, where road points left by
+the ground removal lie). The object's points run from the box's inside with no gap wider than ``gap``. Where they
+run beyond the end the object moves towards (at ``min_speed`` or faster) while the other end of the box is empty,
+the box moves along its length by the smaller of the two (the points then fit in it), at most ``max_shift``.
+Points beyond both ends, none beyond either, or beyond the end the object moves away from (a stray part of its
+scan, a neighbour close behind) leave it where it is; so do points that line up sharpest (tracker/footprint.py
+``fit_heading``) at a heading more than ``max_turn`` from the box's: a box turned away from the object spills its
+points at one end too, and sliding it along its wrong length would move it sideways.
 """
 
 from __future__ import annotations
