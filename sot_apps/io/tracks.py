@@ -40,7 +40,7 @@ DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "l
 TRACKER_FLAGS: frozenset[str] = frozenset({"init", "no_points", "prior_only", "low_points", "nan_points",
                                            "no_shape_inliers", "yaw_clamped", "motion_clamped", "offline", "lost",
                                            "no_sweep", "footprint", "coasting", "waiting", "reacquired", "backward",
-                                           "det", "det_only", "keyframe", "keyframes", "low_quality"})
+                                           "det", "det_only", "keyframe", "keyframes", "low_quality", "contained"})
 
 
 def frame_is_valid(flags: Iterable[str], invalid_flags: Iterable[str] = DEFAULT_INVALID_FLAGS) -> bool:

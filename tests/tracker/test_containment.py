@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from tracker_synthetic import BOX_SIZE, SyntheticSequence, car_points, ground_points
 
+from sot_apps.io.tracks import TRACKER_FLAGS
 from tracker import Box, get_preset, track
 from tracker.config import ContainmentConfig, TrackerConfig
 from tracker.containment import containment_shift
@@ -125,12 +126,14 @@ def test_a_start_box_behind_a_broadside_car_catches_up_with_it():
     seq = _broadside()
     start = Box(seq.boxes[0].x - 0.6, *seq.boxes[0].center[1:], 0.0, *BOX_SIZE)
 
-    def errors(**settings) -> np.ndarray:
+    def errors(**settings) -> tuple[np.ndarray, int]:
         result = track(seq, start, 0, len(seq) - 1, get_preset("full", **settings))
-        return np.array([b.x - g.x for b, g in zip(result.boxes, seq.boxes, strict=True)])[1:]
+        slid = sum("contained" in e.flags for e in result.estimates)
+        return np.array([b.x - g.x for b, g in zip(result.boxes, seq.boxes, strict=True)])[1:], slid
 
-    off = errors(**{"footprint.containment.min_points": 0})
-    world = errors(**{"footprint.containment.min_points": 30, "footprint.containment.shape": "world"})
+    off, none = errors(**{"footprint.containment.min_points": 0})
+    world, slid = errors(**{"footprint.containment.min_points": 30, "footprint.containment.shape": "world"})
+    assert none == 0 and slid >= 1 and "contained" in TRACKER_FLAGS   # a flag motion-export's --invalid-flags takes
     assert np.all(off < -0.5)
     assert -0.13 < world[0] < -0.09
     assert np.all(np.abs(world[1:]) < 0.12)
