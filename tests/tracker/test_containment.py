@@ -12,6 +12,7 @@ from tracker import Box, get_preset, track
 from tracker.config import ContainmentConfig, TrackerConfig
 from tracker.containment import containment_shift
 from tracker.frames import LidarFrame
+from tracker.geometry import rotation_z
 
 ON = ContainmentConfig(min_points=30)
 BOX = Box(10.0, 5.0, 1.0, 0.0, 4.5, 1.8, 1.5)
@@ -31,8 +32,7 @@ def test_points_running_out_of_the_front_move_the_box_by_the_spill(heading):
     rng = np.random.default_rng(0)
     box = Box(BOX.x, BOX.y, BOX.z, heading, *BOX.size)
     local = _side(rng, -2.25 + 0.7, 2.25 + 0.5) - BOX.center
-    c, s = np.cos(heading), np.sin(heading)
-    points = np.c_[c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1], local[:, 2]] + BOX.center
+    points = _turned(local, heading)
     beyond = local[:, 0].max() - 2.25
     assert 0.45 < beyond < 0.5
     assert containment_shift(points, box, ON, 3.0) == pytest.approx(beyond, abs=1e-9)
@@ -52,11 +52,14 @@ def test_no_slide_for_a_box_turned_away_from_its_object():
     """A box 15 degrees off the object's side spills its points at one end too: sliding it along its own length
     would move it sideways. The points line up sharpest 15 degrees off: no slide."""
     rng = np.random.default_rng(5)
-    local = _side(rng, -2.25 + 0.7, 2.25 + 0.5) - BOX.center
-    c, s = np.cos(0.26), np.sin(0.26)
-    turned = np.c_[c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1], local[:, 2]] + BOX.center
+    turned = _turned(_side(rng, -2.25 + 0.7, 2.25 + 0.5) - BOX.center, 0.26)
     assert containment_shift(turned, BOX, ON, 3.0) == 0.0
     assert containment_shift(turned, Box(BOX.x, BOX.y, BOX.z, 0.26, *BOX.size), ON, 3.0) > 0.45
+
+
+def _turned(local: np.ndarray, angle: float) -> np.ndarray:
+    """Points given relative to ``BOX``'s centre, turned by ``angle`` about it (world)."""
+    return local @ rotation_z(angle).T + BOX.center
 
 
 def _flip_along(points: np.ndarray, box: Box) -> np.ndarray:
