@@ -172,11 +172,16 @@ class ShapeConfig:
     voxel_size: float = 0.05
     subshape: bool = True
     subshape_frames: int = 2
+    subshape_hold: int = 0               # > 0: frames from a coasting frame on whose points the sub-shape leaves out
+    subshape_hold_shape: int = 100       # ... when the shape holds at least this many points (a sparser one: kept)
     crop_scale: float = 1.0              # points added to the shape / sub-shape
     ransac: RansacConfig = field(default_factory=RansacConfig)
 
     def __post_init__(self) -> None:
         _positive(self, "shape", "keyframe_interval", "voxel_size")
+        if min(self.subshape_hold, self.subshape_hold_shape) < 0:
+            raise ValueError(f"shape.subshape_hold and subshape_hold_shape: must be >= 0, got {self.subshape_hold}, "
+                             f"{self.subshape_hold_shape}")
 
 
 @dataclass(frozen=True)
@@ -441,13 +446,15 @@ class ContainmentConfig:
     max_shift: float = 0.5               # m: the most the box moves in one frame
     max_turn: float = 0.05               # rad: no move when the points line up sharpest further from the box's heading
     shape: str = "world"                 # "world": the shape stays where it lies in the world; "kept": in the box frame
+    settle_frames: int = 0               # for this many frames after a re-lock the box slides either way
 
     def __post_init__(self) -> None:
         _positive(self, "footprint.containment", "gap", "max_shift", "max_turn")
         _choice("footprint.containment.shape", self.shape, ("kept", "world"))
-        if min(self.min_points, self.min_speed, self.margin, self.floor, self.min_shift) < 0:
-            raise ValueError(f"footprint.containment: min_points, min_speed, margin, floor and min_shift must be >= 0, "
-                             f"got {self.min_points}, {self.min_speed}, {self.margin}, {self.floor}, {self.min_shift}")
+        if min(self.min_points, self.min_speed, self.margin, self.floor, self.min_shift, self.settle_frames) < 0:
+            raise ValueError(f"footprint.containment: min_points, min_speed, margin, floor, min_shift and settle_frames "
+                             f"must be >= 0, got {self.min_points}, {self.min_speed}, {self.margin}, {self.floor}, "
+                             f"{self.min_shift}, {self.settle_frames}")
 
 
 @dataclass(frozen=True)
@@ -836,7 +843,7 @@ _FULL = TrackerConfig(
     first_frame=FirstFrameConfig(search="hypotheses", icp_iterations=20, hypotheses=9, max_yaw=0.1),
     reacquire=ReacquireConfig(mode="clusters", supported_holds_ties=True, hold_frames=2, static_share=0.5,
                               start_fill_frames=3),
-    footprint=FootprintConfig(containment=ContainmentConfig(min_points=30)),
+    footprint=FootprintConfig(containment=ContainmentConfig(min_points=30, settle_frames=10)),
     refinement=RefinementConfig(offline=dataclasses.replace(OFFLINE_PARAMS, window_start=10, window_start_margin=1.0,
                                                             dense_voxel=0.025, window_start_first_moved=0.25,
                                                             own_motion_spread=0.05),

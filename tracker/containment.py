@@ -14,6 +14,12 @@ Points beyond both ends, none beyond either, or beyond the end the object moves 
 scan, a neighbour close behind) leave it where it is; so do points that line up sharpest (tracker/footprint.py
 ``fit_heading``) at a heading more than ``max_turn`` from the box's: a box turned away from the object spills its
 points at one end too, and sliding it along its wrong length would move it sideways.
+
+For ``settle_frames`` frames after a re-lock (tracker/sotracker.py ``_relock``) the box slides either way: the
+search's candidate is a part of the object (its front emerging from behind an occluder, the half in view), the
+box was placed on that part by a guess, and the track's shape starts from it, so the registration holds the box
+where the guess put it; the points that come into view beyond the end the object moves away from are the rest of
+it.
 """
 
 from __future__ import annotations
@@ -29,12 +35,13 @@ __all__ = ["containment_shift"]
 _SEARCH_RANGE = 0.35   # rad: the heading the points line up sharpest at is searched this far each way
 
 
-def containment_shift(points: np.ndarray, box: Box, config: ContainmentConfig, speed: float) -> float:
+def containment_shift(points: np.ndarray, box: Box, config: ContainmentConfig, speed: float,
+                      either_way: bool = False) -> float:
     """How far (m, along the box's heading; negative: backwards) ``box`` should move to hold its object's points
     (``points``: world (N, 3), e.g. the step's non-ground region points), the object moving at ``speed`` (m/s)
     along the box's heading. 0 when the check is off, the object moves slower than ``config.min_speed``, is
     sparser than ``config.min_points`` in the box, or its points do not spill out of exactly the end it moves
-    towards."""
+    towards (with ``either_way``: out of exactly one end)."""
     if config.min_points <= 0 or len(points) == 0 or abs(speed) < config.min_speed:
         return 0.0
     c, s = np.cos(box.heading), np.sin(box.heading)
@@ -56,7 +63,7 @@ def containment_shift(points: np.ndarray, box: Box, config: ContainmentConfig, s
         shift = -min(rear, room_front)
     else:
         return 0.0
-    if abs(shift) < config.min_shift or shift * speed < 0.0:
+    if abs(shift) < config.min_shift or (shift * speed < 0.0 and not either_way):
         return 0.0
     run = (x >= -half_l - max(rear, 0.0)) & (x <= half_l + max(front, 0.0))
     fit = fit_heading(xy[run], box.heading, _SEARCH_RANGE)

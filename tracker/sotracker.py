@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .config import ContainmentConfig, TrackerConfig
+from .config import ContainmentConfig, ShapeConfig, TrackerConfig
 from .containment import containment_shift
 from .deskew import deskew_points
 from .detection import Detections, FrameDetections, associate_detection, detection_motion
@@ -135,7 +135,7 @@ class Tracker:
         self._timestamp_ns = self._start_ns = int(frame.timestamp_ns)
         self.shape = ShapeModel(c.shape.voxel_size)
         self.subshape = SubShape(c.shape.subshape_frames if c.shape.subshape else 0, c.shape.voxel_size)
-        self.steps = self._coasting = 0
+        self.steps = self._coasting = self._settle = 0
         self._previous_pose = previous_pose
         local, flags = self._local_points(frame, box, max(c.first_frame.scale, c.search.scale))
         self.strategies.height.start(box, self._ground_points)
@@ -286,14 +286,15 @@ class Tracker:
             if explained < min_quality:
                 flags += ["low_quality", "prior_only"]
                 return prior.copy()
-        c = self.config.footprint.containment
-        return _slid(x, self.box, local, c, self._last_dt, (self.shape, self.subshape), flags)
+        return _slid(x, self.box, local, self.config.footprint.containment, self._last_dt,
+                     (self.shape, self.subshape), flags, self.steps <= self._settle)
 
     def _update_motion(self, x: np.ndarray, local: np.ndarray, coasting: bool) -> np.ndarray:
         """The motion model's update with the registered motion (CTRV: heading about the visible points); a
         coasting frame does not update it with its own prediction."""
         if coasting:
             self._coasting += 1
+            self.subshape.hold(_hold_frames(self.config.shape, self.shape))   # the coast places the next boxes
         else:
             self._coasting = 0
             prev = self.box
@@ -418,9 +419,8 @@ class Tracker:
         return self._relock(frame, relock, start is None, t0)
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
-        """Restart the track at a confirmed candidate, its velocity seeding the motion model; with
-        ``keep_motion`` (a lost track, whose prediction found the candidate) the motion model goes on as it was
-        (its turn rate too: a vehicle that re-appears mid-turn keeps turning)."""
+        """Restart the track at a confirmed candidate, its velocity seeding the motion model; with ``keep_motion`` (a
+        lost track: its prediction found the candidate) the motion model goes on as it was (a turn keeps turning)."""
         prev, motion_model = self.box, self.motion
         box = Box(float(relock.centre[0]), float(relock.centre[1]), prev.z, prev.heading, prev.length, prev.width,
                   prev.height)
@@ -428,6 +428,7 @@ class Tracker:
         first_box, previous = self.first_box, self._previous_pose
         estimate = self.start(frame, box, previous, motion)
         self.first_box, self._lost_start = first_box, False
+        self._settle = self.config.footprint.containment.settle_frames   # its placement is a guess: see _slid
         if keep_motion:
             self.motion = motion_model
         return replace(estimate, flags=tuple(f for f in estimate.flags if f != "init") + ("reacquired",),
@@ -443,8 +444,7 @@ class Tracker:
         box = box_moved(prev, self.motion.predict(prev, self._last_dt, self._coasting))
         self.prev_points = to_world_frame(to_object_frame(self.prev_points, prev), box)
         self._previous_pose = (int(frame.timestamp_ns), np.asarray(frame.world_from_ego, dtype=np.float64))
-        self._coasting += 1
-        self.box = box
+        self._coasting, self.box = self._coasting + 1, box
         return FrameEstimate(frame.index, box.state, box, 0, 0.0, ("no_sweep", "prior_only"),
                              (time.perf_counter() - t0) * 1e3, np.zeros((0, 3)))
 
@@ -456,16 +456,17 @@ class Tracker:
 
 
 def _slid(x: np.ndarray, box: Box, local: np.ndarray, config: ContainmentConfig, dt: float,
-          shapes: tuple[ShapeModel, SubShape], flags: list[str]) -> np.ndarray:
+          shapes: tuple[ShapeModel, SubShape], flags: list[str], either_way: bool = False) -> np.ndarray:
     """The containment check (tracker/containment.py) of a measured frame's motion ``x`` from ``box`` over ``dt``
     seconds: the box moves along its length to hold its object's points; with ``config.shape`` "world" the shape
-    and sub-shape move back by as much in the object frame (they stay where they lie in the world). Flag
+    and sub-shape move back by as much in the object frame (they stay where they lie in the world). ``either_way``:
+    a re-locked track settling (``config.settle_frames``), its box slides against the motion too. Flag
     ``contained``."""
     if "prior_only" in flags:
         return x
     moved = box_moved(box, x)
     direction = np.array([np.cos(moved.heading), np.sin(moved.heading)])
-    shift = containment_shift(local, moved, config, float(x[:2] @ direction) / dt)
+    shift = containment_shift(local, moved, config, float(x[:2] @ direction) / dt, either_way)
     if shift == 0.0:
         return x
     flags.append("contained")
@@ -473,6 +474,14 @@ def _slid(x: np.ndarray, box: Box, local: np.ndarray, config: ContainmentConfig,
         for shape in shapes:
             shape.slide(-shift)
     return x + np.array([*(shift * direction), 0.0, 0.0])
+
+
+def _hold_frames(config: ShapeConfig, shape: ShapeModel) -> int:
+    """For how many frames from a coasting frame the sub-shape takes no points (``shape.subshape_hold``): a box
+    placed by the coast places the re-appearing object's points in the sub-shape where the coast put them, and the
+    registration then holds the box there; a shape of ``subshape_hold_shape`` points or more places the box instead.
+    A sparser object's shape cannot: its sub-shape is kept."""
+    return config.subshape_hold if config.subshape_hold > 0 and len(shape.points) >= config.subshape_hold_shape else 0
 
 
 def _explained(shape: ShapeModel, local: np.ndarray, box: Box) -> tuple[float, int]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_reacquire_clusters import _scene
 from tracker_synthetic import BOX_SIZE, SyntheticSequence, car_points, ground_points
 
 from sot_apps.io.tracks import TRACKER_FLAGS
@@ -46,6 +47,16 @@ def test_no_slide_against_the_motion_nor_for_a_still_object():
     assert containment_shift(points, BOX, ON, -3.0) == 0.0
     assert containment_shift(points, BOX, ON, 0.5) == 0.0
     assert containment_shift(points, BOX, ON, 1.0) > 0.45
+
+
+def test_either_way_slides_against_the_motion_too():
+    """While a re-locked track settles (``settle_frames``), where its candidate put the box along the object is a
+    guess: points spilling out of the end the object moves away from move the box back, as far as they spill."""
+    rng = np.random.default_rng(4)
+    points = _side(rng, -2.25 - 0.4, 2.25 - 0.7)
+    assert containment_shift(points, BOX, ON, 3.0) == 0.0
+    assert containment_shift(points, BOX, ON, 3.0, either_way=True) == pytest.approx(-0.4, abs=0.02)
+    assert containment_shift(points, BOX, ON, 0.5, either_way=True) == 0.0     # still: no slide either way
 
 
 def test_no_slide_for_a_box_turned_away_from_its_object():
@@ -100,7 +111,7 @@ def test_road_points_along_the_floor_and_points_beside_the_box_do_not_count():
 
 def test_settings_are_checked():
     for bad in ({"gap": 0.0}, {"max_shift": -1.0}, {"max_turn": 0.0}, {"min_points": -1}, {"min_speed": -1.0},
-                {"margin": -0.1}, {"floor": -0.1}, {"shape": "object"}):
+                {"margin": -0.1}, {"floor": -0.1}, {"shape": "object"}, {"settle_frames": -1}):
         with pytest.raises(ValueError, match="footprint.containment"):
             ContainmentConfig(**bad)
     config = TrackerConfig.from_dict({"footprint": {"containment": {"min_points": 40, "shape": "world"}}})
@@ -140,3 +151,31 @@ def test_a_start_box_behind_a_broadside_car_catches_up_with_it():
     assert np.all(off < -0.5)
     assert -0.13 < world[0] < -0.09
     assert np.all(np.abs(world[1:]) < 0.12)
+
+
+def test_a_relocked_box_ahead_of_a_car_that_emerges_from_behind_an_occluder_slides_back_onto_it():
+    """A car at 5 m/s is hidden for 6 frames and speeds up to 9 m/s meanwhile; it re-appears ahead of the
+    prediction, front first from behind an occluder (1 m of it seen, then 0.9 m more each frame). The search's
+    candidate, centred on the part seen, puts the box ahead of the car, and the track's shape starts from that part:
+    the registration leaves the box 0.35 m ahead 4 frames later, 0.18 m 7 frames later. Settling
+    (``settle_frames=10``: the box slides either way for 10 frames after the re-lock) moves it back onto the car as
+    its rear comes into view."""
+    xs = 6.0 + np.concatenate([[0.0], np.cumsum([0.5] * 8 + [0.9] * 23)])
+    boxes = [Box(float(x), 4.0, 0.0, 0.0, *BOX_SIZE) for x in xs]
+    back = 14
+    edge = boxes[back].x + 0.5 * BOX_SIZE[0] - 1.0          # the occluder's edge (x, world)
+    front = {k: float(np.clip(boxes[k].x + 0.5 * BOX_SIZE[0] - edge, 0.0, BOX_SIZE[0])) for k in range(back, 32)}
+    seq = _scene(boxes, 0, hidden=range(8, back), front_seen=front)
+
+    def along_errors(settle: int) -> tuple[np.ndarray, tuple[str, ...]]:
+        result = track(seq, boxes[0], 0, len(seq) - 1, get_preset("full", seed=0, **{
+            "footprint.containment.settle_frames": settle}))
+        flags = tuple(f for e in result.estimates[back:] for f in e.flags)
+        return np.array([e.box.x - b.x for e, b in zip(result.estimates, boxes, strict=True)]), flags
+
+    off, off_flags = along_errors(0)
+    settled, flags = along_errors(10)
+    assert "reacquired" in off_flags and "reacquired" in flags
+    assert np.all(np.abs(off[:9]) < 0.1) and np.all(settled[:back] == off[:back])   # the same until it re-appears
+    assert off[back + 4: back + 8].min() > 0.15                 # still ahead without settling
+    assert np.abs(settled[back + 4:]).max() < 0.1               # on the car from 4 frames after re-appearing
