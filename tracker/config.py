@@ -174,14 +174,15 @@ class ShapeConfig:
     subshape_frames: int = 2
     subshape_hold: int = 0               # > 0: frames from a coasting frame on whose points the sub-shape leaves out
     subshape_hold_shape: int = 100       # ... when the shape holds at least this many points (a sparser one: kept)
+    subshape_hold_dense: int = 0         # > 0: ... except a frame of at least this many object points (0: none)
     crop_scale: float = 1.0              # points added to the shape / sub-shape
     ransac: RansacConfig = field(default_factory=RansacConfig)
 
     def __post_init__(self) -> None:
         _positive(self, "shape", "keyframe_interval", "voxel_size")
-        if min(self.subshape_hold, self.subshape_hold_shape) < 0:
-            raise ValueError(f"shape.subshape_hold and subshape_hold_shape: must be >= 0, got {self.subshape_hold}, "
-                             f"{self.subshape_hold_shape}")
+        if min(self.subshape_hold, self.subshape_hold_shape, self.subshape_hold_dense) < 0:
+            raise ValueError(f"shape.subshape_hold, subshape_hold_shape and subshape_hold_dense: must be >= 0, got "
+                             f"{self.subshape_hold}, {self.subshape_hold_shape}, {self.subshape_hold_dense}")
 
 
 @dataclass(frozen=True)

@@ -71,18 +71,20 @@ class SubShape:
         self.voxel_size = voxel_size
         self._frames: deque[np.ndarray] = deque(maxlen=max(frames, 0) or None)
         self._enabled = frames > 0
-        self._held = 0
+        self._held = self._dense = 0
 
     def add(self, points_object: np.ndarray) -> None:
         """The frame's object points (object frame); none while held (:meth:`hold`: the older frames still drop
         out)."""
         if self._enabled:
-            held, self._held = self._held > 0, max(self._held - 1, 0)
+            held = self._held > 0 and not 0 < self._dense <= len(points_object)
+            self._held = max(self._held - 1, 0)
             self._frames.append(voxel_downsample_centres(points_object[:0] if held else points_object, self.voxel_size))
 
-    def hold(self, frames: int) -> None:
-        """Take no points for the next ``frames`` frames (this one included)."""
-        self._held = max(self._held, frames)
+    def hold(self, frames: int, dense: int = 0) -> None:
+        """Take no points for the next ``frames`` frames (this one included), except from a frame of ``dense`` points
+        or more (0: from none)."""
+        self._held, self._dense = max(self._held, frames), dense
 
     def turn(self, angle: float) -> None:
         """Turn every frame's points by ``angle`` about the object frame's vertical axis."""

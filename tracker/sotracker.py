@@ -294,7 +294,7 @@ class Tracker:
         coasting frame does not update it with its own prediction."""
         if coasting:
             self._coasting += 1
-            self.subshape.hold(_hold_frames(self.config.shape, self.shape))   # the coast places the next boxes
+            self.subshape.hold(_hold_frames(self.config.shape, self.shape), self.config.shape.subshape_hold_dense)
         else:
             self._coasting = 0
             prev = self.box
@@ -480,7 +480,8 @@ def _hold_frames(config: ShapeConfig, shape: ShapeModel) -> int:
     """For how many frames from a coasting frame the sub-shape takes no points (``shape.subshape_hold``): a box
     placed by the coast places the re-appearing object's points in the sub-shape where the coast put them, and the
     registration then holds the box there; a shape of ``subshape_hold_shape`` points or more places the box instead.
-    A sparser object's shape cannot: its sub-shape is kept."""
+    A sparser object's shape cannot: its sub-shape is kept. A frame of ``subshape_hold_dense`` points or more
+    registers well on its own and is taken."""
     return config.subshape_hold if config.subshape_hold > 0 and len(shape.points) >= config.subshape_hold_shape else 0
 
 

@@ -38,6 +38,17 @@ def test_a_held_sub_shape_takes_no_points_while_its_older_frames_drop_out():
     assert _frames_in(sub) == [5.0]
 
 
+def test_a_held_sub_shape_takes_a_dense_frame():
+    """``hold(frames, dense)``: a frame of ``dense`` points or more is taken while held, a sparser one is not."""
+    sub = SubShape(3, 0.05)
+    sub.hold(3, dense=5)
+    sub.add(_frame(1.0)[:4])                    # 4 points: left out
+    sub.add(_frame(2.0))                        # 5 points: taken
+    sub.add(_frame(3.0)[:2])                    # left out
+    sub.add(_frame(4.0)[:2])                    # no longer held: taken
+    assert _frames_in(sub) == [2.0, 4.0]
+
+
 def test_the_sub_shape_leaves_out_the_frames_after_a_coast():
     """A car hidden for 5 frames (coasting from the 2nd hidden frame on): with ``subshape_hold=5`` the sub-shape is
     empty from the first coasting frame until 5 frames after the last one, and fills again after that; without the
@@ -62,8 +73,9 @@ def test_the_sub_shape_leaves_out_the_frames_after_a_coast():
 
 
 def test_the_hold_is_checked():
-    with pytest.raises(ValueError, match="shape.subshape_hold"):
-        ShapeConfig(subshape_hold=-1)
+    for bad in ({"subshape_hold": -1}, {"subshape_hold_shape": -1}, {"subshape_hold_dense": -1}):
+        with pytest.raises(ValueError, match="shape.subshape_hold"):
+            ShapeConfig(**bad)
 
 
 def test_a_sparse_objects_sub_shape_is_not_held():
