@@ -51,8 +51,9 @@ def test_a_held_sub_shape_takes_a_dense_frame():
 
 def test_the_sub_shape_leaves_out_the_frames_after_a_coast():
     """A car hidden for 5 frames (coasting from the 2nd hidden frame on): with ``subshape_hold=5`` the sub-shape is
-    empty from the first coasting frame until 5 frames after the last one, and fills again after that; without the
-    hold it holds the car's points from the first frame the car is seen again."""
+    empty for the 5 frames from the last coasting frame on (that one included) and fills again after them; without
+    the hold it holds the car's points from the first frame the car is seen again. Before the car is hidden the
+    sub-shapes are the same."""
     boxes = _straight(22, (10.0, 4.0), 0.0, 1.0)
     seq = _scene(boxes, 0, hidden=range(8, 13))
 
