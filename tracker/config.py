@@ -473,13 +473,14 @@ class FootprintConfig:
     crop_length: float = 1.2             # the points fitted: in the box scaled this along its length ...
     crop_width: float = 1.8              # ... and this across (a box 20 degrees off still holds the object's corners)
     carry_back: bool = True              # offline: the turn also turns the frames before it that were held turned
+    after_relock: int = 0                # > 0: only on this many measured frames after a re-lock (0: every frame)
     containment: ContainmentConfig = field(default_factory=ContainmentConfig)  # the box slides along its length
 
     def __post_init__(self) -> None:
         _positive(self, "footprint", "frames", "search_range", "crop_length", "crop_width", "min_gain")
-        if self.min_points < 0 or self.min_offset < 0 or self.agreement < 0:
-            raise ValueError(f"footprint: min_points, min_offset and agreement must be >= 0, got {self.min_points}, "
-                             f"{self.min_offset}, {self.agreement}")
+        if min(self.min_points, self.min_offset, self.agreement, self.after_relock) < 0:
+            raise ValueError(f"footprint: min_points, min_offset, agreement and after_relock must be >= 0, got "
+                             f"{self.min_points}, {self.min_offset}, {self.agreement}, {self.after_relock}")
 
 
 @dataclass(frozen=True)

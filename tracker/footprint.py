@@ -102,17 +102,22 @@ def held_turned(points: np.ndarray, heading: float, turn: float, config: Footpri
 class FootprintCheck:
     """The footprint check of one track (see the module docstring): its settings and the votes in a row."""
 
-    def __init__(self, config: FootprintConfig) -> None:
+    def __init__(self, config: FootprintConfig, relocked: bool = False) -> None:
         self.config = config
         self._offsets: list[float] = []
         self.done = False
+        # ``after_relock`` > 0: the measured frames left in which the check runs (only a re-locked track's: its
+        # heading is the coast's guess); -1: every frame
+        self._left = -1 if config.after_relock == 0 else config.after_relock if relocked else 0
 
     def turn(self, local: np.ndarray, box: Box, shape: np.ndarray) -> float | None:
         """How far to turn ``box`` (rad), or None: :meth:`test` on the non-ground world points ``local`` in the
         box grown by ``crop_length`` x ``crop_width``, with the aggregated ``shape`` (object frame)."""
         c = self.config
-        if c.min_points <= 0:
+        if c.min_points <= 0 or self._left == 0:
             return None
+        if self._left > 0:
+            self._left -= 1
         heading = self.test(local[points_in_box(local, box, (c.crop_length, c.crop_width, 1.0))], box.heading, shape)
         return None if heading is None else float(wrap_angle(heading - box.heading))
 

@@ -427,7 +427,7 @@ class Tracker:
         motion = np.array([relock.velocity[0] * _NOMINAL_DT, relock.velocity[1] * _NOMINAL_DT, 0.0, 0.0])
         first_box, previous = self.first_box, self._previous_pose
         estimate = self.start(frame, box, previous, motion)
-        self.first_box, self._lost_start = first_box, False
+        self.first_box, self._lost_start, self._footprint = first_box, False, FootprintCheck(self.config.footprint, True)
         self._settle = self.config.footprint.containment.settle_frames   # its placement is a guess: see _slid
         if keep_motion:
             self.motion = motion_model
