@@ -179,3 +179,61 @@ def test_a_relocked_box_ahead_of_a_car_that_emerges_from_behind_an_occluder_slid
     assert np.all(np.abs(off[:9]) < 0.1) and np.all(settled[:back] == off[:back])   # the same until it re-appears
     assert off[back + 4: back + 8].min() > 0.15                 # still ahead without settling
     assert np.abs(settled[back + 4:]).max() < 0.1               # on the car from 4 frames after re-appearing
+
+
+def _front_face(rng: np.random.Generator, room: float, n: int = 200) -> np.ndarray:
+    """An object's end across the box's width at ``room`` m inside its front end, with its near side behind it
+    back to 0.1 m from the rear end (world; ``BOX`` frame axes)."""
+    face = np.c_[np.full(n, 2.25 - room), rng.uniform(-0.85, 0.85, n), rng.uniform(-0.4, 0.75, n)]
+    side = np.c_[rng.uniform(-2.15, 2.25 - room, n), np.full(n, -0.9), rng.uniform(-0.4, 0.75, n)]
+    return np.vstack([face, side]) + [BOX.x, BOX.y, BOX.z]
+
+
+def test_the_end_the_sensor_looks_at_keeps_at_most_face_gap_of_empty_room():
+    """The rays from a sensor beyond the box's front crossed its first 1.0 m: with ``face_gap`` the box moves back
+    until at most that much is left (at most ``max_shift`` a frame), whichever way the object moves; seen from
+    behind or from the side, or off, nothing."""
+    rng = np.random.default_rng(6)
+    points = _front_face(rng, 1.0)
+    ahead, behind, beside = np.array([50.0, 5.0, 1.7]), np.array([-30.0, 5.0, 1.7]), np.array([10.0, -30.0, 1.7])
+    gap = ContainmentConfig(min_points=30, face_gap=0.7)
+    assert containment_shift(points, BOX, gap, -5.0, sensor=ahead) == pytest.approx(-0.3, abs=1e-9)
+    assert containment_shift(points, BOX, gap, 5.0, sensor=ahead) == pytest.approx(-0.3, abs=1e-9)
+    assert containment_shift(points, BOX, ContainmentConfig(min_points=30, face_gap=0.4), -5.0,
+                             sensor=ahead) == pytest.approx(-0.5)                      # max_shift
+    assert containment_shift(points, BOX, gap, -5.0, sensor=behind) == 0.0             # its rear end is full
+    assert containment_shift(points, BOX, gap, -5.0, sensor=beside) == 0.0
+    assert containment_shift(points, BOX, ON, -5.0, sensor=ahead) == 0.0               # face_gap 0: off
+    assert containment_shift(points, BOX, gap, -0.5, sensor=ahead) == 0.0              # still
+    assert containment_shift(_front_face(rng, 0.6), BOX, gap, -5.0, sensor=ahead) == 0.0   # within face_gap
+    with pytest.raises(ValueError, match="face_gap"):
+        ContainmentConfig(face_gap=-0.1)
+
+
+def test_a_start_box_ahead_of_an_approaching_car_falls_back_onto_it():
+    """A car drives head-on toward a still sensor from 40 m at 6 m/s; its start box lies 1.0 m ahead of it (toward
+    the sensor). The shape starts from the car's front seen 1.0 m inside the box, so the registration holds the
+    box ahead for good. With ``face_gap`` = 0.4 the rays crossed more room in front than that, and the roof's
+    points run out of the box's rear: it moves back by ``max_shift`` at frame 1 and is on the car from frame 3."""
+    rng = np.random.default_rng(0)
+    boxes = [Box(40.0 - 0.6 * k, 0.5, 0.0, np.pi, *BOX_SIZE) for k in range(25)]
+    frames = []
+    for k, box in enumerate(boxes):
+        points = np.vstack([car_points(rng, box, np.array([0.0, 0.0, 1.7])),
+                            ground_points(rng, box.center[:2], 10.0)]) - [0.0, 0.0, 1.7]
+        points += rng.normal(0.0, 0.01, points.shape)
+        world_from_ego = np.eye(4)
+        world_from_ego[2, 3] = 1.7
+        frames.append(LidarFrame(index=k, timestamp_ns=1_000_000_000 + k * 100_000_000,
+                                 points_ego=points.astype(np.float32), world_from_ego=world_from_ego))
+    seq = SyntheticSequence(frames, boxes)
+    start = Box(boxes[0].x - 1.0, *boxes[0].center[1:], np.pi, *BOX_SIZE)
+
+    def ahead(face_gap: float) -> np.ndarray:
+        result = track(seq, start, 0, len(seq) - 1, get_preset("full", seed=0, **{
+            "footprint.containment.face_gap": face_gap}))
+        return np.array([g.x - b.x for b, g in zip(result.boxes, seq.boxes, strict=True)])[1:]
+
+    off, on = ahead(0.0), ahead(0.4)
+    assert np.all(off > 0.8)
+    assert 0.45 < on[0] < 0.55 and np.abs(on[2:]).max() < 0.15
