@@ -448,16 +448,14 @@ class ContainmentConfig:
     max_turn: float = 0.05               # rad: no move when the points line up sharpest further from the box's heading
     shape: str = "world"                 # "world": the shape stays where it lies in the world; "kept": in the box frame
     settle_frames: int = 0               # for this many frames after a re-lock the box slides either way
-    face_gap: float = 0.0                # > 0 (m): the end the sensor looks at keeps at most this much empty room
 
     def __post_init__(self) -> None:
         _positive(self, "footprint.containment", "gap", "max_shift", "max_turn")
         _choice("footprint.containment.shape", self.shape, ("kept", "world"))
-        if min(self.min_points, self.min_speed, self.margin, self.floor, self.min_shift, self.settle_frames,
-               self.face_gap) < 0:
-            raise ValueError(f"footprint.containment: min_points, min_speed, margin, floor, min_shift, settle_frames and "
-                             f"face_gap must be >= 0, got {self.min_points}, {self.min_speed}, {self.margin}, "
-                             f"{self.floor}, {self.min_shift}, {self.settle_frames}, {self.face_gap}")
+        if min(self.min_points, self.min_speed, self.margin, self.floor, self.min_shift, self.settle_frames) < 0:
+            raise ValueError(f"footprint.containment: min_points, min_speed, margin, floor, min_shift and settle_frames "
+                             f"must be >= 0, got {self.min_points}, {self.min_speed}, {self.margin}, {self.floor}, "
+                             f"{self.min_shift}, {self.settle_frames}")
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ _SEARCH_RANGE = 0.35   # rad: the heading the points line up sharpest at is sear
 
 
 def containment_shift(points: np.ndarray, box: Box, config: ContainmentConfig, speed: float,
-                      either_way: bool = False, sensor: np.ndarray | None = None) -> float:
+                      either_way: bool = False) -> float:
     """How far (m, along the box's heading; negative: backwards) ``box`` should move to hold its object's points
     (``points``: world (N, 3), e.g. the step's non-ground region points), the object moving at ``speed`` (m/s)
     along the box's heading. 0 when the check is off, the object moves slower than ``config.min_speed``, is
@@ -57,17 +57,12 @@ def containment_shift(points: np.ndarray, box: Box, config: ContainmentConfig, s
     front = _run_end(x, inside.max(), config.gap) - half_l
     rear = _run_end(-x, -inside.min(), config.gap) - half_l
     room_rear, room_front = inside.min() + half_l, half_l - inside.max()
-    face = 0.0 if config.face_gap <= 0.0 or sensor is None else _face_shift(box, sensor, room_front, room_rear,
-                                                                              config.face_gap)
     if front > 0.0 >= rear:
         shift = min(front, room_rear)
     elif rear > 0.0 >= front:
         shift = -min(rear, room_front)
-    elif front <= 0.0 and rear <= 0.0 and face != 0.0:
-        shift = face
     else:
         return 0.0
-    either_way = either_way or shift * face > 0.0   # the rays crossed the room the box moves out of
     if abs(shift) < config.min_shift or (shift * speed < 0.0 and not either_way):
         return 0.0
     run = (x >= -half_l - max(rear, 0.0)) & (x <= half_l + max(front, 0.0))
@@ -85,15 +80,3 @@ def _run_end(x: np.ndarray, start: float, gap: float) -> float:
     breaks = np.flatnonzero(steps > gap)
     run = ahead if len(breaks) == 0 else ahead[: breaks[0]]
     return float(run[-1]) if len(run) else start
-
-
-def _face_shift(box: Box, sensor: np.ndarray, room_front: float, room_rear: float, face_gap: float) -> float:
-    """The end of ``box`` the ``sensor`` (world) looks at, when it lies beyond that end along the length: the rays
-    crossed its room up to the object's first points, so it keeps at most ``face_gap`` of it (m, along the
-    heading; 0 when the sensor looks at the box's side)."""
-    ahead = np.cos(box.heading) * (sensor[0] - box.x) + np.sin(box.heading) * (sensor[1] - box.y)
-    if ahead > 0.5 * box.length:
-        return -max(room_front - face_gap, 0.0)
-    if ahead < -0.5 * box.length:
-        return max(room_rear - face_gap, 0.0)
-    return 0.0

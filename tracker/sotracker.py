@@ -182,7 +182,7 @@ class Tracker:
         x = self._register(local, prior, search_scale, first, det_target, flags)
         x = limit_motion(x, prior, self.box.heading, first, self.steps, self.config.motion, flags, self._last_dt,
                          len(self.prev_points))
-        x = self._check_fit(x, local, prior, first, flags, frame.world_from_ego[:3, 3])
+        x = self._check_fit(x, local, prior, first, flags)
         coasting = "prior_only" in flags
         x = self.strategies.height.motion(x, self.box, self._ground_points, fit=not coasting)
         x = self._update_motion(x, local, coasting)
@@ -277,8 +277,8 @@ class Tracker:
         flags[:] = [f for f in flags if f != "prior_only"] + ["det_only"]
         return (mp * prior + det * det_target) / (mp + det)
 
-    def _check_fit(self, x: np.ndarray, local: np.ndarray, prior: np.ndarray, first: bool, flags: list[str],
-                   sensor: np.ndarray) -> np.ndarray:
+    def _check_fit(self, x: np.ndarray, local: np.ndarray, prior: np.ndarray, first: bool,
+                   flags: list[str]) -> np.ndarray:
         """A poor fit (clutter; below ``registration.min_quality``): the prior instead; else :func:`_slid`."""
         min_quality = self.config.registration.min_quality
         if min_quality > 0 and "prior_only" not in flags and not first:
@@ -287,7 +287,7 @@ class Tracker:
                 flags += ["low_quality", "prior_only"]
                 return prior.copy()
         return _slid(x, self.box, local, self.config.footprint.containment, self._last_dt,
-                     (self.shape, self.subshape), flags, self.steps <= self._settle, sensor)
+                     (self.shape, self.subshape), flags, self.steps <= self._settle)
 
     def _update_motion(self, x: np.ndarray, local: np.ndarray, coasting: bool) -> np.ndarray:
         """The motion model's update with the registered motion (CTRV: heading about the visible points); a
@@ -456,8 +456,7 @@ class Tracker:
 
 
 def _slid(x: np.ndarray, box: Box, local: np.ndarray, config: ContainmentConfig, dt: float,
-          shapes: tuple[ShapeModel, SubShape], flags: list[str], either_way: bool = False,
-          sensor: np.ndarray | None = None) -> np.ndarray:
+          shapes: tuple[ShapeModel, SubShape], flags: list[str], either_way: bool = False) -> np.ndarray:
     """The containment check (tracker/containment.py) of a measured frame's motion ``x`` from ``box`` over ``dt``
     seconds: the box moves along its length to hold its object's points; with ``config.shape`` "world" the shape
     and sub-shape move back by as much in the object frame (they stay where they lie in the world). ``either_way``:
@@ -467,7 +466,7 @@ def _slid(x: np.ndarray, box: Box, local: np.ndarray, config: ContainmentConfig,
         return x
     moved = box_moved(box, x)
     direction = np.array([np.cos(moved.heading), np.sin(moved.heading)])
-    shift = containment_shift(local, moved, config, float(x[:2] @ direction) / dt, either_way, sensor)
+    shift = containment_shift(local, moved, config, float(x[:2] @ direction) / dt, either_way)
     if shift == 0.0:
         return x
     flags.append("contained")
