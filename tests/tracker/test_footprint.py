@@ -15,6 +15,9 @@ from tracker.geometry import Box, rotation_z, wrap_angle
 from tracker.offline import footprint_carried_back, gather_frame_points
 from tracker.sotracker import TrackResult
 
+# the check on every dense frame, not only after a re-lock (as in `full`), with a gain synthetic cars reach
+EVERY_FRAME = {"footprint.min_points": 150, "footprint.min_gain": 1.1, "footprint.after_relock": 0}
+
 
 @pytest.mark.parametrize("heading, start_offset, sensor", [
     (0.3, 0.2, (0.0, 0.0, 1.7)),       # seen from behind-side: back and one side
@@ -106,7 +109,7 @@ def test_a_dense_track_whose_shape_was_built_turned_is_turned_back_to_the_vehicl
 
     off, never = heading_errors(**{"footprint.min_points": 0})
     assert off[:4].max() < 2.0 and off[5:].min() > abs(delta_deg) / 2 and never == []
-    on, turned = heading_errors(**{"footprint.min_points": 150, "footprint.min_gain": 1.1})
+    on, turned = heading_errors(**EVERY_FRAME)
     assert np.array_equal(on[:5], off[:5])            # nothing changes before
     assert turned == [8]                              # frames 6, 7, 8 dense and agreeing: turned at the third
     assert on[7:].max() < 2.0
@@ -117,7 +120,7 @@ def test_a_box_turned_together_with_its_shape_is_left_to_the_registration():
     registration turns them back within a few frames and nothing else turns the box."""
     boxes = trajectory(16, speed=0.8, yaw_rate=0.0, turn_after=99)
     sequence = make_sequence(16, seed=4, boxes=boxes)
-    tracker = Tracker(get_preset("full", seed=0, **{"footprint.min_points": 150, "footprint.min_gain": 1.1}))
+    tracker = Tracker(get_preset("full", seed=0, **EVERY_FRAME))
     tracker.start(sequence.lidar_frame(0), boxes[0])
     flags, errors = [], []
     for k in range(1, 16):
@@ -224,8 +227,7 @@ def _heading_errors(estimates, boxes) -> np.ndarray:
 
 @pytest.mark.parametrize("delta_deg", [12.0, -15.0])
 def test_offline_carries_a_footprint_turn_back_over_exactly_the_frames_held_turned_with_it(delta_deg):
-    on = {"footprint.min_points": 150, "footprint.min_gain": 1.1}
-    sequence, boxes, result = _track_with_turned_shape(on, delta_deg=delta_deg)
+    sequence, boxes, result = _track_with_turned_shape(EVERY_FRAME, delta_deg=delta_deg)
     turns = {e.frame: e.turn for e in result.estimates if e.turn != 0.0}
     assert list(turns) == [8] and abs(np.degrees(turns[8]) + delta_deg) < 2.0   # the turn undoes the wrong shape
     online = _heading_errors(result.estimates, boxes)
@@ -252,7 +254,7 @@ def test_offline_with_a_carried_turn_is_the_same_from_a_source_or_from_the_point
     """A tracking pass gathers each frame's points around its online box while it tracks and solves from them
     (sot_apps.tracking); tracking alone reads the source: the carried boxes must not change which points (here the
     car stands alone, so the turned regions would hold the same points: the boxes gathered around are checked)."""
-    sequence, _, result = _track_with_turned_shape({"footprint.min_points": 150, "footprint.min_gain": 1.1})
+    sequence, _, result = _track_with_turned_shape(EVERY_FRAME)
     assert any(e.turn != 0.0 for e in result.estimates)
     config = result.config
     gathered = gather_frame_points(sequence, result, config, config.refinement.offline)
