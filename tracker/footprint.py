@@ -13,7 +13,9 @@ was built turned), the box turns there about its centre, once per (re)start, and
 the box's frame (it stays where it lies in the world). A shape that lines up with the box says the registration
 has turned box and shape together away from the points for a while (a partial view); it turns them back itself, and
 turning the box alone would overshoot then: no turn. The offline solve carries a turn back over the frames before it
-that were held turned too (:func:`held_turned`; tracker/offline.py ``footprint_carried_back``).
+that were held turned too (:func:`held_turned`; tracker/offline.py ``footprint_carried_back``). With
+``after_relock`` > 0 the check runs only on the first that many measured frames after a re-lock (of a lost track
+or a lost start; tracker/sotracker.py ``_relock``), whose box takes the held heading and whose shape restarts at it.
 """
 
 from __future__ import annotations
