@@ -108,9 +108,11 @@ class FootprintCheck:
         self.config = config
         self._offsets: list[float] = []
         self.done = False
-        # ``after_relock`` > 0: the measured frames left in which the check runs (only a re-locked track's: its
-        # heading is the coast's guess); -1: every frame
-        self._left = -1 if config.after_relock == 0 else config.after_relock if relocked else 0
+        # the measured frames left in which the check runs, -1: every frame (``after_relock`` 0); else only a
+        # re-locked track's first ``after_relock`` (its heading is the one it held, e.g. the coast's guess)
+        self._left = -1
+        if config.after_relock > 0:
+            self._left = config.after_relock if relocked else 0
 
     def turn(self, local: np.ndarray, box: Box, shape: np.ndarray) -> float | None:
         """How far to turn ``box`` (rad), or None: :meth:`test` on the non-ground world points ``local`` in the
