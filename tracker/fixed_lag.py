@@ -13,7 +13,9 @@ sequence the result approaches the offline refinement's (warm-started solves wit
 
 The front end is not changed by the smoother (its predictions come from its own states), so the result is
 a function of the online result and the points: :func:`refine_fixed_lag` computes it from a finished online
-TrackResult, :class:`FixedLagTracker` streams it, and both give the same states.
+TrackResult, :class:`FixedLagTracker` streams it, and both give the same states. With
+``refinement.relock_bridge="both"`` a re-locked frame bridges the stretch before it that is still free
+(tracker/relock_bridge.py).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box
 from .offline import _box, _rebuild_shape, frame_region_points_timed, refine_states
 from .own_motion import RegionTimes, compensate_track
+from .relock_bridge import bridge_start, bridged_estimate, interpolated_states
 from .sotracker import FrameEstimate, LocalCrop, Tracker, TrackResult
 
 __all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag", "window_states"]
@@ -68,6 +71,8 @@ class FixedLagSmoother:
             assert frame is not None
             points, when = frame_region_points_timed(frame, estimate.box, self.config, self.params, self._previous,
                                                      world, crop, with_times=self.params.own_motion_spread > 0)
+        if self.config.refinement.relock_bridge == "both" and "reacquired" in estimate.flags:
+            self._bridge(estimate)
         self.points.append(points)
         self.captured.append(points)
         self.times.append(when)
@@ -101,6 +106,22 @@ class FixedLagSmoother:
             frame, estimate.box, self.config, self.params, self._previous_of[j],
             with_times=self.params.own_motion_spread > 0)
         self.captured[j] = self.points[j]
+
+    def _bridge(self, estimate: FrameEstimate) -> None:
+        """A re-locked ``estimate`` about to be added: the frames of its bridged stretch (tracker/relock_bridge.py)
+        not yet final become the line from the frame before them to it, without points (also as the window's
+        anchors for them)."""
+        k = len(self.online)
+        a = bridge_start(self.online + [estimate], k, self.config.refinement.backward_lost_points)
+        lo = max(a or k, self.emitted, 1)
+        if lo >= k:
+            return
+        states = interpolated_states(self.states[lo - 1], estimate.state.to_array(), k - lo)
+        for j, state in zip(range(lo, k), states, strict=True):
+            self.online[j] = bridged_estimate(self.online[j], state, self.size)
+            self.states[j] = self.online[j].state.to_array()
+            self.points[j] = self.captured[j] = np.zeros((0, 3))
+            self.times[j] = None
 
     def _own_motion_out(self, begin: int) -> None:
         """The window's points (frames ``begin`` on) with the object's own motion during each sweep taken out

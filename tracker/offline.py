@@ -83,6 +83,7 @@ from .geometry import Box, State, points_in_box, transform_points, wrap_angle
 from .ground import ground_mask
 from .metrics import unique_sorted, voxel_downsample_centres, voxel_downsample_means
 from .own_motion import RegionTimes, compensate_track
+from .relock_bridge import bridged_result
 from .rows import finite3, inside3, norm3, sum3
 from .sotracker import FrameEstimate, LocalCrop, TrackResult, deskew_points
 from .sweep_ground import cached_sweep_ground_mask
@@ -965,8 +966,9 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
     """Offline-refined copy of an online ``result`` (see the module docstring); ``params`` default to
     ``config.refinement.offline``. With ``config.refinement.backward`` (and a ``source``) the states of backward
     passes from the track's anchors replace its weak runs first (tracker/bidirectional.py), when they move some
-    frame's centre farther than ``params.window_start_moved``. ``points``: each frame's region points as :func:`gather_frame_points` gives
-    them, when the caller gathered them while tracking (then ``source`` is not read and may be None), and
+    frame's centre farther than ``params.window_start_moved``; with ``config.refinement.relock_bridge`` the
+    stretches a lost track searched on someone else's points before a re-lock are bridged before that
+    (tracker/relock_bridge.py). ``points``: each frame's region points as :func:`gather_frame_points` gives them, when the caller gathered them while tracking (then ``source`` is not read and may be None), and
     ``point_times`` their capture times (:func:`frame_region_points_timed`; needed to take the object's own motion
     out of them, as :func:`gather_frame_points` does, when ``params.own_motion_spread`` > 0)."""
     config = config or result.config
@@ -979,6 +981,14 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
             # each frame's points around its online box, as a tracking pass gathers them while it tracks
             points = gather_frame_points(source, result, config, params)
         result = carried
+    if config.refinement.relock_bridge != "none" and (bridged := bridged_result(
+            result, config.refinement.backward_lost_points)) is not result:
+        if points is None and source is not None:
+            points = gather_frame_points(source, result, config, params)   # around the online boxes, as a pass does
+        if points is not None:   # a bridged frame holds no points
+            points = [p if a is b else np.zeros((0, 3)) for p, a, b in zip(points, result.estimates,
+                                                                            bridged.estimates, strict=True)]
+        result = bridged
     return _refine_offline(source, result, config, params, points)
 
 

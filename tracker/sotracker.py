@@ -413,9 +413,8 @@ class Tracker:
                 self.box, relock.centre, points, r.supported_holds_ties and supported, self.config.search.crop_scale)):
             if confirms:  # the candidate is where the track is: it holds, the search ends
                 s.reacquire.reset(time_s, self.box.center)
-            coasting = ("coasting",) if relock is None and "prior_only" in estimate.flags else ()
-            return replace(estimate, flags=tuple(dict.fromkeys(estimate.flags + coasting)),
-                           time_ms=(time.perf_counter() - t0) * 1e3)
+            flags = _search_flags(estimate.flags, relock is None, confirms or start is not None)
+            return replace(estimate, flags=flags, time_ms=(time.perf_counter() - t0) * 1e3)
         return self._relock(frame, relock, start is None, t0)
 
     def _relock(self, frame: LidarFrame, relock: Relock, keep_motion: bool, t0: float) -> FrameEstimate:
@@ -453,6 +452,15 @@ class Tracker:
         dt = (int(frame.timestamp_ns) - self._timestamp_ns) * 1e-9
         self._timestamp_ns = int(frame.timestamp_ns)
         return dt if dt > 0 else _NOMINAL_DT
+
+
+def _search_flags(flags: tuple[str, ...], no_candidate: bool, held: bool) -> tuple[str, ...]:
+    """A searching frame's flags: ``coasting`` on the motion model's prediction with no candidate, ``searching`` on
+    points while lost (the box may follow something that is not the object; a re-lock elsewhere later says it
+    did); neither where the track holds its object (``held``) or for a lost start."""
+    if "prior_only" in flags:
+        return tuple(dict.fromkeys(flags + ("coasting",))) if no_candidate else flags
+    return flags if held else tuple(dict.fromkeys(flags + ("searching",)))
 
 
 def _slid(x: np.ndarray, box: Box, local: np.ndarray, config: ContainmentConfig, dt: float,

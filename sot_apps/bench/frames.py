@@ -70,8 +70,8 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
 
 def _flags(estimate: FrameEstimate) -> str:
     return "".join(mark if flag in estimate.flags else "." for flag, mark in
-                   (("yaw_clamped", "C"), ("prior_only", "P"), ("coasting", "c"), ("reacquired", "r"),
-                    ("backward", "b")))
+                   (("yaw_clamped", "C"), ("prior_only", "P"), ("coasting", "c"), ("searching", "s"),
+                    ("reacquired", "r"), ("backward", "b"), ("bridged", "B")))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

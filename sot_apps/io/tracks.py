@@ -39,7 +39,8 @@ DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "l
 # (kept for older files).
 TRACKER_FLAGS: frozenset[str] = frozenset({"init", "no_points", "prior_only", "low_points", "nan_points",
                                            "no_shape_inliers", "yaw_clamped", "motion_clamped", "offline", "lost",
-                                           "no_sweep", "footprint", "coasting", "waiting", "reacquired", "backward",
+                                           "no_sweep", "footprint", "coasting", "searching", "waiting", "reacquired",
+                                           "backward", "bridged",
                                            "det", "det_only", "keyframe", "keyframes", "low_quality", "contained"})
 
 
