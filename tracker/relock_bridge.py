@@ -10,11 +10,14 @@ sides toward it.
 
 A **bridged stretch** is the run of frames a .. k - 1 before a re-locked frame k that were lost
 (:func:`~tracker.bidirectional.is_lost`) or searching, when one of a .. k - 2 was searching with the box held on
-points (not ``low_points``: at least ``registration.min_points`` object points). A stretch that only coasted holds
-no one else's points; nor does frame k - 1 alone: the re-lock's candidate is confirmed over two frames, so k - 1
-is where the object came back into view; nor does a box held on a handful of points: a sparse car coming back
-into view holds it on its own first points, near it (the re-lock, placed on the centre of what is seen of it,
-may be the farther one). Its frames take the states interpolated linearly (x, y, z, heading, the
+points (not ``low_points``: at least ``registration.min_points`` object points), and the last such box lies more
+than a box width across the re-locked box's heading from it. A stretch that only coasted holds no one else's
+points; nor does frame k - 1 alone: the re-lock's candidate is confirmed over two frames, so k - 1 is where the
+object came back into view; nor does a box held on a handful of points: a sparse car coming back into view holds
+it on its own first points, near it (the re-lock, placed on the centre of what is seen of it, may be the farther
+one); nor does a box held in line with the re-lock: a car seen again before the track held it for long enough
+(``reacquire.recover_frames``) holds it on its own points, and a part of it seen misplaces the box along it or by
+half a width, while another car beside it is a lane (a width or more) away. Its frames take the states interpolated linearly (x, y, z, heading, the
 heading along the shorter way) between frame a - 1 and frame k, are flagged ``bridged``, and hold no points: the
 refinement sees them as predictions, pulled toward the line and by its smoothness, with no data of their own.
 Frame 0 (the given box) is never bridged. Applied before the refinement's solve offline
@@ -36,14 +39,22 @@ __all__ = ["bridge_start", "bridged_estimate", "bridged_result", "interpolated_s
 
 def bridge_start(estimates: list[FrameEstimate], k: int, lost_points: int) -> int | None:
     """The first frame a of the bridged stretch before frame k (``estimates[k]`` re-locked; ``estimates`` holds
-    frames 0 .. k - 1 at least), or None: no searching frame before k - 1 since the track last held its object."""
+    frames 0 .. k - 1 at least), or None: no frame before k - 1 since the track last held its object was held on
+    points while searching, or the last such box was not beside the re-locked one."""
     a = k
     while a > 1 and "reacquired" not in estimates[a - 1].flags and (
             "searching" in estimates[a - 1].flags or is_lost(estimates[a - 1], lost_points)):
         a -= 1
-    if not any(_held_on_points(estimates[j]) for j in range(a, k - 1)):
-        return None
-    return a
+    held = [j for j in range(a, k - 1) if _held_on_points(estimates[j])]
+    return a if held and _beside(estimates[held[-1]].box, estimates[k].box) else None
+
+
+def _beside(held: Box, relock: Box) -> bool:
+    """The box held while searching lies more than a box width across the re-locked box's heading from it: what
+    it held was beside the object (a part of the object seen misplaces the box along it, or by half a width)."""
+    offset = np.asarray(held.center[:2], dtype=np.float64) - np.asarray(relock.center[:2], dtype=np.float64)
+    across = -np.sin(relock.heading) * offset[0] + np.cos(relock.heading) * offset[1]
+    return bool(abs(across) > relock.width)
 
 
 def _held_on_points(estimate: FrameEstimate) -> bool:

@@ -23,8 +23,10 @@ def _estimate(k: int, box: Box, points: int, flags: tuple[str, ...] = ()) -> Fra
     return FrameEstimate(k, State.from_array(box.to_array()[:4]), box, points, 1.0, flags, 0.0, np.zeros((0, 3)))
 
 
-def _at(k: int, flags: tuple[str, ...], points: int = 50) -> FrameEstimate:
-    return _estimate(k, Box(float(k), 0.0, 0.0, 0.0, 4.5, 1.8, 1.5), points, flags)
+def _at(k: int, flags: tuple[str, ...], points: int = 50, across: float | None = None) -> FrameEstimate:
+    """A box at x = k along +x; searching boxes 3 m to the left (beside the track) unless ``across`` says."""
+    y = across if across is not None else 3.0 if "searching" in flags else 0.0
+    return _estimate(k, Box(float(k), y, 0.0, 0.0, 4.5, 1.8, 1.5), points, flags)
 
 
 def test_a_stretch_before_a_relock_is_bridged_only_when_the_track_followed_points_while_lost():
@@ -42,6 +44,11 @@ def test_a_stretch_before_a_relock_is_bridged_only_when_the_track_followed_point
     sparse = [_at(0, ("init",)), _at(1, ()), _at(2, ("prior_only", "coasting"), 0), _at(3, ("searching", "low_points"), 4),
               _at(4, ("searching", "low_points"), 6), _at(5, ("reacquired",))]
     assert bridge_start(sparse, 5, 3) is None         # a handful of points: the sparse car's own, coming back
+    in_line = [_at(0, ("init",)), _at(1, ()), _at(2, ("prior_only", "coasting"), 0), _at(3, ("searching",), across=0.9),
+               _at(4, ("searching",), across=1.5), _at(5, ("reacquired",))]
+    assert bridge_start(in_line, 5, 3) is None        # held within a box width across: the object's own points
+    in_line[3] = _at(3, ("searching",), across=-1.9)
+    assert bridge_start(in_line, 5, 3) == 2           # the last box held on points decides (frame 4 is k - 1)
     twice = [_at(0, ("init",)), _at(1, ("searching",)), _at(2, ("searching",)), _at(3, ("reacquired",)),
              _at(4, ("searching",)), _at(5, ("searching",)), _at(6, ("reacquired",))]
     assert bridge_start(twice, 6, 3) == 4             # a stretch ends at the re-lock before it
