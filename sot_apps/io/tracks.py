@@ -33,8 +33,8 @@ __all__ = ["DEFAULT_INVALID_FLAGS", "TRACKER_FLAGS", "frame_is_valid", "TrackHea
 SCHEMA_VERSION = 1
 
 # Flags meaning "this state was not measured" (tracker/sotracker.py sets no_points, prior_only and, for a
-# frame without a sweep, no_sweep).
-DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost", "no_sweep"})
+# frame without a sweep, no_sweep; the refinements bridged, for a frame put on the line to a re-lock).
+DEFAULT_INVALID_FLAGS: frozenset[str] = frozenset({"no_points", "prior_only", "lost", "no_sweep", "bridged"})
 # Every flag the tracker (tracker/sotracker.py, the refinements, keyframes, the Det baseline) writes, plus "lost"
 # (kept for older files).
 TRACKER_FLAGS: frozenset[str] = frozenset({"init", "no_points", "prior_only", "low_points", "nan_points",

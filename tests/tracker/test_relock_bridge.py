@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from test_reacquire_clusters import _iou, _scene, _straight
 
+from sot_apps.io.tracks import frame_is_valid
 from tracker import get_preset, refine_fixed_lag, refine_offline
 from tracker.geometry import Box, State
 from tracker.relock_bridge import bridge_start, bridged_result, interpolated_states
@@ -90,6 +91,7 @@ def test_bridged_frames_lie_on_the_line_between_the_frames_around_them_without_p
     for k in HIDDEN:
         e = bridged.estimates[k]
         assert "bridged" in e.flags and e.num_points == 0 and len(e.points) == 0
+        assert not frame_is_valid(e.flags)        # a prediction: motion export and track health take it as such
         assert np.allclose(e.box.center, truth[k].center, atol=1e-9)   # a straight drive: the line is the truth
     assert all(a is b for a, b in zip(online.estimates[:HIDDEN.start] + online.estimates[RELOCK:],
                                       bridged.estimates[:HIDDEN.start] + bridged.estimates[RELOCK:], strict=True))
