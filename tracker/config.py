@@ -639,9 +639,9 @@ class RefinementConfig:
     backward_reach: int = 40             # offline: the pass starts from the densest frame held up to this many
                                          # frames after the anchor
     backward_lag_lead: int = 3           # fixed lag: the pass starts this many frames after the anchor (held)
-    # the bridge before a re-lock (tracker/relock_bridge.py): the frames a track spent lost and searching before it
-    # was re-locked elsewhere become the line between the frames around them, without points; "offline": in the
-    # offline refinement, "both": also in the fixed-lag window, "none": off
+    # the bridge before a re-lock (tracker/relock_bridge.py): the frames a lost track spent searching on points
+    # beside where it was then re-locked become the line between the frames around them, without points;
+    # "offline": in the offline refinement, "both": also in the fixed-lag window, "none": off
     relock_bridge: str = "none"
 
     def __post_init__(self) -> None:

@@ -968,9 +968,10 @@ def refine_offline(source: FrameSource | None, result: TrackResult, config: Trac
     passes from the track's anchors replace its weak runs first (tracker/bidirectional.py), when they move some
     frame's centre farther than ``params.window_start_moved``; with ``config.refinement.relock_bridge`` the
     stretches a lost track searched on someone else's points before a re-lock are bridged before that
-    (tracker/relock_bridge.py). ``points``: each frame's region points as :func:`gather_frame_points` gives them, when the caller gathered them while tracking (then ``source`` is not read and may be None), and
-    ``point_times`` their capture times (:func:`frame_region_points_timed`; needed to take the object's own motion
-    out of them, as :func:`gather_frame_points` does, when ``params.own_motion_spread`` > 0)."""
+    (tracker/relock_bridge.py). ``points``: each frame's region points as :func:`gather_frame_points` gives them,
+    when the caller gathered them while tracking (then ``source`` is not read and may be None), and ``point_times``
+    their capture times (:func:`frame_region_points_timed`; needed to take the object's own motion out of them, as
+    :func:`gather_frame_points` does, when ``params.own_motion_spread`` > 0)."""
     config = config or result.config
     params = params or config.refinement.offline
     if points is not None and point_times is not None and params.own_motion_spread > 0:

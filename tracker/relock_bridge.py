@@ -2,27 +2,27 @@
 
 Once a track is lost (re-acquisition, tracker/strategies/reacquire.py), its box coasts on the motion model
 (``coasting``) or, where points come back around it, follows them while the search goes on (``searching``). When
-the search then re-locks the track elsewhere (``reacquired``), the points it followed were not the object's: a
-car that turned sparse or hid beside another one is found again metres from where the box went. The online
-states of that stretch are wrong, and its points are someone else's; a refinement that takes them as data (the
-fixed-lag window, the whole-sequence solve) holds the stretch there and its smoothness pulls the frames on both
-sides toward it.
+the search then re-locks the track elsewhere (``reacquired``), the points it followed may not have been the
+object's: a car that turned sparse or hid beside another one is found again metres from where the box went. Then
+the online states of that stretch are wrong, and its points are someone else's; a refinement that takes them as
+data (the fixed-lag window, the whole-sequence solve) holds the stretch there and its smoothness pulls the frames
+on both sides toward it.
 
 A **bridged stretch** is the run of frames a .. k - 1 before a re-locked frame k that were lost
 (:func:`~tracker.bidirectional.is_lost`) or searching, when one of a .. k - 2 was searching with the box held on
 points (not ``low_points``: at least ``registration.min_points`` object points), and the last such box lies more
-than a box width across the re-locked box's heading from it. A stretch that only coasted holds no one else's
-points; nor does frame k - 1 alone: the re-lock's candidate is confirmed over two frames, so k - 1 is where the
-object came back into view; nor does a box held on a handful of points: a sparse car coming back into view holds
-it on its own first points, near it (the re-lock, placed on the centre of what is seen of it, may be the farther
-one); nor does a box held in line with the re-lock: a car seen again before the track held it for long enough
+than a box width across the re-locked box's heading from it. A stretch that only coasted holds no one else's points;
+nor does frame k - 1 alone: the re-lock's candidate is confirmed over two frames, so k - 1 is where the object came
+back into view; nor does a box held on a handful of points: a sparse car coming back into view holds it on its own
+first points, near it (the re-lock, placed on the centre of what is seen of it, may be the farther one); nor does a
+box held in line with the re-lock: a car seen again before the track held it for long enough
 (``reacquire.recover_frames``) holds it on its own points, and a part of it seen misplaces the box along it or by
-half a width, while another car beside it is a lane (a width or more) away. Its frames take the states interpolated linearly (x, y, z, heading, the
-heading along the shorter way) between frame a - 1 and frame k, are flagged ``bridged``, and hold no points: the
-refinement sees them as predictions, pulled toward the line and by its smoothness, with no data of their own.
-Frame 0 (the given box) is never bridged. Applied before the refinement's solve offline
-(``relock_bridge`` "offline" or "both") and, with "both", in the fixed-lag window when the re-locked frame
-arrives, to the frames of the stretch not yet final (interpolated from the last frame before them)."""
+half a width, while another car beside it is a lane (a width or more) away. Its frames take the states interpolated
+linearly (x, y, z, heading, the heading along the shorter way) between frame a - 1 and frame k, are flagged
+``bridged``, and hold no points: the refinement sees them as predictions, pulled toward the line and by its
+smoothness, with no data of their own. Frame 0 (the given box) is never bridged. Applied before the refinement's
+solve offline (``relock_bridge`` "offline" or "both") and, with "both", in the fixed-lag window when the re-locked
+frame arrives, to the frames of the stretch not yet final (interpolated from the last frame before them)."""
 
 from __future__ import annotations
 

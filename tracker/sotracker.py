@@ -457,7 +457,7 @@ class Tracker:
 def _search_flags(flags: tuple[str, ...], no_candidate: bool, held: bool) -> tuple[str, ...]:
     """A searching frame's flags: ``coasting`` on the motion model's prediction with no candidate, ``searching`` on
     points while lost (the box may follow something that is not the object; a re-lock elsewhere later says it
-    did); neither where the track holds its object (``held``) or for a lost start."""
+    did), not where the track holds its object (``held``) or for a lost start."""
     if "prior_only" in flags:
         return tuple(dict.fromkeys(flags + ("coasting",))) if no_candidate else flags
     return flags if held else tuple(dict.fromkeys(flags + ("searching",)))

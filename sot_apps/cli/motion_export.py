@@ -38,8 +38,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--npz", metavar="FILE", help="dense Waymo-motion-style npz (objects x timesteps)")
     parser.add_argument("--csv", metavar="FILE", help="CSV for quick looks (one row per object and frame)")
     parser.add_argument("--invalid-flags", nargs="+", default=None, metavar="FLAG",
-                        help="tracker flags that make a frame invalid (default: no_points prior_only lost no_sweep bridged); "
-                             "the start frame is always valid")
+                        help="tracker flags that make a frame invalid (default: no_points prior_only lost no_sweep "
+                             "bridged); the start frame is always valid")
     parser.add_argument("--focal-track", metavar="ID", default=None,
                         help="AV2 focal track (id or prefix; default: the first exported object)")
     parser.add_argument("--observed-steps", type=nonnegative_int, default=None, metavar="N",
