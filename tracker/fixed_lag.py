@@ -31,7 +31,7 @@ from .frames import FrameSource, LidarFrame
 from .geometry import Box, State, points_in_box
 from .offline import _box, _rebuild_shape, frame_region_points_timed, refine_states
 from .own_motion import RegionTimes, compensate_track
-from .relock_bridge import bridge_start, bridged_estimate, interpolated_states
+from .relock_bridge import bridge_start, bridged_estimates
 from .sotracker import FrameEstimate, LocalCrop, Tracker, TrackResult
 
 __all__ = ["LAG_PARAMS", "FixedLagSmoother", "FixedLagTracker", "refine_fixed_lag", "track_fixed_lag", "window_states"]
@@ -116,9 +116,8 @@ class FixedLagSmoother:
         lo = max(a or k, self.emitted, 1)
         if lo >= k:
             return
-        states = interpolated_states(self.states[lo - 1], estimate.state.to_array(), k - lo)
-        for j, state in zip(range(lo, k), states, strict=True):
-            self.online[j] = bridged_estimate(self.online[j], state, self.size)
+        self.online[lo:k] = bridged_estimates(self.online[lo:k], _box(self.states[lo - 1], self.size), estimate.box)
+        for j in range(lo, k):
             self.states[j] = self.online[j].state.to_array()
             self.points[j] = self.captured[j] = np.zeros((0, 3))
             self.times[j] = None

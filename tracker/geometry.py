@@ -18,6 +18,7 @@ __all__ = [
     "Box",
     "State",
     "wrap_angle",
+    "lerp_box",
     "rotation_z",
     "rotation_zyx",
     "zyx_angles",
@@ -246,3 +247,16 @@ def points_in_box(points: np.ndarray, box: Box, scale: float | tuple[float, floa
     local_x = c * d[:, 0] + s * d[:, 1]
     local_y = -s * d[:, 0] + c * d[:, 1]
     return (np.abs(local_x) <= half[0]) & (np.abs(local_y) <= half[1]) & (np.abs(d[:, 2]) <= half[2])
+
+
+def lerp_box(a: Box, b: Box, t: float, centre: np.ndarray | None = None, heading: float | None = None) -> Box:
+    """The box a fraction ``t`` of the way from ``a`` to ``b``: everything linear (heading the short way round),
+    unless ``centre`` / ``heading`` are given."""
+    if centre is None:
+        centre = (1.0 - t) * a.center + t * b.center
+    if heading is None:
+        heading = a.heading + t * float(wrap_angle(b.heading - a.heading))
+    size = (1.0 - t) * a.size + t * b.size
+    return Box(float(centre[0]), float(centre[1]), float(centre[2]), float(wrap_angle(heading)), float(size[0]),
+               float(size[1]), float(size[2]), roll=(1.0 - t) * a.roll + t * b.roll,
+               pitch=(1.0 - t) * a.pitch + t * b.pitch)

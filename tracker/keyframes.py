@@ -38,7 +38,7 @@ import numpy as np
 
 from .config import OfflineParams, TrackerConfig
 from .frames import FrameSource, LidarFrame
-from .geometry import Box, State, points_in_box, wrap_angle
+from .geometry import Box, State, lerp_box, points_in_box, wrap_angle
 from .offline import Anchors, _rebuild_shape, frame_region_points, refine_states
 from .sotracker import FrameEstimate, Tracker, TrackResult
 
@@ -87,19 +87,6 @@ def keyframe_schedule(start: int, end: int, every: int) -> list[int]:
 
 # ----------------------------------------------------------------------------------------- interpolation
 
-def _lerp_box(a: Box, b: Box, t: float, centre: np.ndarray | None = None, heading: float | None = None) -> Box:
-    """The box a fraction ``t`` of the way from ``a`` to ``b``: everything linear (heading the short way round),
-    unless ``centre`` / ``heading`` are given."""
-    if centre is None:
-        centre = (1.0 - t) * a.center + t * b.center
-    if heading is None:
-        heading = a.heading + t * float(wrap_angle(b.heading - a.heading))
-    size = (1.0 - t) * a.size + t * b.size
-    return Box(float(centre[0]), float(centre[1]), float(centre[2]), float(wrap_angle(heading)), float(size[0]),
-               float(size[1]), float(size[2]), roll=(1.0 - t) * a.roll + t * b.roll,
-               pitch=(1.0 - t) * a.pitch + t * b.pitch)
-
-
 def _gaps(frames: list[int], keyframes: Mapping[int, Box]):
     """(frame, box a, box b, t) for every frame: between keyframes a and b at fraction t; outside them the
     nearest keyframe (a = b); at a keyframe None (its box is used as given)."""
@@ -120,7 +107,7 @@ def _gaps(frames: list[int], keyframes: Mapping[int, Box]):
 
 def interpolate_linear(frames: list[int], keyframes: Mapping[int, Box]) -> dict[int, Box]:
     """Boxes at ``frames`` linear between the keyframes (see the module docstring)."""
-    return {k: keyframes[k] if a is None else _lerp_box(a, b, t) for k, a, b, t in _gaps(frames, keyframes)}
+    return {k: keyframes[k] if a is None else lerp_box(a, b, t) for k, a, b, t in _gaps(frames, keyframes)}
 
 
 def _ctrv_centre(a: Box, b: Box, t: float) -> np.ndarray:
@@ -144,7 +131,7 @@ def _ctrv_centre(a: Box, b: Box, t: float) -> np.ndarray:
 
 def interpolate_ctrv(frames: list[int], keyframes: Mapping[int, Box]) -> dict[int, Box]:
     """Boxes at ``frames`` on constant-turn-rate arcs between the keyframes (see the module docstring)."""
-    return {k: keyframes[k] if a is None else _lerp_box(a, b, t, centre=_ctrv_centre(a, b, t) if a is not b else None)
+    return {k: keyframes[k] if a is None else lerp_box(a, b, t, centre=_ctrv_centre(a, b, t) if a is not b else None)
             for k, a, b, t in _gaps(frames, keyframes)}
 
 

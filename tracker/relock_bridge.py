@@ -31,10 +31,11 @@ import dataclasses
 import numpy as np
 
 from .bidirectional import is_lost
-from .geometry import Box, State, wrap_angle
+from .geometry import Box, State, lerp_box
+from .shape import to_object_frame
 from .sotracker import FrameEstimate, TrackResult
 
-__all__ = ["bridge_start", "bridged_estimate", "bridged_result", "interpolated_states"]
+__all__ = ["bridge_start", "bridged_estimates", "bridged_result"]
 
 
 def bridge_start(estimates: list[FrameEstimate], k: int, lost_points: int) -> int | None:
@@ -52,9 +53,7 @@ def bridge_start(estimates: list[FrameEstimate], k: int, lost_points: int) -> in
 def _beside(held: Box, relock: Box) -> bool:
     """The box held while searching lies more than a box width across the re-locked box's heading from it: what
     it held was beside the object (a part of the object seen misplaces the box along it, or by half a width)."""
-    offset = np.asarray(held.center[:2], dtype=np.float64) - np.asarray(relock.center[:2], dtype=np.float64)
-    across = -np.sin(relock.heading) * offset[0] + np.cos(relock.heading) * offset[1]
-    return bool(abs(across) > relock.width)
+    return bool(abs(to_object_frame(held.center[None, :], relock)[0, 1]) > relock.width)
 
 
 def _held_on_points(estimate: FrameEstimate) -> bool:
@@ -64,35 +63,25 @@ def _held_on_points(estimate: FrameEstimate) -> bool:
     return "searching" in estimate.flags and "low_points" not in estimate.flags
 
 
-def interpolated_states(before: np.ndarray, after: np.ndarray, count: int) -> np.ndarray:
-    """``count`` states (rows x, y, z, heading) evenly between ``before`` and ``after`` (both excluded), the heading
-    the shorter way round."""
-    step = np.asarray(after, dtype=np.float64) - np.asarray(before, dtype=np.float64)
-    step[3] = wrap_angle(step[3])
-    t = np.arange(1, count + 1, dtype=np.float64) / (count + 1)
-    out = before[None, :] + t[:, None] * step[None, :]
-    out[:, 3] = wrap_angle(out[:, 3])
+def bridged_estimates(estimates: list[FrameEstimate], before: Box, after: Box) -> list[FrameEstimate]:
+    """``estimates`` (a stretch) moved evenly onto the line from ``before`` to ``after`` (the boxes around it, both
+    excluded), without points, flagged ``bridged``."""
+    out = []
+    for j, estimate in enumerate(estimates, start=1):
+        box = lerp_box(before, after, j / (len(estimates) + 1))
+        flags = tuple(dict.fromkeys(list(estimate.flags) + ["bridged"]))
+        out.append(dataclasses.replace(estimate, state=State.from_array(box.to_array()[:4]), box=box, num_points=0,
+                                       points=np.zeros((0, 3)), flags=flags))
     return out
-
-
-def bridged_estimate(estimate: FrameEstimate, state: np.ndarray, size: np.ndarray) -> FrameEstimate:
-    """``estimate`` moved to ``state`` (x, y, z, heading), without points, flagged ``bridged``."""
-    box = Box(float(state[0]), float(state[1]), float(state[2]), float(wrap_angle(state[3])),
-              float(size[0]), float(size[1]), float(size[2]))
-    flags = tuple(dict.fromkeys(list(estimate.flags) + ["bridged"]))
-    return dataclasses.replace(estimate, state=State.from_array(box.to_array()[:4]), box=box, num_points=0,
-                               points=np.zeros((0, 3)), flags=flags)
 
 
 def bridged_result(result: TrackResult, lost_points: int) -> TrackResult:
     """``result`` with every bridged stretch (see the module docstring) replaced; ``result`` itself when none."""
     estimates = list(result.estimates)
-    size = np.asarray(result.size, dtype=np.float64)
     changed = False
     for k in range(2, len(estimates)):
         if "reacquired" not in estimates[k].flags or (a := bridge_start(estimates, k, lost_points)) is None:
             continue
-        states = interpolated_states(estimates[a - 1].state.to_array(), estimates[k].state.to_array(), k - a)
-        estimates[a:k] = [bridged_estimate(e, s, size) for e, s in zip(estimates[a:k], states, strict=True)]
+        estimates[a:k] = bridged_estimates(estimates[a:k], estimates[a - 1].box, estimates[k].box)
         changed = True
     return dataclasses.replace(result, estimates=estimates) if changed else result

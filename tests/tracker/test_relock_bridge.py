@@ -12,7 +12,7 @@ from test_reacquire_clusters import _iou, _scene, _straight
 from sot_apps.io.tracks import frame_is_valid
 from tracker import get_preset, refine_fixed_lag, refine_offline
 from tracker.geometry import Box, State
-from tracker.relock_bridge import bridge_start, bridged_result, interpolated_states
+from tracker.relock_bridge import bridge_start, bridged_estimates, bridged_result
 from tracker.sotracker import FrameEstimate, TrackResult, _search_flags
 
 HIDDEN = range(6, 12)   # the target has no points; the lost track follows a car 3 m to its left meanwhile
@@ -55,10 +55,12 @@ def test_a_stretch_before_a_relock_is_bridged_only_when_the_track_followed_point
     assert bridge_start(twice, 6, 3) == 4             # a stretch ends at the re-lock before it
 
 
-def test_interpolated_states_turn_the_shorter_way():
-    out = interpolated_states(np.array([0.0, 0.0, 0.0, np.pi - 0.1]), np.array([4.0, 2.0, 1.0, -np.pi + 0.1]), 3)
-    assert np.allclose(out[:, :3], [[1.0, 0.5, 0.25], [2.0, 1.0, 0.5], [3.0, 1.5, 0.75]])
-    assert np.allclose(np.cos(out[:, 3] - np.array([np.pi - 0.05, np.pi, -np.pi + 0.05])), 1.0)
+def test_bridged_frames_turn_the_shorter_way():
+    before = Box(0.0, 0.0, 0.0, np.pi - 0.1, 4.5, 1.8, 1.5)
+    after = Box(4.0, 2.0, 1.0, -np.pi + 0.1, 4.5, 1.8, 1.5)
+    out = bridged_estimates([_at(k, ("searching",)) for k in (1, 2, 3)], before, after)
+    assert np.allclose([e.box.center for e in out], [[1.0, 0.5, 0.25], [2.0, 1.0, 0.5], [3.0, 1.5, 0.75]])
+    assert np.allclose(np.cos([e.box.heading for e in out] - np.array([np.pi - 0.05, np.pi, -np.pi + 0.05])), 1.0)
 
 
 def test_the_tracker_flags_frames_held_on_points_while_lost_as_searching():
